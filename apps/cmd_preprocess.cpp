@@ -1,0 +1,83 @@
+#include <cstdio>
+#include <sstream>
+#include <string>
+
+#include "command.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+
+namespace seqloc::app {
+namespace {
+
+osm::GeoBox parse_bbox(const std::string& text) {
+  osm::GeoBox box;
+  char extra = 0;
+  if (std::sscanf(text.c_str(), "%lf,%lf,%lf,%lf%c", &box.min_lon, &box.min_lat, &box.max_lon, &box.max_lat,
+                  &extra) != 4) {
+    throw pipeline::UsageError("--bbox '" + text + "': expected lon0,lat0,lon1,lat1 (decimal degrees)");
+  }
+  return box;
+}
+
+class PreprocessCommand : public Command {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("input", options_.input, "OSM input: .osm.pbf, .osm, .osm.gz or .osm.bz2")->required();
+    app.add_option("-o,--output", options_.output, "Region cache to write (GeoPackage, e.g. region.gpkg)")
+        ->required();
+    app.add_option("--bbox", bbox_, "Region lon0,lat0,lon1,lat1 (default: the file header's bbox, else the data's)");
+    app.add_option("--max-distance", options_.max_distance_m, "Road-distance clamp in metres")
+        ->default_val(100.0)
+        ->check(CLI::Range(0.01, pipeline::kMaxClampM));
+    app.add_option("--threads", options_.threads, "Worker threads (0: all cores)")->default_val(0)->check(
+        CLI::NonNegativeNumber);
+    app.add_option("--shard", shard_,
+                   "Build only shard I of N (I/N, 0-based), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; "
+                   "combine the shards with `seqloc cache merge`");
+    app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
+    app.add_flag("--overwrite", options_.overwrite, "Replace an existing cache");
+    app.footer(
+        "The cache is written to OUTPUT.partial and renamed when complete; an interrupted build resumes from the\n"
+        "partial file when rerun with the same input and options. See docs/cache-format.md.");
+  }
+
+  int run() override {
+    if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
+    if (!shard_.empty()) {
+      char extra = 0;
+      if (std::sscanf(shard_.c_str(), "%d/%d%c", &options_.shard_index, &options_.shard_count, &extra) != 2) {
+        throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N, e.g. 0/4");
+      }
+    }
+    options_.validate();
+    log("preprocess %s -> %s", options_.input.c_str(), options_.output.c_str());
+    ProgressBar bar(progress_wanted(progress_), "tiles");
+    const auto report = pipeline::preprocess_region(
+        options_, [&bar](const pipeline::PreprocessProgress& p) { bar.update(p.tiles_done, p.tiles_total); });
+    bar.done();
+    std::ostringstream out;
+    out.precision(3);
+    out << std::fixed << "wrote " << options_.output.string() << ": " << report.tiles_wide << " x " << report.tiles_high
+        << " tiles (" << report.tiles_total << " in this shard, " << report.tiles_written << " rendered, "
+        << report.tiles_resumed << " resumed), " << report.roads << " roads, " << report.areas << " areas, "
+        << report.lines << " lines, " << report.nodes << " nodes in " << report.total_seconds << " s (read "
+        << report.read_seconds << " s, render+write " << report.render_seconds << " s)\n";
+    if (report.ways_missing_nodes > 0) {
+      out << "note: " << report.ways_missing_nodes << " ways referenced nodes missing from the input (drawn with the "
+          << "nodes present)\n";
+    }
+    std::fputs(out.str().c_str(), stdout);
+    return kExitOk;
+  }
+
+ private:
+  pipeline::PreprocessOptions options_;
+  std::string bbox_;
+  std::string shard_;
+  int progress_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Command> make_preprocess_command() { return std::make_unique<PreprocessCommand>(); }
+
+}  // namespace seqloc::app

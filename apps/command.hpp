@@ -1,0 +1,77 @@
+#pragma once
+// One class per subcommand (osmium-tool's Command): setup() declares and validates options only,
+// run() does the work. main() turns exceptions into one line on stderr and an exit code.
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+namespace seqloc::app {
+
+/// Exit codes: 0 success, 1 failure (bad data, I/O), 2 usage.
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitFailure = 1;
+inline constexpr int kExitUsage = 2;
+
+/// Options every subcommand shares.
+struct GlobalOptions {
+  bool verbose = false;
+};
+
+class Command {
+ public:
+  virtual ~Command() = default;
+  /// Declares the subcommand's options on `app`.
+  virtual void setup(CLI::App& app) = 0;
+  /// Does the work; returns the exit code. Throws on failure.
+  virtual int run() = 0;
+
+  void set_global(const GlobalOptions* global) { global_ = global; }
+
+ protected:
+  /// A timestamped log line on stderr, shown with -v.
+  template <class... Args>
+  void log(const char* format, Args... args) const {
+    if (!global_ || !global_->verbose) return;
+    const auto now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+    char stamp[32];
+    std::strftime(stamp, sizeof stamp, "%Y-%m-%d %H:%M:%S", std::localtime(&now));
+    std::fprintf(stderr, "[%s] ", stamp);
+    if constexpr (sizeof...(Args) == 0) {
+      std::fputs(format, stderr);
+    } else {
+      std::fprintf(stderr, format, args...);
+    }
+    std::fputc('\n', stderr);
+  }
+
+  const GlobalOptions* global_ = nullptr;
+};
+
+/// A one-line progress bar on stderr, drawn only when wanted (a terminal, or --progress).
+class ProgressBar {
+ public:
+  ProgressBar(bool enabled, std::string label) : enabled_(enabled), label_(std::move(label)) {}
+  ~ProgressBar() { done(); }
+  void update(long long done, long long total);
+  void done();
+
+ private:
+  bool enabled_;
+  bool drawn_ = false;
+  std::string label_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_{};
+};
+
+/// --progress / --no-progress resolved against whether stderr is a terminal.
+bool progress_wanted(int flag);
+
+std::unique_ptr<Command> make_preprocess_command();
+std::unique_ptr<Command> make_cache_info_command();
+std::unique_ptr<Command> make_cache_merge_command();
+
+}  // namespace seqloc::app

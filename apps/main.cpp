@@ -1,0 +1,88 @@
+// seqloc: sequence localization against OpenStreetMap. Subcommands are classes in cmd_*.cpp.
+
+#include <cstdio>
+#include <exception>
+#include <memory>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include "command.hpp"
+#include "seqloc/osm/errors.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/raster/cache.hpp"
+
+namespace seqloc::app {
+
+bool progress_wanted(int flag) {
+  if (flag > 0) return true;
+  if (flag < 0) return false;
+  return isatty(STDERR_FILENO) != 0;
+}
+
+void ProgressBar::update(long long done, long long total) {
+  if (!enabled_) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (done < total && now - last_ < std::chrono::milliseconds(200)) return;
+  last_ = now;
+  const double elapsed = std::chrono::duration<double>(now - start_).count();
+  const double fraction = total > 0 ? static_cast<double>(done) / static_cast<double>(total) : 1.0;
+  const double rate = elapsed > 0 ? static_cast<double>(done) / elapsed : 0.0;
+  const double eta = rate > 0 ? static_cast<double>(total - done) / rate : 0.0;
+  constexpr int kWidth = 30;
+  const int filled = static_cast<int>(fraction * kWidth);
+  std::fprintf(stderr, "\r%s [%.*s%*s] %lld/%lld %.0f/s ETA %.0fs ", label_.c_str(), filled,
+               "##############################", kWidth - filled, "", done, total, rate, eta);
+  std::fflush(stderr);
+  drawn_ = true;
+}
+
+void ProgressBar::done() {
+  if (drawn_) std::fputc('\n', stderr);
+  drawn_ = false;
+}
+
+}  // namespace seqloc::app
+
+int main(int argc, char** argv) {
+  using namespace seqloc;
+  CLI::App app{"seqloc: localize vehicles against OpenStreetMap with sequences of pose likelihoods.\n"
+               "Map data (c) OpenStreetMap contributors, ODbL 1.0."};
+  app.name("seqloc");
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("seqloc ") + SEQLOC_VERSION);
+  app::GlobalOptions global;
+  app.add_flag("-v,--verbose", global.verbose, "Timestamped log lines on stderr");
+
+  std::vector<std::pair<CLI::App*, std::unique_ptr<app::Command>>> commands;
+  auto add = [&](CLI::App* parent, const char* name, const char* description, std::unique_ptr<app::Command> command) {
+    CLI::App* sub = parent->add_subcommand(name, description);
+    command->set_global(&global);
+    command->setup(*sub);
+    commands.emplace_back(sub, std::move(command));
+  };
+  add(&app, "preprocess", "Build a region cache (GeoPackage) from an OSM file", app::make_preprocess_command());
+  CLI::App* cache = app.add_subcommand("cache", "Inspect and combine region caches");
+  cache->require_subcommand(1);
+  add(cache, "info", "Print a cache's metadata", app::make_cache_info_command());
+  add(cache, "merge", "Merge the shards of a sharded build into one cache", app::make_cache_merge_command());
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? app::kExitOk : app::kExitUsage;
+  }
+  try {
+    for (auto& [sub, command] : commands) {
+      if (sub->parsed()) return command->run();
+    }
+    return app::kExitUsage;
+  } catch (const pipeline::UsageError& e) {
+    std::fprintf(stderr, "seqloc: error: %s\n", e.what());
+    return app::kExitUsage;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "seqloc: error: %s\n", e.what());
+    return app::kExitFailure;
+  }
+}

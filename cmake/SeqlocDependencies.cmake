@@ -1,0 +1,27 @@
+# Every dependency comes from a Debian package (see scripts/deps); nothing is downloaded.
+find_package(Threads REQUIRED)
+find_package(ZLIB REQUIRED)
+find_package(BZip2 REQUIRED)
+find_package(EXPAT REQUIRED)
+find_package(PNG REQUIRED)
+find_package(SQLite3 REQUIRED)
+find_package(OpenSSL REQUIRED COMPONENTS Crypto)
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)
+find_package(CLI11 REQUIRED)
+find_package(nlohmann_json 3.10 REQUIRED)
+
+# libosmium and protozero are header-only; Debian ships no CMake config for them.
+find_path(OSMIUM_INCLUDE_DIR osmium/osm.hpp REQUIRED)
+find_path(PROTOZERO_INCLUDE_DIR protozero/pbf_reader.hpp REQUIRED)
+add_library(seqloc_libosmium INTERFACE)
+target_include_directories(seqloc_libosmium SYSTEM INTERFACE ${OSMIUM_INCLUDE_DIR} ${PROTOZERO_INCLUDE_DIR})
+target_link_libraries(seqloc_libosmium INTERFACE ZLIB::ZLIB BZip2::BZip2 EXPAT::EXPAT Threads::Threads)
+add_library(seqloc::libosmium ALIAS seqloc_libosmium)
+
+# GeographicLib ships a Find module only.
+find_path(GEOGRAPHICLIB_INCLUDE_DIR GeographicLib/TransverseMercator.hpp REQUIRED)
+find_library(GEOGRAPHICLIB_LIBRARY NAMES GeographicLib Geographic REQUIRED)
+add_library(seqloc_geographiclib INTERFACE)
+target_include_directories(seqloc_geographiclib SYSTEM INTERFACE ${GEOGRAPHICLIB_INCLUDE_DIR})
+target_link_libraries(seqloc_geographiclib INTERFACE ${GEOGRAPHICLIB_LIBRARY})
+add_library(seqloc::geographiclib ALIAS seqloc_geographiclib)

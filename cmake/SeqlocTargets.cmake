@@ -1,0 +1,42 @@
+# Compiler settings shared by every seqloc target.
+add_library(seqloc_compile_options INTERFACE)
+target_compile_options(seqloc_compile_options INTERFACE -Wall -Wextra -Wpedantic -Wshadow -Wconversion
+                                                        -Wno-sign-conversion)
+if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU" AND CMAKE_CXX_COMPILER_VERSION VERSION_LESS 13)
+  # GCC 12 false positives inside libstdc++ and libosmium headers at -O2 (GCC bugs 105329 and
+  # 105651: std::string concatenation "may overlap"; strlen "reading from a region of size 0").
+  target_compile_options(seqloc_compile_options INTERFACE -Wno-restrict -Wno-stringop-overread)
+endif()
+if(SEQLOC_WERROR)
+  target_compile_options(seqloc_compile_options INTERFACE -Werror)
+endif()
+if(SEQLOC_SANITIZE)
+  target_compile_options(seqloc_compile_options INTERFACE -fsanitize=address,undefined -fno-omit-frame-pointer
+                                                          -fno-sanitize-recover=undefined)
+  target_link_options(seqloc_compile_options INTERFACE -fsanitize=address,undefined)
+endif()
+
+# seqloc_module(NAME SOURCES... [PUBLIC deps...] [PRIVATE deps...])
+# Declares library seqloc_NAME with alias seqloc::NAME and public headers in NAME/include.
+function(seqloc_module name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC;PRIVATE" ${ARGN})
+  add_library(seqloc_${name} STATIC ${ARG_SOURCES})
+  add_library(seqloc::${name} ALIAS seqloc_${name})
+  target_include_directories(seqloc_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include
+                                            PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
+  target_link_libraries(seqloc_${name} PUBLIC ${ARG_PUBLIC} PRIVATE ${ARG_PRIVATE} seqloc_compile_options)
+  # A public header compiles on its own: one translation unit per header checks it.
+  file(GLOB_RECURSE headers CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/include/*.hpp)
+  set(checks)
+  foreach(header IN LISTS headers)
+    file(RELATIVE_PATH rel ${CMAKE_CURRENT_SOURCE_DIR}/include ${header})
+    string(MAKE_C_IDENTIFIER "${rel}" id)
+    set(check ${CMAKE_CURRENT_BINARY_DIR}/header_checks/${id}.cpp)
+    file(CONFIGURE OUTPUT ${check} CONTENT "#include <${rel}>\n")
+    list(APPEND checks ${check})
+  endforeach()
+  if(checks)
+    add_library(seqloc_${name}_header_checks OBJECT ${checks})
+    target_link_libraries(seqloc_${name}_header_checks PRIVATE seqloc_${name} seqloc_compile_options)
+  endif()
+endfunction()

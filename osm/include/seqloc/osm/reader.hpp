@@ -1,0 +1,33 @@
+#pragma once
+// Reads an OpenStreetMap file (.osm.pbf, .osm, .osm.gz, .osm.bz2) with libosmium and classifies
+// its elements with OrienterNet's rules.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "seqloc/osm/errors.hpp"
+#include "seqloc/osm/features.hpp"
+
+namespace seqloc::osm {
+
+struct ReadOptions {
+  /// Drop features whose bbox lies wholly outside this box (keeps memory bounded when a small
+  /// region is cut from a large file). Unset: keep everything.
+  std::optional<GeoBox> keep_box;
+};
+
+/// Throws OsmInputError naming the file when it is missing, empty, truncated or corrupt.
+[[nodiscard]] FeatureSet read_osm(const std::filesystem::path& input, const ReadOptions& options = {});
+
+/// The header of the file only (cheap): its declared bbox, if any, and replication timestamp.
+struct OsmHeaderInfo {
+  std::optional<GeoBox> box;
+  std::string replication_timestamp;
+};
+[[nodiscard]] OsmHeaderInfo read_osm_header(const std::filesystem::path& input);
+
+/// Lower-case hex SHA-256 of a file's bytes (recorded in the cache's metadata).
+[[nodiscard]] std::string file_sha256(const std::filesystem::path& path);
+
+}  // namespace seqloc::osm

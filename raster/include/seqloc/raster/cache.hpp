@@ -1,0 +1,220 @@
+#pragma once
+// The region cache (conventions.md section 3): one GeoPackage per region that GDAL and QGIS open
+// as it is. Raster tables `classes` (RGB PNG tiles) and `road_distance` (2D gridded coverage,
+// UInt16 PNG tiles, scale 0.01 m), vector table `roads`, and the key/value table
+// `seqloc_metadata`. See docs/cache-format.md.
+//
+// Writing is crash-safe: a build writes `NAME.gpkg.partial` (WAL, committed in batches) and
+// renames it over `NAME.gpkg` only when complete. An interrupted build resumes from the partial
+// file when rerun with the same input and parameters; the previous cache is never touched.
+
+#include <cstdint>
+#include <filesystem>
+#include <list>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "seqloc/osm/features.hpp"
+#include "seqloc/osm/projection.hpp"
+#include "seqloc/raster/grid.hpp"
+#include "seqloc/raster/tile_renderer.hpp"
+
+namespace seqloc::raster {
+
+namespace detail {
+class Database;
+}
+
+/// Base of the cache's data and I/O errors. Messages name the file (and tile) concerned.
+class CacheError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+/// The file cannot be opened, read or written.
+class CacheIoError : public CacheError {
+ public:
+  using CacheError::CacheError;
+};
+/// The file is not a seqloc cache, or one of another format version.
+class CacheFormatError : public CacheError {
+ public:
+  using CacheError::CacheError;
+};
+/// A tile or window outside the cached region, or a tile missing from a cache.
+class CacheRangeError : public CacheError {
+ public:
+  using CacheError::CacheError;
+};
+
+/// Version of the cache layout this build reads and writes.
+inline constexpr int kCacheFormatVersion = 1;
+
+enum class Layer { classes, road_distance };
+[[nodiscard]] const char* layer_table(Layer layer);
+
+struct CacheMetadata {
+  int format_version = kCacheFormatVersion;
+  std::string software_version;
+  std::string source_file;  ///< file name of the OSM input
+  std::string source_sha256;
+  std::string osm_replication_timestamp;
+  double centre_lat = 0;  ///< origin of the region CRS
+  double centre_lon = 0;
+  osm::GeoBox bbox;  ///< the requested bbox (lon/lat)
+  double max_distance_m = 100;
+  RegionGrid grid;
+  int shard_index = 0;
+  int shard_count = 1;
+  std::string created_utc;
+  bool complete = false;
+
+  /// True when both describe the same build (source, region, parameters, format), so that tiles
+  /// of one may stand for tiles of the other (resume, merge).
+  [[nodiscard]] bool same_build(const CacheMetadata& other) const;
+  [[nodiscard]] osm::RegionProjection projection() const { return {centre_lat, centre_lon}; }
+  /// Tiles (col, row) of shard `index` of `count`: every count-th tile in row-major order.
+  [[nodiscard]] bool shard_owns(std::int64_t col, std::int64_t row) const;
+};
+
+/// One tile of both raster layers, encoded for storage.
+struct EncodedTile {
+  std::int64_t col = 0;
+  std::int64_t row = 0;
+  std::vector<std::uint8_t> classes_png;
+  std::vector<std::uint8_t> distance_png;
+  /// Statistics of the road-distance tile in metres (the coverage's unit, after its scale).
+  double distance_min_m = 0;
+  double distance_max_m = 0;
+  double distance_mean_m = 0;
+};
+
+class CacheWriter {
+ public:
+  /// Opens `final_path`.partial, resuming it when it holds the same build, else starting anew.
+  /// Throws CacheIoError when the output directory is missing or not writable.
+  CacheWriter(const std::filesystem::path& final_path, const CacheMetadata& metadata);
+  ~CacheWriter();
+  CacheWriter(const CacheWriter&) = delete;
+  CacheWriter& operator=(const CacheWriter&) = delete;
+
+  [[nodiscard]] bool resumed() const { return resumed_; }
+  /// Tiles already stored (from an interrupted build being resumed).
+  [[nodiscard]] bool has_tile(std::int64_t col, std::int64_t row) const;
+  [[nodiscard]] std::size_t tiles_stored() const { return done_.size(); }
+
+  /// Stores the road centerlines (once; a resumed build keeps the ones it has).
+  void write_roads(const std::vector<RoadLine>& roads);
+  /// Stores one tile of both layers; committed in batches.
+  void write_tile(const EncodedTile& tile);
+  /// Commits, marks the cache complete and renames it to its final path (replacing an older one).
+  void finish();
+
+  [[nodiscard]] const std::filesystem::path& partial_path() const { return partial_; }
+
+ private:
+  void create_schema(const osm::RegionProjection& projection);
+  void write_metadata();
+  void begin();
+  void commit();
+
+  std::filesystem::path final_;
+  std::filesystem::path partial_;
+  CacheMetadata metadata_;
+  std::unique_ptr<detail::Database> db_;
+  std::unordered_map<std::int64_t, bool> done_;  // key col * 2^32 + row
+  bool resumed_ = false;
+  bool in_transaction_ = false;
+  int pending_ = 0;
+};
+
+/// Encodes rendered tile buffers for the cache (PNG), reusing one blob for constant tiles.
+class TileEncoder {
+ public:
+  [[nodiscard]] EncodedTile encode(std::int64_t col, std::int64_t row, const std::vector<std::uint8_t>& rgb,
+                                   bool classes_empty, const std::vector<std::uint16_t>& cm);
+
+ private:
+  std::vector<std::uint8_t> empty_classes_;
+  std::unordered_map<std::uint16_t, std::vector<std::uint8_t>> constant_distance_;
+};
+
+class CacheReader {
+ public:
+  /// Opens a complete cache read-only. Throws CacheFormatError for a file that is not a seqloc
+  /// cache, an unfinished one, or one of another format version.
+  explicit CacheReader(const std::filesystem::path& path, std::size_t lru_tiles = 64);
+  ~CacheReader();
+  CacheReader(const CacheReader&) = delete;
+  CacheReader& operator=(const CacheReader&) = delete;
+
+  [[nodiscard]] const CacheMetadata& metadata() const { return metadata_; }
+  [[nodiscard]] const std::filesystem::path& path() const { return path_; }
+  [[nodiscard]] const RegionGrid& grid() const { return metadata_.grid; }
+
+  /// Decoded tiles, shared with the LRU: RGB interleaved (512 x 512 x 3), or centimetres (512 x 512).
+  [[nodiscard]] std::shared_ptr<const std::vector<std::uint8_t>> classes_tile(std::int64_t col, std::int64_t row);
+  [[nodiscard]] std::shared_ptr<const std::vector<std::uint16_t>> distance_tile(std::int64_t col, std::int64_t row);
+  /// The stored PNG of a tile.
+  [[nodiscard]] std::vector<std::uint8_t> tile_blob(Layer layer, std::int64_t col, std::int64_t row);
+  [[nodiscard]] bool has_tile(Layer layer, std::int64_t col, std::int64_t row);
+
+  /// A window of the region raster (region pixels, north-west origin), stitched across tiles.
+  /// Cells outside the region raise CacheRangeError unless `fill_outside` is set, in which case
+  /// they get background (classes) or the clamp (road distance).
+  void read_classes(std::int64_t u0, std::int64_t v0, int width, int height, std::vector<std::uint8_t>& rgb,
+                    bool fill_outside = false);
+  void read_road_distance(std::int64_t u0, std::int64_t v0, int width, int height, std::vector<std::uint16_t>& cm,
+                          bool fill_outside = false);
+
+  /// The road centerlines of the cache.
+  [[nodiscard]] std::vector<RoadLine> roads();
+
+  struct LruStats {
+    std::size_t hits = 0;
+    std::size_t misses = 0;
+  };
+  [[nodiscard]] LruStats lru_stats() const;
+
+ private:
+  struct Decoded {
+    std::shared_ptr<const std::vector<std::uint8_t>> rgb;
+    std::shared_ptr<const std::vector<std::uint16_t>> cm;
+  };
+  Decoded load(Layer layer, std::int64_t col, std::int64_t row);
+  void check_window(std::int64_t u0, std::int64_t v0, int width, int height, bool fill_outside, Layer layer) const;
+
+  std::filesystem::path path_;
+  std::unique_ptr<detail::Database> db_;
+  CacheMetadata metadata_;
+  std::size_t capacity_;
+  mutable std::mutex mutex_;
+  using Key = std::tuple<int, std::int64_t, std::int64_t>;
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      return std::hash<std::int64_t>()((std::get<1>(k) * 1000003 + std::get<2>(k)) * 4 + std::get<0>(k));
+    }
+  };
+  std::list<std::pair<Key, Decoded>> lru_;
+  std::unordered_map<Key, std::list<std::pair<Key, Decoded>>::iterator, KeyHash> index_;
+  LruStats stats_;
+};
+
+/// Reads the metadata of any seqloc cache (complete, partial or shard) without checks beyond
+/// the format; for `seqloc cache info`.
+[[nodiscard]] CacheMetadata read_cache_metadata(const std::filesystem::path& path);
+
+/// The metadata as key/value pairs, as stored in `seqloc_metadata`.
+[[nodiscard]] std::vector<std::pair<std::string, std::string>> metadata_rows(const CacheMetadata& metadata);
+
+/// Merges shards of one build into a complete cache at `out` (atomically). Throws CacheError when
+/// the shards belong to different builds, overlap, or do not cover the region.
+void merge_shards(const std::vector<std::filesystem::path>& shards, const std::filesystem::path& out);
+
+}  // namespace seqloc::raster

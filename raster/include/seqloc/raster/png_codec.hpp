@@ -1,0 +1,33 @@
+#pragma once
+// PNG encoding and decoding of tiles in memory (libpng): 8-bit RGB for the class raster and
+// 16-bit grey for the road distance, the two tile encodings of the region cache.
+
+#include <cstdint>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace seqloc::raster {
+
+class PngError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct PngImage {
+  int width = 0;
+  int height = 0;
+  int channels = 0;    ///< 1 (grey), 3 (RGB) or 4 (RGBA)
+  int bit_depth = 0;   ///< 8 or 16
+  std::vector<std::uint8_t> pixels8;    ///< row-major, interleaved, when bit_depth == 8
+  std::vector<std::uint16_t> pixels16;  ///< row-major, when bit_depth == 16 (native byte order)
+};
+
+/// zlib level 1 and a fixed filter: the tiles are mostly runs, where faster settings lose little.
+[[nodiscard]] std::vector<std::uint8_t> encode_png_rgb8(std::span<const std::uint8_t> rgb, int width, int height);
+[[nodiscard]] std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> values, int width, int height);
+/// Throws PngError (with `what` naming the blob's origin) on corrupt data.
+[[nodiscard]] PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what);
+
+}  // namespace seqloc::raster

@@ -1,0 +1,125 @@
+// The seqloc command line: --help everywhere, exit codes (0 ok, 1 failure, 2 usage), one-line
+// errors on stderr, and the files each command writes.
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "seqloc/osm/reader.hpp"
+#include "seqloc/osm/synthetic.hpp"
+#include "seqloc/raster/cache.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc {
+namespace {
+
+using test::run_seqloc;
+
+std::filesystem::path small_map(const test::ScratchDir& dir) {
+  osm::SyntheticMap map(47.5, 10.5);
+  map.way({{-200, 0}, {0, 30}, {200, 0}}, {{"highway", "track"}});
+  map.way({{10, 10}, {20, 10}, {20, 20}, {10, 20}}, {{"building", "yes"}}, true);
+  const auto path = dir / "map.osm.pbf";
+  map.write(path, 100);
+  return path;
+}
+
+int count_lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+
+TEST(Cli, HelpOnEverySubcommand) {
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"--help"}, {"preprocess", "--help"}, {"cache", "--help"}, {"cache", "info", "--help"},
+        {"cache", "merge", "--help"}}) {
+    const auto r = run_seqloc(args);
+    EXPECT_EQ(r.exit_code, 0) << args[0];
+    EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
+  }
+  const auto help = run_seqloc({"preprocess", "--help"}).out;
+  for (const char* option : {"--bbox", "--max-distance", "--threads", "--shard", "--progress", "--overwrite", "-o"}) {
+    EXPECT_NE(help.find(option), std::string::npos) << option;
+  }
+  EXPECT_NE(run_seqloc({"--version"}).out.find("seqloc "), std::string::npos);
+}
+
+TEST(Cli, UsageErrorsExitTwo) {
+  EXPECT_EQ(run_seqloc({}).exit_code, 2);
+  EXPECT_EQ(run_seqloc({"preprocess"}).exit_code, 2);
+  EXPECT_EQ(run_seqloc({"frobnicate"}).exit_code, 2);
+  test::ScratchDir dir;
+  const auto map = small_map(dir);
+  const auto bad_bbox = run_seqloc({"preprocess", map.string(), "-o", (dir / "r.gpkg").string(), "--bbox", "1,2,3"});
+  EXPECT_EQ(bad_bbox.exit_code, 2);
+  EXPECT_NE(bad_bbox.err.find("--bbox '1,2,3'"), std::string::npos) << bad_bbox.err;
+  const auto bad_shard = run_seqloc({"preprocess", map.string(), "-o", (dir / "r.gpkg").string(), "--shard", "5/2"});
+  EXPECT_EQ(bad_shard.exit_code, 2);
+  EXPECT_NE(bad_shard.err.find("5/2"), std::string::npos) << bad_shard.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "r.gpkg"));
+}
+
+TEST(Cli, PreprocessWritesACacheAndInfoDescribesIt) {
+  test::ScratchDir dir;
+  const auto map = small_map(dir);
+  const auto out = dir / "r.gpkg";
+  const auto r = run_seqloc({"preprocess", map.string(), "-o", out.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "") << "no progress bar when stderr is not a terminal";
+  EXPECT_NE(r.out.find("wrote " + out.string()), std::string::npos) << r.out;
+  EXPECT_TRUE(std::filesystem::exists(out));
+  EXPECT_FALSE(std::filesystem::exists(out.string() + ".partial"));
+
+  const auto again = run_seqloc({"preprocess", map.string(), "-o", out.string()});
+  EXPECT_EQ(again.exit_code, 2);
+  EXPECT_EQ(count_lines(again.err), 1) << again.err;
+  EXPECT_NE(again.err.find("already exists; pass --overwrite"), std::string::npos) << again.err;
+
+  const auto info = run_seqloc({"cache", "info", out.string(), "--json"});
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const auto json = nlohmann::json::parse(info.out);
+  EXPECT_EQ(json["format_version"], std::to_string(raster::kCacheFormatVersion));
+  EXPECT_EQ(json["source_sha256"], osm::file_sha256(map));
+  EXPECT_EQ(json["source_file"], "map.osm.pbf");
+  EXPECT_EQ(json["state"], "complete");
+  EXPECT_EQ(json["classes"]["ways"][7], "road");
+  const auto text = run_seqloc({"cache", "info", out.string()});
+  EXPECT_EQ(text.exit_code, 0);
+  EXPECT_NE(text.out.find("max_distance_m"), std::string::npos);
+}
+
+TEST(Cli, DataErrorsExitOneWithOneLine) {
+  test::ScratchDir dir;
+  const auto missing = run_seqloc({"preprocess", (dir / "nope.osm.pbf").string(), "-o", (dir / "r.gpkg").string()});
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_EQ(count_lines(missing.err), 1) << missing.err;
+  EXPECT_NE(missing.err.find("nope.osm.pbf: no such file"), std::string::npos) << missing.err;
+  const auto info = run_seqloc({"cache", "info", (dir / "nope.gpkg").string()});
+  EXPECT_EQ(info.exit_code, 1);
+  EXPECT_NE(info.err.find("nope.gpkg"), std::string::npos) << info.err;
+}
+
+TEST(Cli, ShardsMergeIntoOneCache) {
+  test::ScratchDir dir;
+  const auto map = small_map(dir);
+  std::vector<std::string> merge{"cache", "merge", (dir / "merged.gpkg").string()};
+  for (int i = 0; i < 3; ++i) {
+    const auto shard = dir / ("s" + std::to_string(i) + ".gpkg");
+    const auto r = run_seqloc({"preprocess", map.string(), "-o", shard.string(), "--shard",
+                               std::to_string(i) + "/3"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    merge.push_back(shard.string());
+  }
+  const auto r = run_seqloc(merge);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  raster::CacheReader merged(dir / "merged.gpkg");
+  EXPECT_EQ(merged.metadata().shard_count, 1);
+  ASSERT_EQ(run_seqloc({"preprocess", map.string(), "-o", (dir / "single.gpkg").string()}).exit_code, 0);
+  raster::CacheReader single(dir / "single.gpkg");
+  for (std::int64_t row = 0; row < single.grid().tiles_high(); ++row) {
+    for (std::int64_t col = 0; col < single.grid().tiles_wide(); ++col) {
+      EXPECT_EQ(merged.tile_blob(raster::Layer::road_distance, col, row),
+                single.tile_blob(raster::Layer::road_distance, col, row));
+      EXPECT_EQ(merged.tile_blob(raster::Layer::classes, col, row), single.tile_blob(raster::Layer::classes, col, row));
+    }
+  }
+}
+
+}  // namespace
+}  // namespace seqloc

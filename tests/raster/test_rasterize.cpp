@@ -1,0 +1,142 @@
+// Rasterization primitives: known geometry -> known cells, and window invariance (the property
+// that makes tiles seamless).
+
+#include <random>
+#include <set>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/raster/rasterize.hpp"
+
+namespace seqloc::raster {
+namespace {
+
+using Cells = std::set<std::pair<std::int64_t, std::int64_t>>;
+
+Cells line_cells(Pixel a, Pixel b, const Window& w = {-1000, -1000, 2000, 2000}) {
+  Cells cells;
+  for_each_line_cell(a, b, w, [&](std::int64_t u, std::int64_t v) { cells.emplace(u, v); });
+  return cells;
+}
+
+Cells polygon_cells(const std::vector<std::vector<Pixel>>& rings, const Window& w = {-1000, -1000, 2000, 2000}) {
+  Cells cells;
+  PolygonScratch scratch;
+  for_each_polygon_cell(std::span<const std::vector<Pixel>>(rings), w, scratch,
+                        [&](std::int64_t u, std::int64_t v) { cells.emplace(u, v); });
+  return cells;
+}
+
+TEST(Snap, PixelCentresAndTiesToEven) {
+  // A point at the centre of cell (3, 4) has integral pixel coordinates (to_uv subtracts 0.5).
+  EXPECT_EQ(snap(pixel_u(centre_x(3)), pixel_v(centre_y(4))), (Pixel{3, 4}));
+  EXPECT_EQ(snap(2.5, -0.5), (Pixel{2, 0}));  // numpy rounds half to even
+  EXPECT_EQ(snap(3.5, 1.5), (Pixel{4, 2}));
+  // North-up: a point further north has a smaller row.
+  EXPECT_LT(pixel_v(10.0), pixel_v(0.0));
+}
+
+TEST(Lines, AxisAlignedAndDiagonal) {
+  EXPECT_EQ(line_cells({0, 0}, {3, 0}), (Cells{{0, 0}, {1, 0}, {2, 0}, {3, 0}}));
+  EXPECT_EQ(line_cells({2, 5}, {2, 2}), (Cells{{2, 2}, {2, 3}, {2, 4}, {2, 5}}));
+  EXPECT_EQ(line_cells({0, 0}, {3, 3}), (Cells{{0, 0}, {1, 1}, {2, 2}, {3, 3}}));
+  EXPECT_EQ(line_cells({0, 0}, {3, -3}), (Cells{{0, 0}, {1, -1}, {2, -2}, {3, -3}}));
+  // Shallow slope 1/4: the minor coordinate is the nearest to the exact line, ties upward.
+  EXPECT_EQ(line_cells({0, 0}, {4, 1}), (Cells{{0, 0}, {1, 0}, {2, 1}, {3, 1}, {4, 1}}));
+  EXPECT_EQ(line_cells({7, 7}, {7, 7}), (Cells{{7, 7}}));
+}
+
+TEST(Lines, SameCellsInBothDirectionsAndEightConnected) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> d(-40, 40);
+  for (int i = 0; i < 500; ++i) {
+    const Pixel a{d(rng), d(rng)}, b{d(rng), d(rng)};
+    const auto forward = line_cells(a, b);
+    EXPECT_EQ(forward, line_cells(b, a));
+    const auto span = std::max(std::abs(b.u - a.u), std::abs(b.v - a.v));
+    EXPECT_EQ(static_cast<std::int64_t>(forward.size()), span + 1) << "one cell per major-axis step";
+  }
+}
+
+TEST(Polygons, SquareIncludesItsOutline) {
+  // Vertices at cell centres (0,0)-(4,3): interior centres by the half-open rule plus the drawn
+  // outline give the closed 5 x 4 block, as OpenCV's fillPoly would.
+  const auto cells = polygon_cells({{{0, 0}, {4, 0}, {4, 3}, {0, 3}}});
+  Cells expected;
+  for (int v = 0; v <= 3; ++v) {
+    for (int u = 0; u <= 4; ++u) expected.emplace(u, v);
+  }
+  EXPECT_EQ(cells, expected);
+}
+
+TEST(Polygons, InnerRingCutsAHole) {
+  const auto cells = polygon_cells({{{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {{3, 3}, {7, 3}, {7, 7}, {3, 7}}});
+  EXPECT_TRUE(cells.count({1, 1}));
+  EXPECT_TRUE(cells.count({3, 5})) << "the hole's outline is drawn";
+  EXPECT_FALSE(cells.count({5, 5})) << "the hole's inside is empty";
+  EXPECT_FALSE(cells.count({11, 5}));
+}
+
+TEST(Polygons, TriangleAgainstPointInPolygonReference) {
+  // Interior cells must be exactly the centres strictly inside the triangle (plus outline cells).
+  const std::vector<Pixel> tri{{0, 0}, {40, 7}, {13, 31}};
+  const auto cells = polygon_cells({tri});
+  const auto outline = [&] {
+    Cells c;
+    for (std::size_t i = 0; i < 3; ++i) {
+      auto l = line_cells(tri[i], tri[(i + 1) % 3]);
+      c.insert(l.begin(), l.end());
+    }
+    return c;
+  }();
+  auto cross = [](Pixel a, Pixel b, double u, double v) {
+    return (static_cast<double>(b.u - a.u)) * (v - static_cast<double>(a.v)) -
+           (static_cast<double>(b.v - a.v)) * (u - static_cast<double>(a.u));
+  };
+  for (int v = -2; v < 35; ++v) {
+    for (int u = -2; u < 45; ++u) {
+      const double c0 = cross(tri[0], tri[1], u, v), c1 = cross(tri[1], tri[2], u, v), c2 = cross(tri[2], tri[0], u, v);
+      const bool strictly_inside = (c0 > 0 && c1 > 0 && c2 > 0) || (c0 < 0 && c1 < 0 && c2 < 0);
+      const bool drawn = cells.count({u, v}) > 0;
+      if (strictly_inside) {
+        EXPECT_TRUE(drawn) << u << "," << v;
+      }
+      if (!strictly_inside && !outline.count({u, v})) {
+        // On-edge centres may go either way by the half-open rule; off-edge outside ones never.
+        const bool on_edge = c0 == 0 || c1 == 0 || c2 == 0;
+        if (!on_edge) {
+          EXPECT_FALSE(drawn) << u << "," << v;
+        }
+      }
+    }
+  }
+}
+
+TEST(Windows, DrawingIsIndependentOfTheWindow) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> d(-60, 60);
+  for (int trial = 0; trial < 50; ++trial) {
+    std::vector<std::vector<Pixel>> rings(2);
+    for (auto& ring : rings) {
+      for (int k = 0; k < 7; ++k) ring.push_back({d(rng), d(rng)});
+    }
+    const Window whole{-80, -80, 160, 160};
+    const auto all_poly = polygon_cells(rings, whole);
+    const auto all_line = line_cells(rings[0][0], rings[0][1], whole);
+    // Four windows that tile the whole one.
+    Cells poly, line;
+    for (const Window w : {Window{-80, -80, 97, 61}, Window{17, -80, 63, 61}, Window{-80, -19, 97, 99},
+                           Window{17, -19, 63, 99}}) {
+      const auto p = polygon_cells(rings, w);
+      poly.insert(p.begin(), p.end());
+      const auto l = line_cells(rings[0][0], rings[0][1], w);
+      line.insert(l.begin(), l.end());
+      for (const auto& [u, v] : p) EXPECT_TRUE(w.contains(u, v));
+    }
+    EXPECT_EQ(poly, all_poly);
+    EXPECT_EQ(line, all_line);
+  }
+}
+
+}  // namespace
+}  // namespace seqloc::raster
