@@ -2,6 +2,11 @@
 #include <sstream>
 #include <string>
 
+#include <filesystem>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
 #include "command.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 
@@ -35,6 +40,7 @@ class PreprocessCommand : public Command {
                    "combine the shards with `seqloc cache merge`");
     app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
     app.add_flag("--overwrite", options_.overwrite, "Replace an existing cache");
+    app.add_option("--report", report_path_, "Also write the run's figures (tiles, timings per stage) as JSON");
     app.footer(
         "The cache is written to OUTPUT.partial and renamed when complete; an interrupted build resumes from the\n"
         "partial file when rerun with the same input and options. See docs/cache-format.md.");
@@ -66,7 +72,37 @@ class PreprocessCommand : public Command {
           << "nodes present)\n";
     }
     std::fputs(out.str().c_str(), stdout);
+    if (!report_path_.empty()) write_report(report);
     return kExitOk;
+  }
+
+  void write_report(const pipeline::PreprocessReport& r) const {
+    nlohmann::ordered_json j;
+    j["output"] = options_.output.string();
+    j["tiles_wide"] = r.tiles_wide;
+    j["tiles_high"] = r.tiles_high;
+    j["tiles_total"] = r.tiles_total;
+    j["tiles_written"] = r.tiles_written;
+    j["tiles_resumed"] = r.tiles_resumed;
+    j["megapixels_per_layer"] = static_cast<double>(r.tiles_total) * 512.0 * 512.0 / 1e6;
+    j["threads"] = r.threads;
+    j["read_seconds"] = r.read_seconds;
+    j["render_seconds"] = r.render_seconds;
+    j["total_seconds"] = r.total_seconds;
+    j["classes_cpu_seconds"] = r.classes_cpu_seconds;
+    j["distance_cpu_seconds"] = r.distance_cpu_seconds;
+    j["encode_cpu_seconds"] = r.encode_cpu_seconds;
+    j["write_seconds"] = r.write_seconds;
+    j["features"] = {{"nodes", r.nodes}, {"lines", r.lines}, {"areas", r.areas}, {"roads", r.roads}};
+    const std::string tmp = report_path_ + ".tmp";
+    {
+      std::FILE* f = std::fopen(tmp.c_str(), "w");
+      if (!f) throw std::runtime_error(report_path_ + ": cannot write the report");
+      const std::string text = j.dump(2) + "\n";
+      std::fwrite(text.data(), 1, text.size(), f);
+      std::fclose(f);
+    }
+    std::filesystem::rename(tmp, report_path_);
   }
 
  private:
@@ -74,6 +110,7 @@ class PreprocessCommand : public Command {
   std::string bbox_;
   std::string shard_;
   int progress_ = 0;
+  std::string report_path_;
 };
 
 }  // namespace

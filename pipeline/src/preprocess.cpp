@@ -230,9 +230,15 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   std::atomic<std::size_t> next{0};
   std::exception_ptr worker_error;
   std::mutex error_mutex;
+  report.threads = threads;
+  struct StageTimes {
+    double classes = 0, distance = 0, encode = 0;
+  };
+  std::vector<StageTimes> stage_times(static_cast<std::size_t>(threads));
   std::vector<std::jthread> workers;
   for (int t = 0; t < threads; ++t) {
-    workers.emplace_back([&] {
+    workers.emplace_back([&, t] {
+      StageTimes& times = stage_times[static_cast<std::size_t>(t)];
       try {
         raster::RenderScratch scratch;
         raster::TileEncoder encoder;
@@ -240,9 +246,16 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
         std::vector<std::uint16_t> cm;
         for (std::size_t i = next++; i < todo.size(); i = next++) {
           const auto [col, row] = todo[i];
+          auto t0 = Clock::now();
           const bool any_class = renderer.render_classes(col, row, scratch, rgb);
+          times.classes += seconds_since(t0);
+          t0 = Clock::now();
           renderer.render_road_distance(col, row, scratch, cm);
-          if (!queue.push(encoder.encode(col, row, rgb, !any_class, cm))) break;
+          times.distance += seconds_since(t0);
+          t0 = Clock::now();
+          auto tile = encoder.encode(col, row, rgb, !any_class, cm);
+          times.encode += seconds_since(t0);
+          if (!queue.push(std::move(tile))) break;
         }
       } catch (...) {
         std::lock_guard lock(error_mutex);
@@ -255,7 +268,9 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   PreprocessProgress progress{report.tiles_resumed, report.tiles_total};
   try {
     while (auto tile = queue.pop()) {
+      const auto t0 = Clock::now();
       writer.write_tile(*tile);
+      report.write_seconds += seconds_since(t0);
       ++report.tiles_written;
       ++progress.tiles_done;
       if (on_progress) on_progress(progress);
@@ -266,8 +281,15 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   }
   workers.clear();
   if (worker_error) std::rethrow_exception(worker_error);
-  report.render_seconds = seconds_since(render_start);
+  for (const auto& times : stage_times) {
+    report.classes_cpu_seconds += times.classes;
+    report.distance_cpu_seconds += times.distance;
+    report.encode_cpu_seconds += times.encode;
+  }
+  const auto finish_start = Clock::now();
   writer.finish();
+  report.write_seconds += seconds_since(finish_start);
+  report.render_seconds = seconds_since(render_start);
   report.total_seconds = seconds_since(start);
   return report;
 }

@@ -52,9 +52,15 @@ struct PreprocessReport {
   std::int64_t tiles_wide = 0, tiles_high = 0;
   std::size_t nodes = 0, lines = 0, areas = 0, roads = 0;
   std::uint64_t ways_missing_nodes = 0;
-  double read_seconds = 0;
-  double render_seconds = 0;
+  double read_seconds = 0;    ///< reading and classifying the OSM input (wall)
+  double render_seconds = 0;  ///< rendering, encoding and writing the tiles (wall)
   double total_seconds = 0;
+  /// CPU time per stage, summed over the worker threads (the writer is the calling thread).
+  double classes_cpu_seconds = 0;
+  double distance_cpu_seconds = 0;
+  double encode_cpu_seconds = 0;
+  double write_seconds = 0;
+  int threads = 0;
   osm::GeoBox bbox;
   double centre_lat = 0, centre_lon = 0;
 };

@@ -1,0 +1,68 @@
+// The sample region in samples/ is what our generator writes: regenerating it gives the same
+// features, and it holds what the demo needs (a road network with an intersection, forest,
+// meadows, buildings).
+
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <map>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/osm/reader.hpp"
+#include "support/test_support.hpp"
+
+extern char** environ;
+
+namespace seqloc::osm {
+namespace {
+
+const std::filesystem::path kSample = std::filesystem::path(SEQLOC_SOURCE_DIR) / "samples" / "rural-valley.osm.pbf";
+
+std::map<std::string, int> census(const FeatureSet& f) {
+  std::map<std::string, int> count;
+  for (const auto& p : f.points) ++count[std::string(group_name(p.group))];
+  for (const auto& l : f.lines) ++count[std::string(group_name(l.group))];
+  for (const auto& a : f.areas) ++count["area:" + std::string(group_name(a.group))];
+  return count;
+}
+
+TEST(Sample, RegeneratesToTheCommittedFeatures) {
+  test::ScratchDir dir;
+  const auto fresh = dir / "sample.osm.pbf";
+  std::string tool = SEQLOC_MAKE_SAMPLE, out = fresh.string();
+  char* argv[] = {tool.data(), out.data(), nullptr};
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, argv[0], nullptr, nullptr, argv, environ), 0);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+
+  const auto committed = read_osm(kSample);
+  const auto regenerated = read_osm(fresh);
+  EXPECT_EQ(census(committed), census(regenerated));
+  ASSERT_EQ(committed.lines.size(), regenerated.lines.size());
+  for (std::size_t i = 0; i < committed.lines.size(); ++i) {
+    ASSERT_EQ(committed.lines[i].points.size(), regenerated.lines[i].points.size());
+    for (std::size_t k = 0; k < committed.lines[i].points.size(); ++k) {
+      EXPECT_EQ(committed.lines[i].points[k].lat_deg, regenerated.lines[i].points[k].lat_deg);
+      EXPECT_EQ(committed.lines[i].points[k].lon_deg, regenerated.lines[i].points[k].lon_deg);
+    }
+  }
+}
+
+TEST(Sample, IsARuralRegionWithWhatTheDemoNeeds) {
+  const auto count = census(read_osm(kSample));
+  EXPECT_GE(count.at("road"), 5);
+  EXPECT_GE(count.at("path"), 1);
+  EXPECT_GE(count.at("area:forest"), 2);
+  EXPECT_GE(count.at("area:grass"), 2);
+  EXPECT_GE(count.at("area:building"), 10);
+  EXPECT_GE(count.at("tree"), 50);
+  EXPECT_GE(count.at("hedge"), 1);
+  EXPECT_GE(count.at("fence"), 1);
+}
+
+}  // namespace
+}  // namespace seqloc::osm
