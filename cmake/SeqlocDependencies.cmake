@@ -18,6 +18,14 @@ target_include_directories(seqloc_libosmium SYSTEM INTERFACE ${OSMIUM_INCLUDE_DI
 target_link_libraries(seqloc_libosmium INTERFACE ZLIB::ZLIB BZip2::BZip2 EXPAT::EXPAT Threads::Threads)
 add_library(seqloc::libosmium ALIAS seqloc_libosmium)
 
+# libdeflate (fast deflate/inflate for the PNG tiles) ships no CMake config.
+find_path(LIBDEFLATE_INCLUDE_DIR libdeflate.h REQUIRED)
+find_library(LIBDEFLATE_LIBRARY NAMES deflate REQUIRED)
+add_library(seqloc_libdeflate INTERFACE)
+target_include_directories(seqloc_libdeflate SYSTEM INTERFACE ${LIBDEFLATE_INCLUDE_DIR})
+target_link_libraries(seqloc_libdeflate INTERFACE ${LIBDEFLATE_LIBRARY})
+add_library(seqloc::libdeflate ALIAS seqloc_libdeflate)
+
 # GeographicLib ships a Find module only.
 find_path(GEOGRAPHICLIB_INCLUDE_DIR GeographicLib/TransverseMercator.hpp REQUIRED)
 find_library(GEOGRAPHICLIB_LIBRARY NAMES GeographicLib Geographic REQUIRED)

@@ -75,7 +75,8 @@ TileRenderer::TileRenderer(const RegionFeatures& features, RegionGrid grid, doub
     : features_(features),
       grid_(grid),
       halo_px_(static_cast<int>(std::ceil(max_distance_m * kPixelsPerMetre)) + 1),
-      max_cm_(static_cast<std::uint16_t>(std::lround(max_distance_m * 100.0))) {
+      max_cm_(static_cast<std::uint16_t>(std::lround(max_distance_m * 100.0))),
+      quantize_(kCellM, max_cm_) {
   assert(max_distance_m > 0 && max_distance_m * 100.0 < 65535.0);
   const auto n = static_cast<std::size_t>(grid_.tile_count());
   node_bins_.resize(n);
@@ -167,8 +168,8 @@ bool TileRenderer::render_road_distance(std::int64_t col, std::int64_t row, Rend
   draw_roads(w, road_bins_[t], scratch.road_mask);
   if (std::find(scratch.road_mask.begin(), scratch.road_mask.end(), 1) == scratch.road_mask.end()) return false;
   squared_distance(scratch.road_mask, side, side, halo_px_, halo_px_, kTilePx, kTilePx, scratch.distance,
-                   scratch.squared);
-  for (std::size_t i = 0; i < cm.size(); ++i) cm[i] = quantize_distance_cm(scratch.squared[i], kCellM, max_cm_);
+                   scratch.squared, quantize_.reach_cells());
+  for (std::size_t i = 0; i < cm.size(); ++i) cm[i] = quantize_(scratch.squared[i]);
   return true;
 }
 

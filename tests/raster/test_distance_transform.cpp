@@ -72,3 +72,37 @@ TEST(DistanceTransform, QuantizesToCentimetresWithClamp) {
 
 }  // namespace
 }  // namespace seqloc::raster
+
+namespace seqloc::raster {
+namespace {
+
+TEST(DistanceTransform, ReachLimitedTransformIsExactAfterClamping) {
+  std::mt19937 rng(77);
+  DistanceScratch scratch;
+  std::vector<std::uint32_t> full, limited;
+  const DistanceQuantizer quantize(0.5, 1000);  // clamp 10 m = 20 cells
+  ASSERT_EQ(quantize.reach_cells(), 20);
+  for (int trial = 0; trial < 30; ++trial) {
+    const int w = 60 + trial, h = 50 + 2 * trial;
+    const auto mask = random_mask(rng, w, h, trial % 2 ? 0.002 : 0.02);
+    const auto reference = brute_force_distance_m(mask, w, h, 0.5);
+    squared_distance(mask, w, h, 10, 12, w - 25, h - 20, scratch, limited, quantize.reach_cells());
+    for (int v = 0; v < h - 20; ++v) {
+      for (int u = 0; u < w - 25; ++u) {
+        const double metres = reference[static_cast<std::size_t>((v + 12) * w + u + 10)];
+        const std::uint16_t expected =
+            metres > 1e100 ? 1000 : static_cast<std::uint16_t>(std::min(1000.0, std::floor(metres * 100 + 0.5)));
+        ASSERT_EQ(quantize(limited[static_cast<std::size_t>(v * (w - 25) + u)]), expected) << trial;
+      }
+    }
+  }
+}
+
+TEST(DistanceTransform, QuantizerTableEqualsTheFormula) {
+  const DistanceQuantizer quantize(0.5, 10000);
+  for (std::uint32_t d2 = 0; d2 < 50000; ++d2) ASSERT_EQ(quantize(d2), quantize_distance_cm(d2, 0.5, 10000)) << d2;
+  EXPECT_EQ(quantize(kNoMark), 10000);
+}
+
+}  // namespace
+}  // namespace seqloc::raster

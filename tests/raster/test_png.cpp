@@ -1,5 +1,7 @@
 #include <random>
 
+#include <png.h>
+
 #include <gtest/gtest.h>
 
 #include "seqloc/raster/png_codec.hpp"
@@ -41,6 +43,50 @@ TEST(Png, CorruptDataIsAnErrorNamingTheBlob) {
   auto flipped = png;
   for (std::size_t i = 40; i < flipped.size() - 12; i += 7) flipped[i] ^= 0x5a;
   EXPECT_THROW((void)decode_png(flipped, "tile"), PngError);
+}
+
+}  // namespace
+}  // namespace seqloc::raster
+
+namespace seqloc::raster {
+namespace {
+
+// A PNG written by libpng itself (its adaptive filter choice uses all five filter types), plain
+// and interlaced: the fast path must decode the first, libpng the second, both to the pixels.
+std::vector<std::uint8_t> libpng_encode(const std::vector<std::uint8_t>& rgb, int w, int h, bool interlaced) {
+  std::vector<std::uint8_t> out;
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  png_infop info = png_create_info_struct(png);
+  png_set_write_fn(
+      png, &out,
+      [](png_structp p, png_bytep data, png_size_t n) {
+        auto* v = static_cast<std::vector<std::uint8_t>*>(png_get_io_ptr(p));
+        v->insert(v->end(), data, data + n);
+      },
+      nullptr);
+  png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_ALL_FILTERS);
+  png_set_IHDR(png, info, static_cast<png_uint_32>(w), static_cast<png_uint_32>(h), 8, PNG_COLOR_TYPE_RGB,
+               interlaced ? PNG_INTERLACE_ADAM7 : PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_BASE, PNG_FILTER_TYPE_BASE);
+  std::vector<png_bytep> rows(static_cast<std::size_t>(h));
+  for (int r = 0; r < h; ++r) rows[static_cast<std::size_t>(r)] = const_cast<png_bytep>(rgb.data() + r * w * 3);
+  png_set_rows(png, info, rows.data());
+  png_write_png(png, info, PNG_TRANSFORM_IDENTITY, nullptr);
+  png_destroy_write_struct(&png, &info);
+  return out;
+}
+
+TEST(Png, DecodesPngsFromOtherWriters) {
+  std::mt19937 rng(9);
+  const int w = 97, h = 61;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(w * h * 3));
+  // Smooth gradients plus noise, so that libpng picks different filters per row.
+  for (int i = 0; i < w * h * 3; ++i) rgb[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(i / 7 + rng() % 9);
+  for (bool interlaced : {false, true}) {
+    const auto image = decode_png(libpng_encode(rgb, w, h, interlaced), "libpng");
+    EXPECT_EQ(image.width, w);
+    EXPECT_EQ(image.channels, 3);
+    EXPECT_EQ(image.pixels8, rgb) << (interlaced ? "interlaced" : "plain");
+  }
 }
 
 }  // namespace

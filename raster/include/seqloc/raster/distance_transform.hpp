@@ -19,8 +19,8 @@ inline constexpr std::uint32_t kNoMark = 0xFFFFFFFFu;
 
 /// Scratch buffers of the transform (one per thread, reused across tiles).
 struct DistanceScratch {
-  std::vector<std::uint32_t> column;  ///< squared vertical distances, window-sized
-  std::vector<std::uint32_t> up;      ///< running distance to the last mark above, per column
+  std::vector<std::uint16_t> column;  ///< vertical distances (cells) of the output rows
+  std::vector<std::uint16_t> up;      ///< running distance to the last mark above, per column
   std::vector<std::int32_t> hull_q;
   std::vector<double> hull_z;
 };
@@ -29,8 +29,12 @@ struct DistanceScratch {
 /// [out_u0, out_u0 + out_w) x [out_v0, out_v0 + out_h) of a width x height mask (non-zero = mark),
 /// taking every mark of the whole mask into account. Row-major, out_w * out_h values; kNoMark
 /// where the mask has no mark at all in the relevant rows.
+///
+/// With `reach` > 0 only distances up to `reach` cells are wanted: any cell farther from every
+/// mark may get kNoMark instead of its distance (marks more than `reach` rows away from a cell's
+/// column are skipped), which is exact once the result is clamped at `reach`.
 void squared_distance(std::span<const std::uint8_t> mask, int width, int height, int out_u0, int out_v0, int out_w,
-                      int out_h, DistanceScratch& scratch, std::vector<std::uint32_t>& out);
+                      int out_h, DistanceScratch& scratch, std::vector<std::uint32_t>& out, int reach = 0);
 
 /// Reference implementation for tests: brute force over all marks, in double precision metres
 /// (cell size `cell_m`), for the whole mask; a large value where there is no mark.
@@ -45,5 +49,22 @@ void squared_distance(std::span<const std::uint8_t> mask, int width, int height,
   if (cm >= max_cm) return max_cm;
   return static_cast<std::uint16_t>(cm + 0.5);
 }
+
+/// quantize_distance_cm() as a table over the squared distances below the clamp (the same values,
+/// without a square root per cell).
+class DistanceQuantizer {
+ public:
+  DistanceQuantizer(double cell_m, std::uint16_t max_cm);
+  [[nodiscard]] std::uint16_t operator()(std::uint32_t squared_cells) const {
+    return squared_cells < table_.size() ? table_[squared_cells] : max_cm_;
+  }
+  /// The clamp in cells, rounded up: the `reach` to pass to squared_distance().
+  [[nodiscard]] int reach_cells() const { return reach_; }
+
+ private:
+  std::vector<std::uint16_t> table_;
+  std::uint16_t max_cm_;
+  int reach_;
+};
 
 }  // namespace seqloc::raster

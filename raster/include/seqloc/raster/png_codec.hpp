@@ -1,5 +1,5 @@
 #pragma once
-// PNG encoding and decoding of tiles in memory (libpng): 8-bit RGB for the class raster and
+// PNG encoding and decoding of tiles in memory: 8-bit RGB for the class raster and
 // 16-bit grey for the road distance, the two tile encodings of the region cache.
 
 #include <cstdint>
@@ -24,7 +24,8 @@ struct PngImage {
   std::vector<std::uint16_t> pixels16;  ///< row-major, when bit_depth == 16 (native byte order)
 };
 
-/// zlib level 1 and a fixed filter: the tiles are mostly runs, where faster settings lose little.
+/// Written with libdeflate (level 1) and a fixed filter per encoding; any PNG decodes (libpng
+/// handles what the fast path does not: palettes, other depths, interlacing).
 [[nodiscard]] std::vector<std::uint8_t> encode_png_rgb8(std::span<const std::uint8_t> rgb, int width, int height);
 [[nodiscard]] std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> values, int width, int height);
 /// Throws PngError (with `what` naming the blob's origin) on corrupt data.

@@ -107,6 +107,7 @@ class TileRenderer {
   RegionGrid grid_;
   int halo_px_;
   std::uint16_t max_cm_;
+  DistanceQuantizer quantize_;
   std::vector<std::vector<std::uint32_t>> node_bins_, line_bins_, area_bins_, road_bins_;
   std::vector<std::uint32_t> road_lines_;  ///< indices of road-group lines
   std::vector<std::uint32_t> all_nodes_, all_lines_, all_areas_;
