@@ -3,11 +3,7 @@
 // as an uninterrupted build.
 
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
-#include <unistd.h>
-
-#include <fcntl.h>
 
 #include <chrono>
 #include <random>
@@ -18,28 +14,10 @@
 #include "seqloc/raster/cache.hpp"
 #include "support/test_support.hpp"
 
-extern char** environ;
-
 namespace seqloc::pipeline {
 namespace {
 
 const char* kBbox = "11.520,49.995,11.566,50.024";  // ~3.3 x 3.2 km of north-bayreuth: ~1 s of work
-
-pid_t spawn_seqloc(const std::vector<std::string>& args) {
-  std::vector<std::string> storage{SEQLOC_BINARY};
-  storage.insert(storage.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (auto& a : storage) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
-  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
-  pid_t pid = 0;
-  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  return rc == 0 ? pid : -1;
-}
 
 TEST(CrashSafety, KillNineNeverDamagesTheCacheAndARerunCompletes) {
   const auto osm = test::shared_osm("north-bayreuth.osm.pbf");
@@ -60,7 +38,7 @@ TEST(CrashSafety, KillNineNeverDamagesTheCacheAndARerunCompletes) {
   std::uniform_int_distribution<int> delay_ms(30, 900);
   int killed_mid_build = 0;
   for (int attempt = 0; attempt < 8; ++attempt) {
-    const pid_t pid = spawn_seqloc(args);
+    const pid_t pid = test::start_seqloc(args);
     ASSERT_GT(pid, 0);
     std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms(rng)));
     kill(pid, SIGKILL);

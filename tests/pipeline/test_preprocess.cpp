@@ -36,6 +36,16 @@ osm::SyntheticMap known_map() {
   return map;
 }
 
+// The known map written to `dir`, with options to preprocess it over kBox into dir/r.gpkg.
+PreprocessOptions known_options(const test::ScratchDir& dir) {
+  known_map().write(dir / "map.osm.pbf", 50);
+  PreprocessOptions options;
+  options.input = dir / "map.osm.pbf";
+  options.output = dir / "r.gpkg";
+  options.bbox = kBox;
+  return options;
+}
+
 struct Built {
   test::ScratchDir dir;
   std::filesystem::path cache;
@@ -43,11 +53,7 @@ struct Built {
 
 std::unique_ptr<Built> build_known() {
   auto b = std::make_unique<Built>();
-  known_map().write(b->dir / "map.osm.pbf", 50);
-  PreprocessOptions options;
-  options.input = b->dir / "map.osm.pbf";
-  options.output = b->dir / "region.gpkg";
-  options.bbox = kBox;
+  const auto options = known_options(b->dir);
   preprocess_region(options);
   b->cache = options.output;
   return b;
@@ -140,11 +146,7 @@ void expect_usage_error(const PreprocessOptions& options, const std::string& fra
 
 TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
   test::ScratchDir dir;
-  known_map().write(dir / "map.osm.pbf", 50);
-  PreprocessOptions options;
-  options.input = dir / "map.osm.pbf";
-  options.output = dir / "r.gpkg";
-  options.bbox = kBox;
+  const auto options = known_options(dir);
   preprocess_region(options);
   const std::string before = test::read_file(options.output);
 
@@ -181,11 +183,7 @@ TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
 
 TEST(Preprocess, ReadersKeepReadingWhileACacheIsRebuilt) {
   test::ScratchDir dir;
-  known_map().write(dir / "map.osm.pbf", 50);
-  PreprocessOptions options;
-  options.input = dir / "map.osm.pbf";
-  options.output = dir / "r.gpkg";
-  options.bbox = kBox;
+  auto options = known_options(dir);
   options.max_distance_m = 50;
   preprocess_region(options);
 

@@ -2,9 +2,6 @@
 // features, and it holds what the demo needs (a road network with an intersection, forest,
 // meadows, buildings).
 
-#include <spawn.h>
-#include <sys/wait.h>
-
 #include <algorithm>
 #include <map>
 
@@ -12,8 +9,6 @@
 
 #include "seqloc/osm/reader.hpp"
 #include "support/test_support.hpp"
-
-extern char** environ;
 
 namespace seqloc::osm {
 namespace {
@@ -31,13 +26,8 @@ std::map<std::string, int> census(const FeatureSet& f) {
 TEST(Sample, RegeneratesToTheCommittedFeatures) {
   test::ScratchDir dir;
   const auto fresh = dir / "sample.osm.pbf";
-  std::string tool = SEQLOC_MAKE_SAMPLE, out = fresh.string();
-  char* argv[] = {tool.data(), out.data(), nullptr};
-  pid_t pid = 0;
-  ASSERT_EQ(posix_spawn(&pid, argv[0], nullptr, nullptr, argv, environ), 0);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  const auto made = test::run_program(SEQLOC_MAKE_SAMPLE, {fresh.string()});
+  ASSERT_EQ(made.exit_code, 0) << made.err;
 
   const auto committed = read_osm(kSample);
   const auto regenerated = read_osm(fresh);

@@ -37,27 +37,38 @@ ScratchDir::~ScratchDir() {
   }
 }
 
-CommandResult run_seqloc(const std::vector<std::string>& args) {
-  ScratchDir capture;
-  const auto out_path = capture / "stdout", err_path = capture / "stderr";
-  std::vector<std::string> argv_storage{SEQLOC_BINARY};
-  argv_storage.insert(argv_storage.end(), args.begin(), args.end());
+namespace {
+
+// posix_spawn with stdin from /dev/null and stdout/stderr to the given files.
+pid_t spawn(const std::string& program, const std::vector<std::string>& args, const std::string& out,
+            const std::string& err) {
+  std::vector<std::string> storage{program};
+  storage.insert(storage.end(), args.begin(), args.end());
   std::vector<char*> argv;
-  for (auto& a : argv_storage) argv.push_back(a.data());
+  for (auto& a : storage) argv.push_back(a.data());
   argv.push_back(nullptr);
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
   posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_addopen(&actions, 1, out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&actions, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   pid_t pid = 0;
+  const int rc = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  return rc == 0 ? pid : -1;
+}
+
+}  // namespace
+
+CommandResult run_program(const std::string& program, const std::vector<std::string>& args) {
+  ScratchDir capture;
+  const auto out_path = capture / "stdout", err_path = capture / "stderr";
   CommandResult result;
-  if (posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ) != 0) {
-    posix_spawn_file_actions_destroy(&actions);
-    ADD_FAILURE() << "cannot start " << argv[0];
+  const pid_t pid = spawn(program, args, out_path.string(), err_path.string());
+  if (pid < 0) {
+    ADD_FAILURE() << "cannot start " << program;
     return result;
   }
-  posix_spawn_file_actions_destroy(&actions);
   int status = 0;
   waitpid(pid, &status, 0);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
@@ -65,6 +76,10 @@ CommandResult run_seqloc(const std::vector<std::string>& args) {
   result.err = read_file(err_path);
   return result;
 }
+
+CommandResult run_seqloc(const std::vector<std::string>& args) { return run_program(SEQLOC_BINARY, args); }
+
+int start_seqloc(const std::vector<std::string>& args) { return spawn(SEQLOC_BINARY, args, "/dev/null", "/dev/null"); }
 
 std::filesystem::path shared_osm(const std::string& name) {
   const auto path = std::filesystem::path(SEQLOC_SHARED_DATA) / name;

@@ -28,8 +28,12 @@ struct CommandResult {
   std::string err;
 };
 
-/// Runs the seqloc binary with `args` (no shell), capturing its output.
+/// Runs a program with `args` (no shell) to completion, capturing its output.
+CommandResult run_program(const std::string& program, const std::vector<std::string>& args);
+/// Runs the seqloc binary.
 CommandResult run_seqloc(const std::vector<std::string>& args);
+/// Starts the seqloc binary in the background (output discarded); returns its pid, or -1.
+int start_seqloc(const std::vector<std::string>& args);
 
 /// ../shared/data/osm/NAME, or an empty path when the shared data is not there.
 std::filesystem::path shared_osm(const std::string& name);
