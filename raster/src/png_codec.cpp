@@ -161,7 +161,11 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
   if (blob.size() < 8 + 25 || std::memcmp(blob.data(), kSignature, 8) != 0) return std::nullopt;
   std::size_t offset = 8;
   PngImage image;
-  std::vector<std::uint8_t> zdata;
+  // The zlib stream: read in place when it is one IDAT chunk (as we write it), else gathered.
+  thread_local std::vector<std::uint8_t> gathered;
+  gathered.clear();
+  std::span<const std::uint8_t> zdata;
+  int idat_chunks = 0;
   bool have_header = false, ended = false;
   while (offset + 12 <= blob.size()) {
     const std::uint32_t size = get_u32(blob.data() + offset);
@@ -191,7 +195,13 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
       }
       have_header = true;
     } else if (std::memcmp(type, "IDAT", 4) == 0) {
-      zdata.insert(zdata.end(), data, data + size);
+      if (++idat_chunks == 1) {
+        zdata = {data, size};
+      } else {
+        if (idat_chunks == 2) gathered.assign(zdata.begin(), zdata.end());
+        gathered.insert(gathered.end(), data, data + size);
+        zdata = gathered;
+      }
     } else if (std::memcmp(type, "IEND", 4) == 0) {
       ended = true;
       break;
@@ -203,22 +213,38 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
   if (!have_header || !ended) throw PngError(what + ": corrupt PNG: truncated");
   const int bpp = image.channels * image.bit_depth / 8;
   const std::size_t stride = static_cast<std::size_t>(image.width) * static_cast<std::size_t>(bpp);
-  std::vector<std::uint8_t> raw((stride + 1) * static_cast<std::size_t>(image.height));
+  thread_local std::vector<std::uint8_t> raw;  // reused: no page faults on every tile
+  raw.resize((stride + 1) * static_cast<std::size_t>(image.height));
   std::size_t produced = 0;
   const auto rc = libdeflate_zlib_decompress(thread_decompressor(), zdata.data(), zdata.size(), raw.data(), raw.size(),
                                              &produced);
   if (rc != LIBDEFLATE_SUCCESS || produced != raw.size()) throw PngError(what + ": corrupt PNG: bad image data");
-  if (!unfilter(raw.data(), stride, image.height, bpp)) throw PngError(what + ": corrupt PNG: unknown filter type");
   if (image.bit_depth == 16) {
+    // 16-bit grey: rows filtered with "sub" (ours) are unfiltered and byte-swapped in one pass
+    // on whole samples; other filters go through the generic unfilter first.
+    bool all_sub = true;
+    for (int r = 0; r < image.height && all_sub; ++r) all_sub = raw[static_cast<std::size_t>(r) * (stride + 1)] == 1;
+    if (!all_sub && !unfilter(raw.data(), stride, image.height, bpp)) {
+      throw PngError(what + ": corrupt PNG: unknown filter type");
+    }
     image.pixels16.resize(static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height));
     for (int r = 0; r < image.height; ++r) {
       const std::uint8_t* src = raw.data() + static_cast<std::size_t>(r) * (stride + 1) + 1;
       std::uint16_t* dst = image.pixels16.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(image.width);
-      for (int i = 0; i < image.width; ++i) {
-        dst[i] = static_cast<std::uint16_t>((src[2 * i] << 8) | src[2 * i + 1]);
+      if (all_sub) {
+        // Byte-wise sub with bpp 2 adds the high and the low bytes separately, modulo 256.
+        std::uint8_t hi = 0, lo = 0;
+        for (int i = 0; i < image.width; ++i) {
+          hi = static_cast<std::uint8_t>(hi + src[2 * i]);
+          lo = static_cast<std::uint8_t>(lo + src[2 * i + 1]);
+          dst[i] = static_cast<std::uint16_t>((hi << 8) | lo);
+        }
+      } else {
+        for (int i = 0; i < image.width; ++i) dst[i] = static_cast<std::uint16_t>((src[2 * i] << 8) | src[2 * i + 1]);
       }
     }
   } else {
+    if (!unfilter(raw.data(), stride, image.height, bpp)) throw PngError(what + ": corrupt PNG: unknown filter type");
     image.pixels8.resize(stride * static_cast<std::size_t>(image.height));
     for (int r = 0; r < image.height; ++r) {
       std::memcpy(image.pixels8.data() + static_cast<std::size_t>(r) * stride,

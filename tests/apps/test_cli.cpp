@@ -84,6 +84,19 @@ TEST(Cli, PreprocessWritesACacheAndInfoDescribesIt) {
   EXPECT_NE(text.out.find("max_distance_m"), std::string::npos);
 }
 
+TEST(Cli, ProgressOnRequestAndTimestampedLogs) {
+  test::ScratchDir dir;
+  const auto map = small_map(dir);
+  const auto r = run_seqloc({"-v", "preprocess", map.string(), "-o", (dir / "r.gpkg").string(), "--progress",
+                             "--report", (dir / "report.json").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("tiles ["), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("] preprocess "), std::string::npos) << "a timestamped log line: " << r.err;
+  const auto report = nlohmann::json::parse(test::read_file(dir / "report.json"));
+  EXPECT_EQ(report["tiles_written"], report["tiles_total"]);
+  EXPECT_GT(report["tiles_total"].get<int>(), 0);
+}
+
 TEST(Cli, DataErrorsExitOneWithOneLine) {
   test::ScratchDir dir;
   const auto missing = run_seqloc({"preprocess", (dir / "nope.osm.pbf").string(), "-o", (dir / "r.gpkg").string()});

@@ -1,5 +1,7 @@
 #include <random>
 
+#include <cstring>
+
 #include <png.h>
 
 #include <gtest/gtest.h>
@@ -53,7 +55,7 @@ namespace {
 
 // A PNG written by libpng itself (its adaptive filter choice uses all five filter types), plain
 // and interlaced: the fast path must decode the first, libpng the second, both to the pixels.
-std::vector<std::uint8_t> libpng_encode(const std::vector<std::uint8_t>& rgb, int w, int h, bool interlaced) {
+std::vector<std::uint8_t> libpng_encode(const void* pixels, int w, int h, int depth, int color, bool interlaced) {
   std::vector<std::uint8_t> out;
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
   png_infop info = png_create_info_struct(png);
@@ -65,12 +67,17 @@ std::vector<std::uint8_t> libpng_encode(const std::vector<std::uint8_t>& rgb, in
       },
       nullptr);
   png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_ALL_FILTERS);
-  png_set_IHDR(png, info, static_cast<png_uint_32>(w), static_cast<png_uint_32>(h), 8, PNG_COLOR_TYPE_RGB,
+  png_set_IHDR(png, info, static_cast<png_uint_32>(w), static_cast<png_uint_32>(h), depth, color,
                interlaced ? PNG_INTERLACE_ADAM7 : PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_BASE, PNG_FILTER_TYPE_BASE);
+  const int row_bytes = w * (color == PNG_COLOR_TYPE_RGB ? 3 : 1) * depth / 8;
   std::vector<png_bytep> rows(static_cast<std::size_t>(h));
-  for (int r = 0; r < h; ++r) rows[static_cast<std::size_t>(r)] = const_cast<png_bytep>(rgb.data() + r * w * 3);
+  for (int r = 0; r < h; ++r) {
+    rows[static_cast<std::size_t>(r)] = const_cast<png_bytep>(static_cast<const std::uint8_t*>(pixels) + r * row_bytes);
+  }
   png_set_rows(png, info, rows.data());
-  png_write_png(png, info, PNG_TRANSFORM_IDENTITY, nullptr);
+  // Small IDAT chunks, so that the image data spans many of them.
+  png_set_compression_buffer_size(png, 1024);
+  png_write_png(png, info, depth == 16 ? PNG_TRANSFORM_SWAP_ENDIAN : PNG_TRANSFORM_IDENTITY, nullptr);
   png_destroy_write_struct(&png, &info);
   return out;
 }
@@ -82,11 +89,22 @@ TEST(Png, DecodesPngsFromOtherWriters) {
   // Smooth gradients plus noise, so that libpng picks different filters per row.
   for (int i = 0; i < w * h * 3; ++i) rgb[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(i / 7 + rng() % 9);
   for (bool interlaced : {false, true}) {
-    const auto image = decode_png(libpng_encode(rgb, w, h, interlaced), "libpng");
+    const auto png = libpng_encode(rgb.data(), w, h, 8, PNG_COLOR_TYPE_RGB, interlaced);
+    const auto image = decode_png(png, "libpng");
     EXPECT_EQ(image.width, w);
     EXPECT_EQ(image.channels, 3);
     EXPECT_EQ(image.pixels8, rgb) << (interlaced ? "interlaced" : "plain");
   }
+  // 16-bit grey with libpng's choice of filters, over many IDAT chunks.
+  std::vector<std::uint16_t> grey(static_cast<std::size_t>(w * h));
+  for (int i = 0; i < w * h; ++i) grey[static_cast<std::size_t>(i)] = static_cast<std::uint16_t>(i * 37 + rng() % 300);
+  const auto png = libpng_encode(grey.data(), w, h, 16, PNG_COLOR_TYPE_GRAY, false);
+  int idat = 0;
+  for (std::size_t i = 0; i + 4 <= png.size(); ++i) idat += std::memcmp(png.data() + i, "IDAT", 4) == 0;
+  EXPECT_GT(idat, 2) << "the fixture must span several IDAT chunks";
+  const auto image = decode_png(png, "libpng16");
+  EXPECT_EQ(image.bit_depth, 16);
+  EXPECT_EQ(image.pixels16, grey);
 }
 
 }  // namespace
