@@ -1,0 +1,31 @@
+#pragma once
+// The "offline" baseline (conventions.md section 6): for each frame t, the sum of the
+// log-likelihoods of frames s (all of them, or |s - t| <= K) warped into frame t's pose space by
+// the relative motion between s and t; its argmax is frame t's pose. It uses future frames, so
+// it is an upper reference for what sequence aggregation can reach, not an online method.
+
+#include <vector>
+
+#include "seqloc/filter/config.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+
+namespace seqloc::filter {
+
+struct OfflineFrame {
+  const PreparedFrame* frame = nullptr;
+  CropPose crop;
+  Odometry from_previous;  ///< motion from the previous frame (ignored for the first)
+};
+
+/// The relative motion from a pose to a later one, composed from the increments in between
+/// (each in the body frame of its start), expressed in the body frame of the first pose.
+[[nodiscard]] Odometry compose(const std::vector<Odometry>& increments);
+/// The motion that undoes `motion` (expressed in the body frame of its end).
+[[nodiscard]] Odometry invert(const Odometry& motion);
+
+/// One pose per frame, in the window of `config` (width, height, headings, threads).
+/// `half_window` < 0 aggregates all frames.
+[[nodiscard]] std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const FilterConfig& config,
+                                              int half_window = -1);
+
+}  // namespace seqloc::filter

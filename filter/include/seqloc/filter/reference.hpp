@@ -1,0 +1,35 @@
+#pragma once
+// A slow, obviously correct implementation of one SeqLoc step: plain loops over every cell, double
+// precision, written from conventions.md section 6 and the interpolation rules stated in
+// seqloc_filter.hpp, sharing no code with the fast filter beyond the half-float conversion. The
+// tests run both on seeded random volumes and motions and compare them.
+
+#include <vector>
+
+#include "seqloc/filter/config.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/filter/types.hpp"
+
+namespace seqloc::filter {
+
+class ReferenceFilter {
+ public:
+  explicit ReferenceFilter(const FilterConfig& config);
+
+  void reset_uniform();
+  void reset_gaussian(double u, double v, double sigma_m);
+  FrameResult step(const FrameVolume& volume, const CropPose& crop, const Odometry& odometry,
+                   const float* road_distance_m, const GpsFix* gps = nullptr);
+
+  [[nodiscard]] double at(int u, int v, int k) const { return b_[index(u, v, k)]; }
+
+ private:
+  [[nodiscard]] std::size_t index(int u, int v, int k) const {
+    return (static_cast<std::size_t>(k) * c_.height + static_cast<std::size_t>(v)) * c_.width + u;
+  }
+  FilterConfig c_;
+  std::vector<double> b_;
+  bool first_ = true;
+};
+
+}  // namespace seqloc::filter

@@ -1,0 +1,63 @@
+#pragma once
+// Plain inputs of the filter (conventions.md sections 1, 4 and 6). The filter is map-agnostic:
+// positions are window cells (0.5 m, u east, v south, the cell's centre at integer (u, v)) and
+// headings are grid headings, degrees clockwise from the window's north.
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+namespace seqloc::filter {
+
+/// A frame volume or a configuration the filter cannot use; the message says what and why.
+class FilterError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+/// Motion between frames t-1 and t in the body frame of t-1 (conventions.md section 1):
+/// forward and left in metres, yaw counter-clockwise positive (a left turn is positive), so the
+/// heading (clockwise) at t is the heading at t-1 minus yaw_deg.
+struct Odometry {
+  double forward_m = 0;
+  double left_m = 0;
+  double yaw_deg = 0;
+};
+
+/// A pose in window coordinates.
+struct Pose {
+  double u = 0;            ///< window cells, east
+  double v = 0;            ///< window cells, south
+  double heading_deg = 0;  ///< grid heading, clockwise from window north, [0, 360)
+};
+
+enum class VolumeType { float32, float16 };
+enum class VolumeValues { log_prob, prob };
+
+/// A frame's pose likelihood volume as the backbone wrote it: shape (H, W, N), C order, bin j
+/// holding heading j * 360 / N in the crop's own frame (conventions.md section 4). A view: the
+/// data must outlive the call that takes it.
+struct FrameVolume {
+  const void* data = nullptr;
+  VolumeType type = VolumeType::float32;
+  VolumeValues values = VolumeValues::log_prob;
+  int height = 0;
+  int width = 0;
+  int bins = 0;
+  double cell_m = 0.5;  ///< the volume's cell size
+};
+
+/// Where a frame volume lies in the window: the window position (cells, may be fractional) of
+/// the crop's centre, and the rotation of the crop's north from the window's north (degrees
+/// clockwise; 0 for crops in region-grid coordinates, minus the meridian convergence for crops
+/// north-up in the local tangent plane).
+struct CropPose {
+  double centre_u = 0;
+  double centre_v = 0;
+  double rotation_deg = 0;
+};
+
+/// 16-bit IEEE half to float (NumPy float16), exact.
+float half_to_float(std::uint16_t h);
+
+}  // namespace seqloc::filter

@@ -1,0 +1,222 @@
+#include "seqloc/filter/reference.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+namespace seqloc::filter {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Bilinear sample of a (width x height) image at (x, y); nullopt outside [0, w-1] x [0, h-1].
+std::optional<double> bilinear(const std::vector<double>& image, std::size_t offset, int width, int height, double x,
+                               double y) {
+  if (x < 0 || y < 0 || x > width - 1 || y > height - 1) return std::nullopt;
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  const int x1 = std::min(x0 + 1, width - 1), y1 = std::min(y0 + 1, height - 1);
+  const double ax = x - x0, ay = y - y0;
+  auto px = [&](int xx, int yy) { return image[offset + static_cast<std::size_t>(yy) * width + xx]; };
+  return (1 - ay) * ((1 - ax) * px(x0, y0) + ax * px(x1, y0)) + ay * ((1 - ax) * px(x0, y1) + ax * px(x1, y1));
+}
+
+double wrap360(double d) {
+  d = std::fmod(d, 360.0);
+  return d < 0 ? d + 360.0 : d;
+}
+
+}  // namespace
+
+ReferenceFilter::ReferenceFilter(const FilterConfig& config)
+    : c_(config), b_(static_cast<std::size_t>(config.width) * config.height * config.headings) {
+  c_.validate();
+  reset_uniform();
+}
+
+void ReferenceFilter::reset_uniform() {
+  std::fill(b_.begin(), b_.end(), -std::log(static_cast<double>(b_.size())));
+  first_ = true;
+}
+
+void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
+  const double sigma = sigma_m / 0.5;
+  double sum = 0;
+  for (int v = 0; v < c_.height; ++v)
+    for (int u = 0; u < c_.width; ++u) sum += std::exp(-((u - u0) * (u - u0) + (v - v0) * (v - v0)) / (2 * sigma * sigma));
+  for (int k = 0; k < c_.headings; ++k)
+    for (int v = 0; v < c_.height; ++v)
+      for (int u = 0; u < c_.width; ++u) {
+        const double g = std::exp(-((u - u0) * (u - u0) + (v - v0) * (v - v0)) / (2 * sigma * sigma));
+        b_[index(u, v, k)] = std::log(g / sum / c_.headings);
+      }
+  first_ = true;
+}
+
+FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& crop, const Odometry& odo,
+                                  const float* road_distance_m, const GpsFix* gps) {
+  const int W = c_.width, H = c_.height, R = c_.headings;
+  const int vh = volume.height, vw = volume.width, vn = volume.bins;
+
+  // 1. Predict: b_hat(x, th) = log of the probability-domain interpolation: bilinear in space
+  //    (each source bin j translated by the odometry's displacement d(th_j)), linear between the
+  //    two source bins around th + yaw; sources outside the window count as the window minimum.
+  if (!first_) {
+    const double window_min = *std::min_element(b_.begin(), b_.end());
+    std::vector<double> hat(b_.size());
+    for (int k = 0; k < R; ++k) {
+      const double p = k + odo.yaw_deg * R / 360.0;
+      const double fp = std::floor(p);
+      const double a = p - fp;
+      const int j0 = static_cast<int>(((static_cast<long long>(fp) % R) + R) % R), j1 = (j0 + 1) % R;
+      for (int v = 0; v < H; ++v)
+        for (int u = 0; u < W; ++u) {
+          std::vector<std::pair<double, double>> terms;  // (log value, weight)
+          for (int side = 0; side < 2; ++side) {
+            const int j = side == 0 ? j0 : j1;
+            const double wj = side == 0 ? 1 - a : a;
+            if (wj == 0) continue;
+            const double h = j * 360.0 / R * kPi / 180.0;
+            double du = (odo.forward_m * std::sin(h) - odo.left_m * std::cos(h)) / 0.5;
+            double dv = -(odo.forward_m * std::cos(h) + odo.left_m * std::sin(h)) / 0.5;
+            if (std::abs(du - std::round(du)) < 1e-9) du = std::round(du);
+            if (std::abs(dv - std::round(dv)) < 1e-9) dv = std::round(dv);
+            const double x = u - du, y = v - dv;
+            if (x < 0 || y < 0 || x > W - 1 || y > H - 1) {
+              terms.emplace_back(window_min, wj);
+              continue;
+            }
+            const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+            const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
+            const double ax = x - x0, ay = y - y0;
+            terms.emplace_back(b_[index(x0, y0, j)], wj * (1 - ax) * (1 - ay));
+            terms.emplace_back(b_[index(x1, y0, j)], wj * ax * (1 - ay));
+            terms.emplace_back(b_[index(x0, y1, j)], wj * (1 - ax) * ay);
+            terms.emplace_back(b_[index(x1, y1, j)], wj * ax * ay);
+          }
+          double m = -std::numeric_limits<double>::infinity();
+          for (const auto& [l, wt] : terms)
+            if (wt > 0) m = std::max(m, l);
+          double sum = 0;
+          for (const auto& [l, wt] : terms)
+            if (wt > 0) sum += wt * std::exp(l - m);
+          hat[index(u, v, k)] = m + std::log(sum);
+        }
+    }
+    b_ = hat;
+  }
+
+  // 2. ETU: the frame normalized over its own M cells, its normalized entropy and weight.
+  const std::size_t m_cells = static_cast<std::size_t>(vh) * vw * vn;
+  std::vector<double> logp(m_cells);  // [bin][v][u]
+  double max = -std::numeric_limits<double>::infinity();
+  for (int v = 0; v < vh; ++v)
+    for (int u = 0; u < vw; ++u)
+      for (int j = 0; j < vn; ++j) {
+        const std::size_t i = (static_cast<std::size_t>(v) * vw + u) * vn + j;
+        double x = volume.type == VolumeType::float32 ? static_cast<const float*>(volume.data)[i]
+                                                     : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
+        if (volume.values == VolumeValues::prob) x = x > 0 ? std::log(x) : -std::numeric_limits<double>::infinity();
+        if (std::isinf(x)) x = kLogZero;  // the filter's stand-in for log(0)
+        logp[(static_cast<std::size_t>(j) * vh + v) * vw + u] = x;
+        max = std::max(max, x);
+      }
+  double sum = 0;
+  for (double x : logp) sum += std::exp(x - max);
+  const double lse_frame = max + std::log(sum);
+  double entropy = 0;
+  for (double& x : logp) {
+    if (x <= kLogZero) continue;
+    x -= lse_frame;
+    entropy -= std::exp(x) * x;
+  }
+  const double log_m = std::log(static_cast<double>(m_cells));
+  const double h_hat = std::clamp(entropy / log_m, 0.0, 1.0);
+  const double w = c_.etu ? std::max(1 - h_hat, 1e-3) : 1.0;
+
+  // 3. Update: b = log_softmax(w log p + b_hat), log p sampled at every window cell and bin.
+  const double rot = crop.rotation_deg * kPi / 180.0;
+  std::vector<double> val(b_.size());
+  for (int k = 0; k < R; ++k) {
+    const double p = wrap360(k * 360.0 / R - crop.rotation_deg) * vn / 360.0;
+    const int j0 = static_cast<int>(std::floor(p)) % vn, j1 = (j0 + 1) % vn;
+    const double a = p - std::floor(p);
+    for (int v = 0; v < H; ++v)
+      for (int u = 0; u < W; ++u) {
+        const double east = (u - crop.centre_u) * 0.5, north = -(v - crop.centre_v) * 0.5;
+        // The crop's axes are the window's turned clockwise by the rotation.
+        const double ce = east * std::cos(rot) - north * std::sin(rot);
+        const double cn = east * std::sin(rot) + north * std::cos(rot);
+        const double x = ce / volume.cell_m + (vw - 1) / 2.0, y = -cn / volume.cell_m + (vh - 1) / 2.0;
+        const auto s0 = bilinear(logp, static_cast<std::size_t>(j0) * vh * vw, vw, vh, x, y);
+        const auto s1 = bilinear(logp, static_cast<std::size_t>(j1) * vh * vw, vw, vh, x, y);
+        const double l = s0 ? (1 - a) * *s0 + a * *s1 : -log_m;
+        double g = 0;
+        if (c_.gps_prior && gps) {
+          const double du = (u - gps->u) * 0.5, dv = (v - gps->v) * 0.5;
+          g = -(du * du + dv * dv) / (2 * gps->sigma_m * gps->sigma_m);
+        }
+        val[index(u, v, k)] = w * l + b_[index(u, v, k)] + g;
+      }
+  }
+  const double vmax = *std::max_element(val.begin(), val.end());
+  double vsum = 0;
+  for (double x : val) vsum += std::exp(x - vmax);
+  const double lse = vmax + std::log(vsum);
+  for (std::size_t i = 0; i < b_.size(); ++i) b_[i] = val[i] - lse;
+
+  // 4. MGR: b <- log((1 - eps) exp(b) + eps q), q = (0.9 g / Z + 0.1 / M_xy) / R.
+  if (c_.mgr) {
+    const std::size_t mxy = static_cast<std::size_t>(W) * H;
+    std::vector<double> g(mxy);
+    double z = 0;
+    for (std::size_t i = 0; i < mxy; ++i) {
+      const double d = road_distance_m[i];
+      g[i] = std::exp(-d * d / (2 * c_.mgr_sigma_m * c_.mgr_sigma_m));
+      z += g[i];
+    }
+    for (int k = 0; k < R; ++k)
+      for (std::size_t i = 0; i < mxy; ++i) {
+        const double q = (0.9 * g[i] / z + 0.1 / static_cast<double>(mxy)) / R;
+        double& b = b_[static_cast<std::size_t>(k) * mxy + i];
+        b = std::log((1 - c_.mgr_epsilon) * std::exp(b) + c_.mgr_epsilon * q);
+      }
+  }
+
+  // 5. PAS around the argmax.
+  FrameResult r;
+  r.frame_entropy = h_hat;
+  r.etu_weight = w;
+  int bu = 0, bv = 0, bk = 0;
+  double best = -std::numeric_limits<double>::infinity();
+  for (int k = 0; k < R; ++k)
+    for (int v = 0; v < H; ++v)
+      for (int u = 0; u < W; ++u)
+        if (b_[index(u, v, k)] > best) {
+          best = b_[index(u, v, k)];
+          bu = u;
+          bv = v;
+          bk = k;
+        }
+  r.peak_log_belief = static_cast<float>(best);
+  r.argmax = {static_cast<double>(bu), static_cast<double>(bv), bk * 360.0 / R};
+  r.pose = r.argmax;
+  if (c_.pas) {
+    double sm = 0, su = 0, sv = 0;
+    for (int v = bv - c_.pas_radius; v <= bv + c_.pas_radius; ++v)
+      for (int u = bu - c_.pas_radius; u <= bu + c_.pas_radius; ++u) {
+        if (u < 0 || v < 0 || u >= W || v >= H) continue;
+        double m = 0;
+        for (int k = 0; k < R; ++k) m += std::exp(b_[index(u, v, k)]);
+        sm += m;
+        su += m * u;
+        sv += m * v;
+      }
+    r.pose.u = su / sm;
+    r.pose.v = sv / sm;
+  }
+  first_ = false;
+  return r;
+}
+
+}  // namespace seqloc::filter

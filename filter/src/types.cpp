@@ -1,0 +1,54 @@
+#include <cmath>
+#include <cstring>
+#include <sstream>
+
+#include "seqloc/filter/config.hpp"
+#include "seqloc/filter/types.hpp"
+
+namespace seqloc::filter {
+
+float half_to_float(std::uint16_t h) {
+  const std::uint32_t sign = static_cast<std::uint32_t>(h & 0x8000u) << 16;
+  const std::uint32_t exponent = (h >> 10) & 0x1Fu;
+  const std::uint32_t mantissa = h & 0x3FFu;
+  std::uint32_t bits = 0;
+  if (exponent == 0) {
+    if (mantissa == 0) {
+      bits = sign;
+    } else {  // subnormal: value = mantissa * 2^-24
+      const float value = std::ldexp(static_cast<float>(mantissa), -24);
+      std::memcpy(&bits, &value, 4);
+      bits |= sign;
+    }
+  } else if (exponent == 31) {
+    bits = sign | 0x7F800000u | (mantissa << 13);  // inf or NaN
+  } else {
+    bits = sign | ((exponent + 112) << 23) | (mantissa << 13);
+  }
+  float out = 0;
+  std::memcpy(&out, &bits, 4);
+  return out;
+}
+
+void FilterConfig::validate() const {
+  auto fail = [](const std::string& field, double value, const std::string& constraint) {
+    std::ostringstream s;
+    s << "filter config: " << field << " = " << value << ": " << constraint;
+    throw FilterError(s.str());
+  };
+  if (width < 8 || width > 4096) fail("width", width, "must be in [8, 4096] cells");
+  if (height < 8 || height > 4096) fail("height", height, "must be in [8, 4096] cells");
+  if (headings < 4 || headings > 4096) fail("headings", headings, "must be in [4, 4096] bins");
+  if (!(mgr_epsilon > 0 && mgr_epsilon < 1)) fail("mgr_epsilon", mgr_epsilon, "must be in (0, 1)");
+  if (!(mgr_sigma_m > 0)) fail("mgr_sigma_m", mgr_sigma_m, "must be > 0");
+  if (pas_radius < 0 || pas_radius > 64) fail("pas_radius", pas_radius, "must be in [0, 64] cells");
+  if (!(relocalization_jump_m > 0)) fail("relocalization_jump_m", relocalization_jump_m, "must be > 0");
+  if (subbin_half_width < 1 || subbin_half_width >= headings / 2) {
+    fail("subbin_half_width", subbin_half_width, "must be in [1, headings / 2)");
+  }
+  if (!(motion_noise_xy_per_m >= 0)) fail("motion_noise_xy_per_m", motion_noise_xy_per_m, "must be >= 0");
+  if (!(motion_noise_deg_per_m >= 0)) fail("motion_noise_deg_per_m", motion_noise_deg_per_m, "must be >= 0");
+  if (threads < 1 || threads > 256) fail("threads", threads, "must be in [1, 256]");
+}
+
+}  // namespace seqloc::filter

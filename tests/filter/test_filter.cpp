@@ -1,0 +1,372 @@
+// The SeqLoc filter: the fast implementation against the double-precision reference on seeded
+// random inputs, the analytic cases of conventions.md section 6, and robust intake.
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/filter/offline.hpp"
+#include "seqloc/filter/reference.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+FilterConfig small_config() {
+  FilterConfig c;
+  c.width = 24;
+  c.height = 20;
+  c.headings = 16;
+  return c;
+}
+
+struct Volume {
+  std::vector<float> values;
+  FrameVolume view(int h, int w, int n, double cell_m = 0.5) const {
+    FrameVolume f;
+    f.data = values.data();
+    f.height = h;
+    f.width = w;
+    f.bins = n;
+    f.cell_m = cell_m;
+    return f;
+  }
+};
+
+Volume random_volume(std::mt19937& rng, int h, int w, int n) {
+  std::normal_distribution<float> d(0.0f, 2.0f);
+  Volume v;
+  v.values.resize(static_cast<std::size_t>(h * w * n));
+  for (auto& x : v.values) x = d(rng);
+  return v;
+}
+
+// Float32 against double: every value is a sum of a few terms of magnitude up to ~50, each
+// rounded to float (relative 6e-8), through interpolation and log-sum-exp, five steps deep; 1e-4
+// absolute (plus 1e-6 relative for deep tails) is two orders of magnitude above that drift and
+// far below any difference a bug in an index or a weight would make (>= 1e-2 on these inputs).
+void expect_same_belief(const BeliefVolume& fast, const ReferenceFilter& ref, const std::string& what) {
+  double worst = 0;
+  for (int k = 0; k < fast.headings(); ++k)
+    for (int v = 0; v < fast.height(); ++v)
+      for (int u = 0; u < fast.width(); ++u) {
+        const double r = ref.at(u, v, k);
+        const double diff = std::abs(fast.at(u, v, k) - r);
+        worst = std::max(worst, diff);
+        ASSERT_LE(diff, 1e-4 + 1e-6 * std::abs(r)) << what << " at (" << u << ", " << v << ", " << k << ")";
+      }
+  SUCCEED() << what << ": worst difference " << worst;
+}
+
+struct Variant {
+  const char* name;
+  bool etu, mgr, pas;
+  double rotation_deg;
+  double cell_m;
+  int bins;
+  int threads;
+};
+
+class FastAgainstReference : public ::testing::TestWithParam<Variant> {};
+
+TEST_P(FastAgainstReference, AgreeOnSeededRandomSequences) {
+  const Variant& p = GetParam();
+  FilterConfig c = small_config();
+  c.etu = p.etu;
+  c.mgr = p.mgr;
+  c.pas = p.pas;
+  c.threads = p.threads;
+  std::mt19937 rng(1234);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::vector<float> road(static_cast<std::size_t>(c.width * c.height));
+  for (auto& d : road) d = static_cast<float>(30 * unit(rng) * unit(rng));
+  SeqLocFilter fast(c);
+  ReferenceFilter ref(c);
+  for (int step = 0; step < 5; ++step) {
+    const int h = 9 + step % 3, w = 11 - step % 2;
+    const Volume vol = random_volume(rng, h, w, p.bins);
+    const FrameVolume view = vol.view(h, w, p.bins, p.cell_m);
+    const CropPose crop{6 + 12 * unit(rng), 5 + 10 * unit(rng), p.rotation_deg == 0 ? 0.0 : p.rotation_deg + 10 * step};
+    const Odometry odo{3 * unit(rng), unit(rng) - 0.5, 40 * unit(rng) - 20};
+    const auto a = fast.step(prepare_frame(view, c.headings), crop, odo, road.data());
+    const auto b = ref.step(view, crop, odo, road.data());
+    expect_same_belief(fast.belief(), ref, std::string(p.name) + " step " + std::to_string(step));
+    EXPECT_EQ(a.argmax.u, b.argmax.u);
+    EXPECT_EQ(a.argmax.v, b.argmax.v);
+    EXPECT_EQ(a.argmax.heading_deg, b.argmax.heading_deg);
+    EXPECT_NEAR(a.pose.u, b.pose.u, 1e-3);
+    EXPECT_NEAR(a.pose.v, b.pose.v, 1e-3);
+    EXPECT_NEAR(a.frame_entropy, b.frame_entropy, 1e-6);
+    EXPECT_NEAR(a.etu_weight, b.etu_weight, 1e-6);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Filter, FastAgainstReference,
+    ::testing::Values(Variant{"seqloc", true, true, true, 0, 0.5, 16, 1},
+                      Variant{"naive", false, false, false, 0, 0.5, 16, 1},
+                      Variant{"etu_only", true, false, false, 0, 0.5, 16, 1},
+                      Variant{"mgr_only", false, true, false, 0, 0.5, 16, 2},
+                      Variant{"rotated_crop", true, true, true, 7.5, 0.5, 16, 1},
+                      Variant{"coarse_volume", true, true, true, 0, 1.0, 16, 1},
+                      Variant{"fewer_bins", true, true, true, 0, 0.5, 8, 1},
+                      Variant{"more_bins", true, true, true, 3.0, 0.5, 32, 2},
+                      Variant{"threads", true, true, true, 0, 0.5, 16, 3}),
+    [](const auto& variant) { return std::string(variant.param.name); });
+
+// A volume whose mass is one cell: log-prob 0 there, -inf elsewhere.
+Volume delta_volume(int h, int w, int n, int v, int u, int j) {
+  Volume d;
+  d.values.assign(static_cast<std::size_t>(h * w * n), -std::numeric_limits<float>::infinity());
+  d.values[static_cast<std::size_t>((v * w + u) * n + j)] = 0;
+  return d;
+}
+
+TEST(Analytic, ASharpLikelihoodGivesItsOwnPose) {
+  FilterConfig c = small_config();
+  c.mgr = false;
+  SeqLocFilter filter(c);
+  const Volume d = delta_volume(9, 11, 16, 3, 7, 4);
+  const auto frame = prepare_frame(d.view(9, 11, 16), c.headings);
+  const CropPose crop{12, 10, 0};
+  const auto r = filter.step(frame, crop, {}, nullptr);
+  const Pose expected = single_frame_pose(frame, crop);
+  EXPECT_EQ(expected.u, 12 + (7 - 5));
+  EXPECT_EQ(expected.v, 10 + (3 - 4));
+  EXPECT_EQ(expected.heading_deg, 4 * 22.5);
+  EXPECT_EQ(r.argmax.u, expected.u);
+  EXPECT_EQ(r.argmax.v, expected.v);
+  EXPECT_EQ(r.argmax.heading_deg, expected.heading_deg);
+  EXPECT_NEAR(r.pose.u, expected.u, 1e-9) << "PAS of a single cell is that cell";
+  EXPECT_NEAR(r.etu_weight, 1.0, 1e-9) << "a delta has entropy 0";
+}
+
+TEST(Analytic, WholeCellTranslationMovesADeltaExactly) {
+  FilterConfig c = small_config();
+  SeqLocFilter filter(c);
+  BeliefVolume& b = filter.belief();
+  std::fill(b.data(), b.data() + b.size(), -1000.0f);
+  b.at(10, 10, 0) = 0;  // heading 0: north
+  b.at(10, 10, 4) = 0;  // heading 90: east
+  filter.predict({2.0, 0.0, 0.0});  // 2 m = 4 cells forward
+  EXPECT_EQ(b.at(10, 6, 0), 0.0f) << "north: v decreases";
+  EXPECT_EQ(b.at(14, 10, 4), 0.0f) << "east: u increases";
+  EXPECT_LE(b.at(10, 10, 0), -1000.0f);
+  filter.predict({0.0, 1.0, 0.0});  // 1 m left = 2 cells
+  EXPECT_EQ(b.at(8, 6, 0), 0.0f) << "left of north is west";
+  EXPECT_EQ(b.at(14, 8, 4), 0.0f) << "left of east is north";
+}
+
+TEST(Analytic, YawShiftsHeadingBinsTheRightWay) {
+  FilterConfig c = small_config();
+  SeqLocFilter filter(c);
+  BeliefVolume& b = filter.belief();
+  std::fill(b.data(), b.data() + b.size(), -1000.0f);
+  b.at(10, 10, 4) = 0;  // east
+  filter.predict({0.0, 0.0, 45.0});  // a left turn of 45 degrees: east becomes north-east
+  EXPECT_EQ(b.at(10, 10, 2), 0.0f);
+  filter.predict({0.0, 0.0, -11.25});  // half a bin to the right: the mass splits between two bins
+  EXPECT_NEAR(b.at(10, 10, 2), std::log(0.5f), 1e-6);
+  EXPECT_NEAR(b.at(10, 10, 3), std::log(0.5f), 1e-6);
+  EXPECT_NEAR(b.total_probability(), 1.0, 1e-5);
+}
+
+TEST(Analytic, ALoopOfOdometryReturnsTheBelief) {
+  FilterConfig c = small_config();
+  c.width = c.height = 64;
+  SeqLocFilter filter(c);
+  BeliefVolume& b = filter.belief();
+  // A delta at heading 0; a square of 10 m sides with 90-degree left turns (4 bins exactly).
+  std::fill(b.data(), b.data() + b.size(), -1000.0f);
+  b.at(40, 40, 0) = 0;
+  for (int side = 0; side < 4; ++side) {
+    filter.predict({10.0, 0.0, 0.0});
+    filter.predict({0.0, 0.0, 90.0});
+  }
+  EXPECT_EQ(b.at(40, 40, 0), 0.0f) << "integral moves: exact";
+  // An octagon with a smooth belief: sub-cell moves interpolate, so the peak returns within a cell.
+  b.set_gaussian(32, 32, 2.0);
+  const BeliefVolume before = b;
+  for (int side = 0; side < 8; ++side) {
+    filter.predict({3.3, 0.0, 45.0});
+  }
+  int best_u = 0, best_v = 0;
+  float best = -1e30f;
+  for (int v = 0; v < 64; ++v)
+    for (int u = 0; u < 64; ++u)
+      if (b.at(u, v, 0) > best) {
+        best = b.at(u, v, 0);
+        best_u = u;
+        best_v = v;
+      }
+  EXPECT_LE(std::hypot(best_u - 32, best_v - 32), 1.0);
+  EXPECT_NEAR(b.total_probability(), before.total_probability(), 0.02) << "mass is kept (none left the window)";
+}
+
+TEST(Analytic, BeliefSumsToOneAfterEveryStep) {
+  FilterConfig c = small_config();
+  std::mt19937 rng(5);
+  std::vector<float> road(static_cast<std::size_t>(c.width * c.height), 4.0f);
+  for (const bool mgr : {false, true}) {
+    c.mgr = mgr;
+    SeqLocFilter filter(c);
+    for (int step = 0; step < 6; ++step) {
+      const Volume vol = random_volume(rng, 9, 11, 16);
+      filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {1.5, 0.2, 7}, road.data());
+      EXPECT_NEAR(filter.belief().total_probability(), 1.0, 1e-3) << "mgr " << mgr << " step " << step;
+    }
+  }
+}
+
+TEST(Analytic, EtuWeightOfUniformAndDelta) {
+  Volume uniform;
+  uniform.values.assign(9 * 11 * 16, -3.0f);
+  const auto u = prepare_frame(uniform.view(9, 11, 16), 16);
+  EXPECT_NEAR(u.entropy, 1.0, 1e-6);
+  EXPECT_DOUBLE_EQ(etu_weight(u.entropy), 1e-3);
+  const auto d = prepare_frame(delta_volume(9, 11, 16, 1, 1, 1).view(9, 11, 16), 16);
+  EXPECT_NEAR(d.entropy, 0.0, 1e-9);
+  EXPECT_DOUBLE_EQ(etu_weight(d.entropy), 1.0);
+}
+
+TEST(Analytic, MgrKeepsEverySuppressedCellAtLeastEpsQ) {
+  FilterConfig c = small_config();
+  SeqLocFilter filter(c);
+  std::vector<float> road(static_cast<std::size_t>(c.width * c.height));
+  for (int v = 0; v < c.height; ++v)
+    for (int u = 0; u < c.width; ++u) road[static_cast<std::size_t>(v * c.width + u)] = static_cast<float>(std::abs(v - 10));
+  // A very confident frame elsewhere suppresses most cells to nothing, but not below eps q.
+  const Volume d = delta_volume(9, 11, 16, 2, 2, 3);
+  filter.step(prepare_frame(d.view(9, 11, 16), c.headings), {12, 10, 0}, {}, road.data());
+  const auto log_q = road_prior_log_q(road.data(), c.width, c.height, c.headings, c.mgr_sigma_m);
+  for (int k = 0; k < c.headings; ++k)
+    for (std::size_t i = 0; i < log_q.size(); ++i) {
+      ASSERT_GE(filter.belief().slice(k)[i], log_q[i] + std::log(c.mgr_epsilon) - 1e-5);
+    }
+}
+
+TEST(Analytic, PasOfSymmetricAndAsymmetricPeaks) {
+  BeliefVolume b(16, 16, 4);
+  std::fill(b.data(), b.data() + b.size(), -1000.0f);
+  for (int k = 0; k < 4; ++k) {
+    b.at(8, 8, k) = std::log(0.1f);
+    b.at(7, 8, k) = b.at(9, 8, k) = b.at(8, 7, k) = b.at(8, 9, k) = std::log(0.05f);
+  }
+  Pose p = peak_anchored_position(b, 8, 8, 3);
+  EXPECT_NEAR(p.u, 8.0, 1e-9);
+  EXPECT_NEAR(p.v, 8.0, 1e-9);
+  // Heavier to the east: the exact weighted mean.
+  for (int k = 0; k < 4; ++k) b.at(10, 8, k) = std::log(0.07f);
+  p = peak_anchored_position(b, 8, 8, 3);
+  const double m8 = 0.4, m_side = 0.2, m10 = 0.28;
+  const double expected_u = (8 * m8 + 7 * m_side + 9 * m_side + 8 * m_side * 2 + 10 * m10) / (m8 + 4 * m_side + m10);
+  EXPECT_NEAR(p.u, expected_u, 1e-6);
+  EXPECT_GT(p.u, 8.0);
+  EXPECT_NEAR(p.v, 8.0, 1e-6);
+  // Radius 1 does not see the cell at u = 10.
+  EXPECT_NEAR(peak_anchored_position(b, 8, 8, 1).u, 8.0, 1e-9);
+}
+
+TEST(Intake, BadVolumesAreClearErrors) {
+  Volume v;
+  v.values.assign(9 * 11 * 16, -1.0f);
+  auto expect_error = [](const FrameVolume& view, const std::string& fragment) {
+    try {
+      (void)prepare_frame(view, 16);
+      FAIL() << "no error, expected '" << fragment << "'";
+    } catch (const FilterError& e) {
+      EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    }
+  };
+  Volume nan = v;
+  nan.values[100] = std::nanf("");
+  expect_error(nan.view(9, 11, 16), "NaN at cell 100");
+  Volume pinf = v;
+  pinf.values[7] = std::numeric_limits<float>::infinity();
+  expect_error(pinf.view(9, 11, 16), "+inf");
+  Volume negative = v;
+  for (auto& x : negative.values) x = 0.5f;
+  negative.values[3] = -0.1f;
+  FrameVolume prob = negative.view(9, 11, 16);
+  prob.values = VolumeValues::prob;
+  expect_error(prob, "probability");
+  Volume zeros = v;
+  std::fill(zeros.values.begin(), zeros.values.end(), 0.0f);
+  FrameVolume zero_prob = zeros.view(9, 11, 16);
+  zero_prob.values = VolumeValues::prob;
+  expect_error(zero_prob, "no probability mass");
+  expect_error(v.view(9, 11, 12), "neither divide nor are a multiple");
+  expect_error(FrameVolume{}, "empty volume");
+}
+
+TEST(Intake, MinusInfinityIsAZeroWithoutNaN) {
+  FilterConfig c = small_config();
+  c.mgr = false;  // nothing lifts the zeros: the hardest case
+  SeqLocFilter filter(c);
+  std::mt19937 rng(3);
+  for (int step = 0; step < 4; ++step) {
+    Volume vol = random_volume(rng, 9, 11, 16);
+    for (std::size_t i = 0; i < vol.values.size(); i += 3) vol.values[i] = -std::numeric_limits<float>::infinity();
+    filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {2, 0, 30}, nullptr);
+    for (std::size_t i = 0; i < filter.belief().size(); ++i) ASSERT_TRUE(std::isfinite(filter.belief().data()[i])) << i;
+  }
+}
+
+TEST(Intake, Float16EqualsFloat32AndProbEqualsLogProb) {
+  std::mt19937 rng(8);
+  const Volume f32 = random_volume(rng, 5, 6, 8);
+  // float16 values of exactly representable numbers (multiples of 1/64 in range).
+  std::vector<float> exact(f32.values.size());
+  std::vector<std::uint16_t> halves(f32.values.size());
+  for (std::size_t i = 0; i < exact.size(); ++i) {
+    const int q = static_cast<int>(std::lround(f32.values[i] * 64));
+    exact[i] = static_cast<float>(q) / 64.0f;
+    // Build the half: sign, exponent, mantissa of q / 64.
+    std::uint16_t h = 0;
+    if (q != 0) {
+      const int a = std::abs(q);
+      int e = 0;
+      while ((a >> (e + 1)) != 0) ++e;  // a in [2^e, 2^(e+1))
+      const int mantissa = ((a << 10) >> e) & 0x3FF;
+      h = static_cast<std::uint16_t>(((q < 0) << 15) | ((e - 6 + 15) << 10) | mantissa);
+    }
+    halves[i] = h;
+    ASSERT_EQ(half_to_float(h), exact[i]) << i;
+  }
+  FrameVolume a{exact.data(), VolumeType::float32, VolumeValues::log_prob, 5, 6, 8, 0.5};
+  FrameVolume b{halves.data(), VolumeType::float16, VolumeValues::log_prob, 5, 6, 8, 0.5};
+  EXPECT_EQ(prepare_frame(a, 16).log_prob, prepare_frame(b, 16).log_prob);
+  std::vector<float> probs(exact.size());
+  for (std::size_t i = 0; i < probs.size(); ++i) probs[i] = std::exp(exact[i]);
+  FrameVolume p{probs.data(), VolumeType::float32, VolumeValues::prob, 5, 6, 8, 0.5};
+  const auto from_prob = prepare_frame(p, 16), from_log = prepare_frame(a, 16);
+  for (std::size_t i = 0; i < probs.size(); ++i) EXPECT_NEAR(from_prob.log_prob[i], from_log.log_prob[i], 1e-5);
+  EXPECT_EQ(half_to_float(0x7C00), std::numeric_limits<float>::infinity());
+  EXPECT_EQ(half_to_float(0x0001), std::ldexp(1.0f, -24));
+}
+
+TEST(Config, ValidateNamesTheField) {
+  FilterConfig c;
+  c.mgr_epsilon = 1.5;
+  try {
+    c.validate();
+    FAIL();
+  } catch (const FilterError& e) {
+    EXPECT_NE(std::string(e.what()).find("mgr_epsilon = 1.5"), std::string::npos) << e.what();
+  }
+  c = FilterConfig{};
+  c.pas_radius = -1;
+  EXPECT_THROW(c.validate(), FilterError);
+  c = FilterConfig{};
+  c.threads = 0;
+  EXPECT_THROW(SeqLocFilter{c}, FilterError);
+  FilterConfig ok;
+  EXPECT_NO_THROW(ok.validate());
+  EXPECT_EQ(ok.headings, 256);
+  EXPECT_DOUBLE_EQ(ok.mgr_epsilon, 0.01);
+  EXPECT_EQ(ok.pas_radius, 3);
+}
+
+}  // namespace
+}  // namespace seqloc::filter

@@ -1,0 +1,200 @@
+// The baselines (single, offline), heading-bin resampling, window moves, and the additions beyond
+// the paper (sub-bin heading, motion noise, GPS prior, relocalization flag).
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/filter/offline.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+FilterConfig config(int w, int h, int r) {
+  FilterConfig c;
+  c.width = w;
+  c.height = h;
+  c.headings = r;
+  return c;
+}
+
+// Log-probabilities of a Gaussian bump at volume cell (v, u) and bin j (sharp, but smooth enough
+// to interpolate).
+std::vector<float> bump(int h, int w, int n, double v0, double u0, double j0, double sigma = 1.0,
+                        double sigma_bins = 0.7) {
+  std::vector<float> out(static_cast<std::size_t>(h * w * n));
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u)
+      for (int j = 0; j < n; ++j) {
+        double dj = std::fmod(std::abs(j - j0), n);
+        dj = std::min(dj, n - dj);
+        out[static_cast<std::size_t>((v * w + u) * n + j)] = static_cast<float>(
+            -((v - v0) * (v - v0) + (u - u0) * (u - u0)) / (2 * sigma * sigma) - dj * dj / (2 * sigma_bins * sigma_bins));
+      }
+  return out;
+}
+
+FrameVolume view(const std::vector<float>& v, int h, int w, int n) {
+  return FrameVolume{v.data(), VolumeType::float32, VolumeValues::log_prob, h, w, n, 0.5};
+}
+
+TEST(Odometry, ComposeAndInvert) {
+  // A quarter circle driven as four 22.5-degree turns returns to a pose 90 degrees left.
+  const Odometry m = compose({{5, 0, 90}, {5, 0, 0}});
+  EXPECT_NEAR(m.forward_m, 5, 1e-12);
+  EXPECT_NEAR(m.left_m, 5, 1e-12);
+  EXPECT_NEAR(m.yaw_deg, 90, 1e-12);
+  const Odometry back = compose({m, invert(m)});
+  EXPECT_NEAR(back.forward_m, 0, 1e-12);
+  EXPECT_NEAR(back.left_m, 0, 1e-12);
+  EXPECT_NEAR(back.yaw_deg, 0, 1e-12);
+}
+
+TEST(Baselines, SingleFramePoseHandlesRotatedCrops) {
+  const auto vol = bump(9, 9, 16, 0, 4, 0);  // north edge centre, heading 0 in the crop
+  const auto frame = prepare_frame(view(vol, 9, 9, 16), 16);
+  // The crop's north is turned 90 degrees clockwise from the window's: its "north" is east.
+  const Pose p = single_frame_pose(frame, {20, 20, 90});
+  EXPECT_NEAR(p.u, 24, 1e-9) << "4 cells (2 m) from the crop centre, to the window's east";
+  EXPECT_NEAR(p.v, 20, 1e-9);
+  EXPECT_NEAR(p.heading_deg, 90, 1e-9);
+}
+
+TEST(Baselines, OfflineRecoversAStraightRoute) {
+  // A vehicle drives north 2 m per frame; each frame's likelihood is a bump at its true pose in
+  // a crop centred on the window, plus a second, false bump that moves randomly.
+  const FilterConfig c = config(40, 48, 16);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> where(1, 7);
+  std::vector<std::vector<float>> volumes;
+  std::vector<PreparedFrame> frames;
+  std::vector<OfflineFrame> input;
+  const int n = 6;
+  for (int t = 0; t < n; ++t) {
+    const double true_v = 30 - 4 * t;  // window row of the vehicle
+    auto vol = bump(9, 9, 16, 4, 4, 0);
+    const auto noise = bump(9, 9, 16, where(rng), where(rng), 8);
+    for (std::size_t i = 0; i < vol.size(); ++i) vol[i] = std::max(vol[i], noise[i] + 0.2f);  // the false bump is higher
+    volumes.push_back(vol);
+    (void)true_v;
+  }
+  for (int t = 0; t < n; ++t) frames.push_back(prepare_frame(view(volumes[static_cast<std::size_t>(t)], 9, 9, 16), 16));
+  for (int t = 0; t < n; ++t) {
+    input.push_back({&frames[static_cast<std::size_t>(t)], CropPose{20, 30.0 - 4 * t, 0}, Odometry{t == 0 ? 0.0 : 2.0, 0, 0}});
+  }
+  for (int t = 0; t < n; ++t) {
+    const Pose single = single_frame_pose(frames[static_cast<std::size_t>(t)], input[static_cast<std::size_t>(t)].crop);
+    EXPECT_NE(single.heading_deg, 0.0) << "the single frame is fooled by the false bump";
+  }
+  const auto poses = offline_poses(input, c);
+  for (int t = 0; t < n; ++t) {
+    EXPECT_EQ(poses[static_cast<std::size_t>(t)].u, 20) << t;
+    EXPECT_EQ(poses[static_cast<std::size_t>(t)].v, 30 - 4 * t) << t;
+    EXPECT_EQ(poses[static_cast<std::size_t>(t)].heading_deg, 0) << t;
+  }
+  const auto windowed = offline_poses(input, c, 1);
+  EXPECT_EQ(windowed.size(), static_cast<std::size_t>(n));
+}
+
+TEST(Intake, FewerAndMoreBinsThanTheWindowMapToTheRightHeadings) {
+  for (const int bins : {8, 32}) {
+    FilterConfig c = config(24, 24, 16);
+    c.mgr = false;
+    c.pas = false;
+    SeqLocFilter filter(c);
+    const auto vol = bump(9, 9, bins, 4, 4, bins / 4.0);  // heading 90
+    const auto r = filter.step(prepare_frame(view(vol, 9, 9, bins), 16), {12, 12, 0}, {}, nullptr);
+    EXPECT_EQ(r.argmax.heading_deg, 90) << bins << " bins";
+    EXPECT_EQ(r.argmax.u, 12);
+    EXPECT_EQ(r.argmax.v, 12);
+  }
+}
+
+TEST(Window, RecentreMovesContentAndFillsWithTheMinimum) {
+  BeliefVolume b(10, 8, 4);
+  std::fill(b.data(), b.data() + b.size(), -5.0f);
+  b.at(2, 3, 1) = -1.0f;
+  b.at(9, 7, 0) = -9.0f;
+  b.recentre(-3, 2);  // the window moves 3 cells west and 2 south
+  EXPECT_EQ(b.at(5, 1, 1), -1.0f);
+  EXPECT_EQ(b.at(0, 7, 2), -9.0f) << "entering cells get the minimum";
+  EXPECT_EQ(b.at(0, 0, 3), -9.0f);
+}
+
+TEST(Beyond, SubBinHeadingRefinesBetweenBins) {
+  FilterConfig c = config(24, 24, 16);
+  c.mgr = false;
+  c.subbin_heading = true;
+  SeqLocFilter filter(c);
+  // True heading 30 degrees = bin 1.333 of 16.
+  const auto vol = bump(9, 9, 64, 4, 4, 30.0 / 360.0 * 64, 1.0, 2.0);
+  const auto r = filter.step(prepare_frame(view(vol, 9, 9, 64), 16), {12, 12, 0}, {}, nullptr);
+  EXPECT_EQ(r.argmax.heading_deg, 22.5);
+  EXPECT_LT(std::abs(r.pose.heading_deg - 30.0), std::abs(r.argmax.heading_deg - 30.0));
+}
+
+TEST(Beyond, MotionNoiseDiffusesButKeepsMass) {
+  FilterConfig c = config(32, 32, 16);
+  c.motion_noise = true;
+  c.motion_noise_xy_per_m = 0.2;
+  c.motion_noise_deg_per_m = 5;
+  SeqLocFilter filter(c);
+  BeliefVolume& b = filter.belief();
+  b.set_gaussian(16, 16, 1.0);
+  const float peak_before = *std::max_element(b.data(), b.data() + b.size());
+  filter.predict({4.0, 0.0, 0.0});
+  const float peak_after = *std::max_element(b.data(), b.data() + b.size());
+  EXPECT_LT(peak_after, peak_before - 0.1f) << "the belief spread out";
+  EXPECT_NEAR(b.total_probability(), 1.0, 0.02);
+  c.motion_noise = false;
+  SeqLocFilter plain(c);
+  plain.belief().set_gaussian(16, 16, 1.0);
+  plain.predict({4.0, 0.0, 0.0});
+  const float plain_peak = *std::max_element(plain.belief().data(), plain.belief().data() + plain.belief().size());
+  EXPECT_GT(plain_peak, peak_after);
+}
+
+TEST(Beyond, GpsPriorPullsTowardsTheFix) {
+  FilterConfig c = config(40, 40, 8);
+  c.mgr = false;
+  c.pas = false;
+  c.gps_prior = true;
+  SeqLocFilter filter(c);
+  std::vector<float> flat(9 * 9 * 8, 0.0f);
+  const GpsFix fix{30, 10, 2.0};
+  const auto r = filter.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, nullptr, &fix);
+  EXPECT_EQ(r.argmax.u, 30);
+  EXPECT_EQ(r.argmax.v, 10);
+  c.gps_prior = false;
+  SeqLocFilter without(c);
+  EXPECT_NE(without.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, nullptr, &fix).argmax.u, 30);
+}
+
+TEST(Beyond, RelocalizationIsFlaggedWhenTheArgmaxJumps) {
+  FilterConfig c = config(64, 64, 8);
+  c.mgr = false;
+  c.etu = false;
+  c.relocalization_jump_m = 5;
+  SeqLocFilter filter(c);
+  const auto here = bump(9, 9, 8, 4, 4, 0);
+  auto r = filter.step(prepare_frame(view(here, 9, 9, 8), 8), {20, 40, 0}, {}, nullptr);
+  EXPECT_FALSE(r.relocalized);
+  r = filter.step(prepare_frame(view(here, 9, 9, 8), 8), {20, 36, 0}, {2, 0, 0}, nullptr);
+  EXPECT_FALSE(r.relocalized) << "moved as the odometry says";
+  // A much stronger peak 15 m away.
+  std::vector<float> there(9 * 9 * 8);
+  const auto sharp = bump(9, 9, 8, 4, 4, 0, 0.3, 0.3);
+  for (std::size_t i = 0; i < there.size(); ++i) there[i] = 20 * sharp[i];
+  // Two frames of it outweigh the two of the old place; the jump is flagged once, when it happens.
+  const auto first = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 32, 0}, {2, 0, 0}, nullptr);
+  const auto second = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 28, 0}, {2, 0, 0}, nullptr);
+  EXPECT_NE(first.relocalized, second.relocalized);
+  EXPECT_EQ(second.argmax.u, 50);
+  const auto third = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 24, 0}, {2, 0, 0}, nullptr);
+  EXPECT_FALSE(third.relocalized);
+}
+
+}  // namespace
+}  // namespace seqloc::filter
