@@ -15,37 +15,37 @@ BeliefVolume::BeliefVolume(int width, int height, int headings)
   set_uniform();
 }
 
+double BeliefVolume::log_at(int u, int v, int k) const { return std::log(static_cast<double>(prob(u, v, k))); }
+
 void BeliefVolume::set_uniform() {
-  std::fill(data_.begin(), data_.end(), static_cast<float>(-std::log(static_cast<double>(data_.size()))));
+  std::fill(data_.begin(), data_.end(), static_cast<float>(1.0 / static_cast<double>(data_.size())));
 }
 
 void BeliefVolume::set_gaussian(double u0, double v0, double sigma_cells) {
-  std::vector<double> log_g(slice_cells());
-  double max = -1e300;
+  std::vector<double> g(slice_cells());
+  double sum = 0;
   for (int v = 0; v < height_; ++v) {
     for (int u = 0; u < width_; ++u) {
       const double du = u - u0, dv = v - v0;
-      const double l = -(du * du + dv * dv) / (2 * sigma_cells * sigma_cells);
-      log_g[static_cast<std::size_t>(v) * width_ + u] = l;
-      max = std::max(max, l);
+      const double value = std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells));
+      g[static_cast<std::size_t>(v) * width_ + u] = value;
+      sum += value;
     }
   }
-  double sum = 0;
-  for (double l : log_g) sum += std::exp(l - max);
-  const double log_norm = max + std::log(sum) + std::log(static_cast<double>(headings_));
+  const double norm = sum * headings_;
   for (int k = 0; k < headings_; ++k) {
     float* s = slice(k);
-    for (std::size_t i = 0; i < slice_cells(); ++i) s[i] = static_cast<float>(log_g[i] - log_norm);
+    for (std::size_t i = 0; i < slice_cells(); ++i) s[i] = static_cast<float>(g[i] / norm);
   }
 }
 
 void BeliefVolume::recentre(int du, int dv) {
   if (du == 0 && dv == 0) return;
   const float fill = min_value();
-  std::vector<float> row(static_cast<std::size_t>(width_));
+  std::vector<float> copy(slice_cells());
   for (int k = 0; k < headings_; ++k) {
     float* s = slice(k);
-    std::vector<float> copy(s, s + slice_cells());
+    std::copy(s, s + slice_cells(), copy.begin());
     for (int v = 0; v < height_; ++v) {
       const int sv = v + dv;
       for (int u = 0; u < width_; ++u) {
@@ -62,13 +62,13 @@ float BeliefVolume::min_value() const { return *std::min_element(data_.begin(), 
 
 double BeliefVolume::total_probability() const {
   double sum = 0;
-  for (float b : data_) sum += std::exp(static_cast<double>(b));
+  for (float p : data_) sum += p;
   return sum;
 }
 
 double BeliefVolume::position_mass(int u, int v) const {
   double sum = 0;
-  for (int k = 0; k < headings_; ++k) sum += std::exp(static_cast<double>(at(u, v, k)));
+  for (int k = 0; k < headings_; ++k) sum += prob(u, v, k);
   return sum;
 }
 

@@ -8,13 +8,15 @@
 
 namespace seqloc::filter::detail {
 
-/// The frame's log-probability at every cell of the window for one window heading, into `out`
-/// (width x height); log(1/M) outside the crop. `blend_buffer` is scratch space.
-void sample_frame_slice(const PreparedFrame& frame, const CropPose& crop, double heading_deg, int width, int height,
-                        std::vector<float>& blend_buffer, float* out);
+/// Samples a heading-major frame array (`values`: bins x vh x vw, e.g. log-probabilities, or
+/// tempered probabilities) at every window cell for one window heading, into `out` (width x
+/// height): linear in heading, bilinear in space; `fill` where the cell's centre is outside the
+/// crop. `blend_buffer` is scratch space.
+void sample_slice(const float* values, int bins, int vh, int vw, double cell_m, const CropPose& crop,
+                  double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer, float* out);
 
-/// Backward warp of a whole volume through the odometry (see seqloc_filter.hpp); cells whose
-/// source lies outside the window get `fill`.
+/// Backward warp of a whole volume through the odometry (see seqloc_filter.hpp), interpolating
+/// the stored values linearly; cells whose source lies outside the window get `fill`.
 void warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odometry& odometry, float fill, int threads);
 
 /// Window displacement (cells, u east / v south) of the odometry for a heading (clockwise from

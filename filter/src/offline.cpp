@@ -37,8 +37,10 @@ std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const F
   for (const auto& f : frames) {
     placed.emplace_back(W, H, R);
     for (int k = 0; k < R; ++k) {
-      detail::sample_frame_slice(*f.frame, f.crop, placed.back().bin_heading_deg(k), W, H, blend,
-                                 placed.back().slice(k));
+      // Log-likelihoods are sampled (and later warped) linearly: here they are weights to add up.
+      detail::sample_slice(f.frame->log_prob.data(), f.frame->bins, f.frame->height, f.frame->width, f.frame->cell_m,
+                           f.crop, placed.back().bin_heading_deg(k), W, H, static_cast<float>(-f.frame->log_cells),
+                           blend, placed.back().slice(k));
     }
   }
   std::vector<Pose> poses;

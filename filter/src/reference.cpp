@@ -3,23 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <optional>
 
 namespace seqloc::filter {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-// Bilinear sample of a (width x height) image at (x, y); nullopt outside [0, w-1] x [0, h-1].
-std::optional<double> bilinear(const std::vector<double>& image, std::size_t offset, int width, int height, double x,
-                               double y) {
-  if (x < 0 || y < 0 || x > width - 1 || y > height - 1) return std::nullopt;
-  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-  const int x1 = std::min(x0 + 1, width - 1), y1 = std::min(y0 + 1, height - 1);
-  const double ax = x - x0, ay = y - y0;
-  auto px = [&](int xx, int yy) { return image[offset + static_cast<std::size_t>(yy) * width + xx]; };
-  return (1 - ay) * ((1 - ax) * px(x0, y0) + ax * px(x1, y0)) + ay * ((1 - ax) * px(x0, y1) + ax * px(x1, y1));
-}
 
 double wrap360(double d) {
   d = std::fmod(d, 360.0);
@@ -134,7 +122,9 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
   const double h_hat = std::clamp(entropy / log_m, 0.0, 1.0);
   const double w = c_.etu ? std::max(1 - h_hat, 1e-3) : 1.0;
 
-  // 3. Update: b = log_softmax(w log p + b_hat), log p sampled at every window cell and bin.
+  // 3. Update: b = log_softmax(w log p + b_hat). The tempered likelihood p^w is sampled at every
+  //    window cell and bin by linear interpolation of p^w (bilinear in space, linear between the
+  //    two bins around the crop's heading), computed here as a log-sum-exp of the neighbours.
   const double rot = crop.rotation_deg * kPi / 180.0;
   std::vector<double> val(b_.size());
   for (int k = 0; k < R; ++k) {
@@ -148,15 +138,35 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
         const double ce = east * std::cos(rot) - north * std::sin(rot);
         const double cn = east * std::sin(rot) + north * std::cos(rot);
         const double x = ce / volume.cell_m + (vw - 1) / 2.0, y = -cn / volume.cell_m + (vh - 1) / 2.0;
-        const auto s0 = bilinear(logp, static_cast<std::size_t>(j0) * vh * vw, vw, vh, x, y);
-        const auto s1 = bilinear(logp, static_cast<std::size_t>(j1) * vh * vw, vw, vh, x, y);
-        const double l = s0 ? (1 - a) * *s0 + a * *s1 : -log_m;
+        double l = w * -log_m;  // outside the crop: no information
+        if (x >= 0 && y >= 0 && x <= vw - 1 && y <= vh - 1) {
+          const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+          const int x1 = std::min(x0 + 1, vw - 1), y1 = std::min(y0 + 1, vh - 1);
+          const double ax = x - x0, ay = y - y0;
+          std::vector<std::pair<double, double>> terms;  // (w log p, weight)
+          for (int side = 0; side < 2; ++side) {
+            const int j = side == 0 ? j0 : j1;
+            const double wj = side == 0 ? 1 - a : a;
+            auto at = [&](int xx, int yy) { return w * logp[(static_cast<std::size_t>(j) * vh + yy) * vw + xx]; };
+            terms.emplace_back(at(x0, y0), wj * (1 - ax) * (1 - ay));
+            terms.emplace_back(at(x1, y0), wj * ax * (1 - ay));
+            terms.emplace_back(at(x0, y1), wj * (1 - ax) * ay);
+            terms.emplace_back(at(x1, y1), wj * ax * ay);
+          }
+          double m = -std::numeric_limits<double>::infinity();
+          for (const auto& [t, wt] : terms)
+            if (wt > 0) m = std::max(m, t);
+          double weighted = 0;
+          for (const auto& [t, wt] : terms)
+            if (wt > 0) weighted += wt * std::exp(t - m);
+          l = m + std::log(weighted);
+        }
         double g = 0;
         if (c_.gps_prior && gps) {
           const double du = (u - gps->u) * 0.5, dv = (v - gps->v) * 0.5;
           g = -(du * du + dv * dv) / (2 * gps->sigma_m * gps->sigma_m);
         }
-        val[index(u, v, k)] = w * l + b_[index(u, v, k)] + g;
+        val[index(u, v, k)] = l + b_[index(u, v, k)] + g;
       }
   }
   const double vmax = *std::max_element(val.begin(), val.end());

@@ -79,7 +79,7 @@ using detail::displacement_cells;
 // ---------------------------------------------------------------------------------------------
 // Frame intake
 
-PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings) {
+PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads) {
   std::ostringstream where;
   where << "volume of shape (" << volume.height << ", " << volume.width << ", " << volume.bins << ")";
   if (volume.data == nullptr || volume.height <= 0 || volume.width <= 0 || volume.bins <= 0) {
@@ -96,54 +96,104 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings) {
   f.width = volume.width;
   f.bins = volume.bins;
   f.cell_m = volume.cell_m;
-  const std::size_t cells = static_cast<std::size_t>(volume.height) * volume.width * volume.bins;
+  const int H = volume.height, W = volume.width, N = volume.bins;
+  const std::size_t slice = static_cast<std::size_t>(H) * W;
+  const std::size_t cells = slice * static_cast<std::size_t>(N);
   f.log_cells = std::log(static_cast<double>(cells));
   f.log_prob.resize(cells);
-  // Convert to log values, heading-major, checking every value.
+  // Per chunk of bins, in parallel: transpose (H, W, N) to heading-major one source row at a
+  // time (it stays in cache), convert, check, map -inf to kLogZero and find the chunk's maximum.
+  constexpr float kInf = std::numeric_limits<float>::infinity();
   const bool is_prob = volume.values == VolumeValues::prob;
-  double max = -std::numeric_limits<double>::infinity();
-  std::size_t max_index = 0;
-  for (std::size_t i = 0; i < cells; ++i) {
-    const float raw = volume.type == VolumeType::float32 ? static_cast<const float*>(volume.data)[i]
-                                                         : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
-    const std::size_t bin = i % static_cast<std::size_t>(volume.bins);
-    const std::size_t pixel = i / static_cast<std::size_t>(volume.bins);
-    if (std::isnan(raw)) throw FilterError(where.str() + ": NaN at cell " + std::to_string(i));
-    float value;
+  const int chunks = std::max(1, std::min(threads, N));
+  std::vector<float> chunk_max(static_cast<std::size_t>(chunks), -kInf);
+  std::vector<char> chunk_bad(static_cast<std::size_t>(chunks), 0);
+  detail::parallel_chunks(N, chunks, [&](int j0, int j1, int t) {
+    for (int v = 0; v < H; ++v) {
+      const std::size_t row = static_cast<std::size_t>(v) * W * N;
+      for (int j = j0; j < j1; ++j) {
+        float* dst = f.log_prob.data() + static_cast<std::size_t>(j) * slice + static_cast<std::size_t>(v) * W;
+        if (volume.type == VolumeType::float32) {
+          const float* src = static_cast<const float*>(volume.data) + row + j;
+          for (int u = 0; u < W; ++u) dst[u] = src[static_cast<std::size_t>(u) * N];
+        } else {
+          const std::uint16_t* src = static_cast<const std::uint16_t*>(volume.data) + row + j;
+          for (int u = 0; u < W; ++u) dst[u] = half_to_float(src[static_cast<std::size_t>(u) * N]);
+        }
+      }
+    }
+    const std::size_t begin = static_cast<std::size_t>(j0) * slice, end = static_cast<std::size_t>(j1) * slice;
+    ArrayMap x(f.log_prob.data() + begin, static_cast<Eigen::Index>(end - begin));
+    bool bad = false;
     if (is_prob) {
-      if (raw < 0 || std::isinf(raw)) {
-        throw FilterError(where.str() + ": probability " + std::to_string(raw) + " at cell " + std::to_string(i));
-      }
-      value = raw > 0 ? std::log(raw) : kLogZero;
+      bad = !(x >= 0).all() || (x == kInf).any();  // NaN fails x >= 0
+      if (!bad) x = (x > 0).select(x.log(), kLogZero);
     } else {
-      if (raw == std::numeric_limits<float>::infinity()) {
-        throw FilterError(where.str() + ": log-probability +inf at cell " + std::to_string(i));
-      }
-      value = std::isinf(raw) ? kLogZero : raw;  // -inf: probability 0
+      bad = x.isNaN().any() || (x == kInf).any();
+      if (!bad) x = (x == -kInf).select(kLogZero, x);
     }
-    f.log_prob[bin * (cells / static_cast<std::size_t>(volume.bins)) + pixel] = value;
-    if (value > max) {
-      max = value;
-      max_index = i;
-    }
+    chunk_bad[static_cast<std::size_t>(t)] = bad;
+    if (!bad) chunk_max[static_cast<std::size_t>(t)] = x.maxCoeff();
+  });
+  const bool bad = std::find(chunk_bad.begin(), chunk_bad.end(), 1) != chunk_bad.end();
+  const float max = *std::max_element(chunk_max.begin(), chunk_max.end());
+  if (bad) {
+    // Name the first offending cell by its index in the file's (H, W, N) order.
+    for (int v = 0; v < H; ++v)
+      for (int u = 0; u < W; ++u)
+        for (int j = 0; j < N; ++j) {
+          const std::size_t i = (static_cast<std::size_t>(v) * W + u) * N + j;
+          const float raw = volume.type == VolumeType::float32
+                                ? static_cast<const float*>(volume.data)[i]
+                                : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
+          std::string what;
+          if (std::isnan(raw)) what = "NaN";
+          if (raw == kInf) what = is_prob ? "probability +inf" : "log-probability +inf";
+          if (is_prob && raw < 0) what = "probability " + std::to_string(raw) + " < 0";
+          if (!what.empty()) throw FilterError(where.str() + ": " + what + " at cell " + std::to_string(i));
+        }
   }
   if (max <= kLogZero) throw FilterError(where.str() + ": no probability mass (every cell is zero)");
-  // log-softmax over all cells, and the normalized entropy.
-  double sum = 0;
-  for (float v : f.log_prob) sum += std::exp(static_cast<double>(v) - max);
-  const double lse = max + std::log(sum);
-  double entropy = 0;
-  for (float& v : f.log_prob) {
-    if (v <= kLogZero) continue;
-    const double l = static_cast<double>(v) - lse;
-    v = static_cast<float>(l);
-    entropy -= std::exp(l) * l;
+  // log-softmax over all cells and the normalized entropy, in blocks (float within a block,
+  // double across): with e = exp(x - max), S = sum e, lse = max + log S,
+  // H = -sum (e / S)(x - lse) = lse - sum(e x) / S.
+  constexpr Eigen::Index kBlock = 4096;
+  std::vector<double> chunk_sum(static_cast<std::size_t>(chunks)), chunk_ex(static_cast<std::size_t>(chunks));
+  const auto blocks = static_cast<int>((static_cast<Eigen::Index>(cells) + kBlock - 1) / kBlock);
+  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int t) {
+    Eigen::ArrayXf e(kBlock);
+    double s_sum = 0, s_ex = 0;
+    for (int block = b0; block < b1; ++block) {
+      const Eigen::Index start = block * kBlock;
+      const Eigen::Index len = std::min<Eigen::Index>(kBlock, static_cast<Eigen::Index>(cells) - start);
+      ConstArrayMap x(f.log_prob.data() + start, len);
+      auto eb = e.head(len);
+      eb = (x > kLogZero).select((x - max).exp(), 0.0f);
+      s_sum += eb.sum();
+      s_ex += (eb * (x > kLogZero).select(x, 0.0f)).sum();
+    }
+    chunk_sum[static_cast<std::size_t>(t)] = s_sum;
+    chunk_ex[static_cast<std::size_t>(t)] = s_ex;
+  });
+  double sum = 0, ex = 0;
+  for (int t = 0; t < chunks; ++t) {
+    sum += chunk_sum[static_cast<std::size_t>(t)];
+    ex += chunk_ex[static_cast<std::size_t>(t)];
   }
-  f.entropy = std::clamp(entropy / f.log_cells, 0.0, 1.0);
-  f.argmax_bin = static_cast<int>(max_index % static_cast<std::size_t>(volume.bins));
-  const std::size_t pixel = max_index / static_cast<std::size_t>(volume.bins);
-  f.argmax_v = static_cast<int>(pixel / static_cast<std::size_t>(volume.width));
-  f.argmax_u = static_cast<int>(pixel % static_cast<std::size_t>(volume.width));
+  const double lse = max + std::log(sum);
+  f.entropy = std::clamp((lse - ex / sum) / f.log_cells, 0.0, 1.0);
+  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int) {
+    const Eigen::Index start = b0 * kBlock;
+    const Eigen::Index stop = std::min<Eigen::Index>(static_cast<Eigen::Index>(b1) * kBlock, static_cast<Eigen::Index>(cells));
+    ArrayMap x(f.log_prob.data() + start, stop - start);
+    x = (x > kLogZero).select(x - static_cast<float>(lse), kLogZero);
+  });
+  // The argmax, first in heading-major order: its value is max - lse exactly.
+  const float top = max - static_cast<float>(lse);  // computed as in the pass above
+  const std::size_t best = static_cast<std::size_t>(std::find(f.log_prob.begin(), f.log_prob.end(), top) - f.log_prob.begin());
+  f.argmax_bin = static_cast<int>(static_cast<std::size_t>(best) / slice);
+  f.argmax_v = static_cast<int>(static_cast<std::size_t>(best) % slice / static_cast<std::size_t>(W));
+  f.argmax_u = static_cast<int>(static_cast<std::size_t>(best) % static_cast<std::size_t>(W));
   return f;
 }
 
@@ -156,21 +206,6 @@ Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, i
   const double dx = east * std::cos(a) + north * std::sin(a);
   const double dy = -east * std::sin(a) + north * std::cos(a);
   return {crop.centre_u + dx / kCellM, crop.centre_v - dy / kCellM, wrap_degrees(bin * 360.0 / frame.bins + crop.rotation_deg)};
-}
-
-Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, int radius) {
-  // x_hat = sum m(x) x / sum m(x) over the cells around x*, m(x) = sum_th exp(b(x, th)).
-  double sm = 0, su = 0, sv = 0;
-  for (int v = std::max(0, v_star - radius); v <= std::min(belief.height() - 1, v_star + radius); ++v) {
-    for (int u = std::max(0, u_star - radius); u <= std::min(belief.width() - 1, u_star + radius); ++u) {
-      const double m = belief.position_mass(u, v);
-      sm += m;
-      su += m * u;
-      sv += m * v;
-    }
-  }
-  if (!(sm > 0)) return {static_cast<double>(u_star), static_cast<double>(v_star), 0};
-  return {su / sm, sv / sm, 0};
 }
 
 Pose single_frame_pose(const PreparedFrame& frame, const CropPose& crop) {
@@ -197,101 +232,50 @@ std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int
 // ---------------------------------------------------------------------------------------------
 // The filter
 
-struct SeqLocFilter::Impl {
-  BeliefVolume scratch;  // the other buffer of predict
-  struct Worker {
-    std::vector<float> sample, blend;
-    Eigen::ArrayXf t0, t1;
-  };
-  std::vector<Worker> workers;
-
-  Impl(const FilterConfig& c) : scratch(c.width, c.height, c.headings), workers(static_cast<std::size_t>(c.threads)) {
-    const std::size_t n = static_cast<std::size_t>(c.width) * c.height;
-    for (auto& w : workers) {
-      w.sample.resize(n);
-      w.t0.resize(static_cast<Eigen::Index>(n));
-      w.t1.resize(static_cast<Eigen::Index>(n));
-    }
+void detail::sample_slice(const float* values, int bins, int vh, int vw, double cell_m, const CropPose& crop,
+                          double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer,
+                          float* out) {
+  // Heading: the crop's own heading of window heading h is h - rotation.
+  const double p = wrap_degrees(heading_deg - crop.rotation_deg) * bins / 360.0;
+  const int j0 = static_cast<int>(std::floor(p)) % bins;
+  const int j1 = (j0 + 1) % bins;
+  const auto a = static_cast<float>(p - std::floor(p));
+  const std::size_t slice = static_cast<std::size_t>(vw) * vh;
+  const float* s0 = values + static_cast<std::size_t>(j0) * slice;
+  const float* s1 = values + static_cast<std::size_t>(j1) * slice;
+  const float* blended = s0;
+  if (a > 0) {
+    blend_buffer.resize(slice);
+    for (std::size_t i = 0; i < slice; ++i) blend_buffer[i] = (1 - a) * s0[i] + a * s1[i];
+    blended = blend_buffer.data();
   }
-
-  void sample_frame(const PreparedFrame& f, const CropPose& crop, double heading_deg, int width, int height,
-                    Worker& worker, float* out) const {
-    detail::sample_frame_slice(f, crop, heading_deg, width, height, worker.blend, out);
+  const double scale = kCellM / cell_m;
+  if (crop.rotation_deg == 0.0 && scale == 1.0) {
+    // Axis-aligned, same cells: a translation (crops served by seqloc itself).
+    translate(blended, vw, vh, out, width, height, (vw - 1) / 2.0 - crop.centre_u, (vh - 1) / 2.0 - crop.centre_v,
+              fill);
+    return;
   }
-};
-
-void detail::sample_frame_slice(const PreparedFrame& f, const CropPose& crop, double heading_deg, int width,
-                                int height, std::vector<float>& blend_buffer, float* out) {
-  {
-    const auto no_info = static_cast<float>(-f.log_cells);
-    // Heading: the crop's own heading of window heading h is h - rotation.
-    const double p = wrap_degrees(heading_deg - crop.rotation_deg) * f.bins / 360.0;
-    const int j0 = static_cast<int>(std::floor(p)) % f.bins;
-    const int j1 = (j0 + 1) % f.bins;
-    const auto a = static_cast<float>(p - std::floor(p));
-    const std::size_t slice = static_cast<std::size_t>(f.width) * f.height;
-    const float* s0 = f.log_prob.data() + static_cast<std::size_t>(j0) * slice;
-    const float* s1 = f.log_prob.data() + static_cast<std::size_t>(j1) * slice;
-    const float* blended = s0;
-    if (a > 0) {
-      blend_buffer.resize(slice);
-      for (std::size_t i = 0; i < slice; ++i) blend_buffer[i] = (1 - a) * s0[i] + a * s1[i];
-      blended = blend_buffer.data();
-    }
-    const double scale = kCellM / f.cell_m;
-    if (crop.rotation_deg == 0.0 && scale == 1.0) {
-      // Axis-aligned, same cells: a translation (crops served by seqloc itself).
-      translate(blended, f.width, f.height, out, width, height, (f.width - 1) / 2.0 - crop.centre_u,
-                (f.height - 1) / 2.0 - crop.centre_v, no_info);
-      return;
-    }
-    // General affine map from window cells to volume cells.
-    const double r = crop.rotation_deg * kDegToRad, c = std::cos(r), s = std::sin(r);
-    const double cu = (f.width - 1) / 2.0, cv = (f.height - 1) / 2.0;
-    for (int v = 0; v < height; ++v) {
-      for (int u = 0; u < width; ++u) {
-        const double du = u - crop.centre_u, dv = v - crop.centre_v;
-        const double x = cu + scale * (du * c + dv * s);
-        const double y = cv + scale * (-du * s + dv * c);
-        float value = no_info;
-        if (x >= 0 && y >= 0 && x <= f.width - 1 && y <= f.height - 1) {
-          const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-          const int x1 = std::min(x0 + 1, f.width - 1), y1 = std::min(y0 + 1, f.height - 1);
-          const auto ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
-          const float* r0 = blended + static_cast<std::size_t>(y0) * f.width;
-          const float* r1 = blended + static_cast<std::size_t>(y1) * f.width;
-          value = (1 - ay) * ((1 - ax) * r0[x0] + ax * r0[x1]) + ay * ((1 - ax) * r1[x0] + ax * r1[x1]);
-        }
-        out[static_cast<std::size_t>(v) * width + u] = value;
+  // General affine map from window cells to volume cells: the crop's axes are the window's
+  // turned clockwise by the rotation.
+  const double r = crop.rotation_deg * kDegToRad, c = std::cos(r), s = std::sin(r);
+  const double cu = (vw - 1) / 2.0, cv = (vh - 1) / 2.0;
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const double du = u - crop.centre_u, dv = v - crop.centre_v;
+      const double x = cu + scale * (du * c + dv * s);
+      const double y = cv + scale * (-du * s + dv * c);
+      float value = fill;
+      if (x >= 0 && y >= 0 && x <= vw - 1 && y <= vh - 1) {
+        const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+        const int x1 = std::min(x0 + 1, vw - 1), y1 = std::min(y0 + 1, vh - 1);
+        const auto ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
+        const float* r0 = blended + static_cast<std::size_t>(y0) * vw;
+        const float* r1 = blended + static_cast<std::size_t>(y1) * vw;
+        value = (1 - ay) * ((1 - ax) * r0[x0] + ax * r0[x1]) + ay * ((1 - ax) * r1[x0] + ax * r1[x1]);
       }
+      out[static_cast<std::size_t>(v) * width + u] = value;
     }
-  }
-}
-
-SeqLocFilter::SeqLocFilter(const FilterConfig& config)
-    : config_((config.validate(), config)),
-      belief_(config.width, config.height, config.headings),
-      impl_(std::make_unique<Impl>(config)) {}
-
-SeqLocFilter::~SeqLocFilter() = default;
-
-void SeqLocFilter::reset_uniform() {
-  belief_.set_uniform();
-  first_ = true;
-  last_estimate_.reset();
-}
-
-void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
-  belief_.set_gaussian(u, v, sigma_m / kCellM);
-  first_ = true;
-  last_estimate_.reset();
-}
-
-void SeqLocFilter::recentre(int du, int dv) {
-  belief_.recentre(du, dv);
-  if (last_estimate_) {
-    last_estimate_->u -= du;
-    last_estimate_->v -= dv;
   }
 }
 
@@ -304,105 +288,110 @@ void detail::warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odomet
   const auto a = static_cast<float>(p - floor_p);
   const int s = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
   const std::size_t n = in.slice_cells();
-  const auto N = static_cast<Eigen::Index>(n);
-  // Interpolation is in the probability domain, so that moving a peak keeps its mass: each
-  // source slice is scaled by its maximum, exponentiated, translated bilinearly; the blend of two
-  // slices is taken back to logs once per cell.
-  struct Translated {
-    std::vector<float> prob;
-    float log_scale = 0;
-  };
-  auto translated = [&](int j, Translated& t, std::vector<float>& exp_buffer) {
+  auto translated = [&](int j, float* dst) {
     double du = 0, dv = 0;
     displacement_cells(odometry, in.bin_heading_deg(j), du, dv);
-    ConstArrayMap src(in.slice(j), N);
-    t.log_scale = std::max(src.maxCoeff(), fill);
-    exp_buffer.resize(n);
-    ArrayMap(exp_buffer.data(), N) = (src - t.log_scale).exp();
-    t.prob.resize(n);
-    translate(exp_buffer.data(), W, H, t.prob.data(), W, H, -du, -dv, std::exp(fill - t.log_scale));
-  };
-  // Exact value of one cell from the source logs (stable log-sum-exp of the weighted neighbours),
-  // for the cells whose probabilities underflow float.
-  auto exact = [&](int u, int v, int k) {
-    double terms[8] = {}, weights[8] = {};
-    int count = 0;
-    const int j0 = (k + s) % R;
-    for (int side = 0; side < 2; ++side) {
-      const int j = (j0 + side) % R;
-      const double wj = side == 0 ? 1.0 - a : a;
-      if (wj == 0) continue;
-      double du = 0, dv = 0;
-      displacement_cells(odometry, in.bin_heading_deg(j), du, dv);
-      const double x = u - du, y = v - dv;
-      if (x < 0 || y < 0 || x > W - 1 || y > H - 1) {
-        terms[count] = fill;
-        weights[count++] = wj;
-        continue;
-      }
-      const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-      const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
-      const double ax = x - x0, ay = y - y0;
-      const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
-      const double ws[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
-      for (int i = 0; i < 4; ++i) {
-        if (ws[i] == 0) continue;
-        terms[count] = in.at(xs[i], ys[i], j);
-        weights[count++] = wj * ws[i];
-      }
-    }
-    double m = terms[0];
-    for (int i = 1; i < count; ++i) m = std::max(m, terms[i]);
-    double sum = 0;
-    for (int i = 0; i < count; ++i) sum += weights[i] * std::exp(terms[i] - m);
-    return sum > 0 ? static_cast<float>(m + std::log(sum)) : kLogZero;
+    translate(in.slice(j), W, H, dst, W, H, -du, -dv, fill);
   };
   detail::parallel_chunks(R, threads, [&](int k0, int k1, int) {
-    Translated current, next;
-    std::vector<float> exp_buffer;
-    Eigen::ArrayXf mix(N);
-    translated((k0 + s) % R, current, exp_buffer);
+    std::vector<float> buffer_a(n), buffer_b(n);
+    float* current = buffer_a.data();
+    float* next = buffer_b.data();
+    translated((k0 + s) % R, current);
     for (int k = k0; k < k1; ++k) {
-      ArrayMap dst(out.slice(k), N);
-      ConstArrayMap p0(current.prob.data(), N);
-      float scale = current.log_scale;
+      float* dst = out.slice(k);
       if (a == 0.0f) {
-        mix = p0;
-      } else {
-        translated((k + s + 1) % R, next, exp_buffer);
-        ConstArrayMap p1(next.prob.data(), N);
-        scale = std::max(current.log_scale, next.log_scale);
-        mix = (1 - a) * std::exp(current.log_scale - scale) * p0 + a * std::exp(next.log_scale - scale) * p1;
+        std::copy(current, current + n, dst);
+        if (k + 1 < k1) translated((k + 1 + s) % R, current);
+        continue;
       }
-      dst = mix.log() + scale;
-      // Cells more than ~69 nats below their slice's maximum: float's exp (which Eigen clamps at
-      // the smallest normal instead of 0) cannot represent them, so they take the exact formula.
-      constexpr float kSmallest = 1e-30f;
-      for (Eigen::Index i = 0; i < N; ++i) {
-        if (!(mix[i] > kSmallest)) dst[i] = exact(static_cast<int>(i % W), static_cast<int>(i / W), k);
-      }
-      if (a == 0.0f) {
-        if (k + 1 < k1) translated((k + 1 + s) % R, current, exp_buffer);
-      } else {
-        std::swap(current, next);
-      }
+      translated((k + s + 1) % R, next);
+      for (std::size_t i = 0; i < n; ++i) dst[i] = (1 - a) * current[i] + a * next[i];
+      std::swap(current, next);
     }
   });
 }
 
+Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, int radius) {
+  // x_hat = sum m(x) x / sum m(x) over the cells around x*, m(x) = sum_th exp(b(x, th)).
+  double sm = 0, su = 0, sv = 0;
+  for (int v = std::max(0, v_star - radius); v <= std::min(belief.height() - 1, v_star + radius); ++v) {
+    for (int u = std::max(0, u_star - radius); u <= std::min(belief.width() - 1, u_star + radius); ++u) {
+      const double m = belief.position_mass(u, v);
+      sm += m;
+      su += m * u;
+      sv += m * v;
+    }
+  }
+  if (!(sm > 0)) return {static_cast<double>(u_star), static_cast<double>(v_star), 0};
+  return {su / sm, sv / sm, 0};
+}
+
+// ---------------------------------------------------------------------------------------------
+// The filter
+
+struct SeqLocFilter::Impl {
+  BeliefVolume scratch;          // the other buffer of predict
+  std::vector<float> tempered;   // the frame's p^w / max, heading-major
+  struct Worker {
+    std::vector<float> sample, blend;
+  };
+  std::vector<Worker> workers;
+
+  explicit Impl(const FilterConfig& c)
+      : scratch(c.width, c.height, c.headings), workers(static_cast<std::size_t>(c.threads)) {
+    for (auto& w : workers) w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
+  }
+};
+
+SeqLocFilter::SeqLocFilter(const FilterConfig& config)
+    : config_((config.validate(), config)),
+      belief_(config.width, config.height, config.headings),
+      impl_(std::make_unique<Impl>(config)) {}
+
+SeqLocFilter::~SeqLocFilter() = default;
+
+void SeqLocFilter::reset_uniform() {
+  belief_.set_uniform();
+  cached_min_.reset();
+  first_ = true;
+  last_estimate_.reset();
+}
+
+void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
+  belief_.set_gaussian(u, v, sigma_m / kCellM);
+  cached_min_.reset();
+  first_ = true;
+  last_estimate_.reset();
+}
+
+void SeqLocFilter::recentre(int du, int dv) {
+  belief_.recentre(du, dv);
+  cached_min_.reset();
+  if (last_estimate_) {
+    last_estimate_->u -= du;
+    last_estimate_->v -= dv;
+  }
+}
+
 void SeqLocFilter::predict(const Odometry& odometry) {
   const int W = config_.width, H = config_.height, R = config_.headings;
-  detail::warp_volume(belief_, impl_->scratch, odometry, belief_.min_value(), config_.threads);
+  // The window's minimum: kept from the end of the last step unless the belief was handed out
+  // for writing since.
+  const float fill = cached_min_ ? *cached_min_ : belief_.min_value();
+  detail::warp_volume(belief_, impl_->scratch, odometry, fill, config_.threads);
+  cached_min_.reset();
   std::swap(belief_, impl_->scratch);
 
   if (config_.motion_noise) {
     const double step_m = std::hypot(odometry.forward_m, odometry.left_m);
     const double sigma_cells = config_.motion_noise_xy_per_m * step_m / kCellM;
     const double sigma_bins = config_.motion_noise_deg_per_m * step_m * R / 360.0;
-    // Diffusion in the probability domain: separable Gaussian blur in u, v and (circular) heading.
+    // Diffusion: separable Gaussian blur in u, v and (circular) heading; mass beyond the window
+    // edge is lost, as in the motion itself.
     auto kernel = [](double sigma) {
-      std::vector<double> k;
       if (sigma < 1e-3) return std::vector<double>{1.0};
+      std::vector<double> k;
       const int radius = static_cast<int>(std::ceil(3 * sigma));
       double sum = 0;
       for (int i = -radius; i <= radius; ++i) {
@@ -413,39 +402,38 @@ void SeqLocFilter::predict(const Odometry& odometry) {
       return k;
     };
     const auto kx = kernel(sigma_cells), kh = kernel(sigma_bins);
-    const float max = *std::max_element(belief_.data(), belief_.data() + belief_.size());
-    std::vector<double> prob(belief_.size()), tmp(belief_.size());
-    for (std::size_t i = 0; i < prob.size(); ++i) prob[i] = std::exp(static_cast<double>(belief_.data()[i]) - max);
     const int rx = static_cast<int>(kx.size() / 2), rh = static_cast<int>(kh.size() / 2);
     const std::size_t n = belief_.slice_cells();
+    std::vector<float> tmp(belief_.size());
+    float* p = belief_.data();
     auto idx = [&](int u, int v, int k) { return static_cast<std::size_t>(k) * n + static_cast<std::size_t>(v) * W + u; };
-    for (int k = 0; k < R; ++k)  // u (mass beyond the window edge is lost, as in predict)
+    for (int k = 0; k < R; ++k)
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
           double acc = 0;
           for (int i = -rx; i <= rx; ++i) {
-            if (u + i >= 0 && u + i < W) acc += kx[static_cast<std::size_t>(i + rx)] * prob[idx(u + i, v, k)];
+            if (u + i >= 0 && u + i < W) acc += kx[static_cast<std::size_t>(i + rx)] * p[idx(u + i, v, k)];
           }
-          tmp[idx(u, v, k)] = acc;
+          tmp[idx(u, v, k)] = static_cast<float>(acc);
         }
-    for (int k = 0; k < R; ++k)  // v
+    for (int k = 0; k < R; ++k)
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
           double acc = 0;
           for (int i = -rx; i <= rx; ++i) {
             if (v + i >= 0 && v + i < H) acc += kx[static_cast<std::size_t>(i + rx)] * tmp[idx(u, v + i, k)];
           }
-          prob[idx(u, v, k)] = acc;
+          p[idx(u, v, k)] = static_cast<float>(acc);
         }
-    for (int k = 0; k < R; ++k)  // heading, circular
+    for (int k = 0; k < R; ++k)
       for (std::size_t c = 0; c < n; ++c) {
         double acc = 0;
-        for (int i = -rh; i <= rh; ++i) acc += kh[static_cast<std::size_t>(i + rh)] * prob[static_cast<std::size_t>((k + i + R) % R) * n + c];
-        tmp[static_cast<std::size_t>(k) * n + c] = acc;
+        for (int i = -rh; i <= rh; ++i) {
+          acc += kh[static_cast<std::size_t>(i + rh)] * p[static_cast<std::size_t>((k + i + R) % R) * n + c];
+        }
+        tmp[static_cast<std::size_t>(k) * n + c] = static_cast<float>(acc);
       }
-    for (std::size_t i = 0; i < prob.size(); ++i) {
-      belief_.data()[i] = tmp[i] > 0 ? static_cast<float>(std::log(tmp[i]) + max) : kLogZero;
-    }
+    std::copy(tmp.begin(), tmp.end(), p);
   }
 }
 
@@ -454,6 +442,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
   if (config_.mgr && road_distance_m == nullptr) throw FilterError("MGR is on but no road-distance window was given");
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
+  const auto N = static_cast<Eigen::Index>(n);
   if (!first_) predict(odometry);
 
   FrameResult result;
@@ -461,75 +450,91 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
   result.etu_weight = config_.etu ? etu_weight(frame.entropy) : 1.0;
   const auto w = static_cast<float>(result.etu_weight);
 
-  std::vector<float> gps_term;
+  // The tempered likelihood p^w on the crop, scaled by its maximum (the scale cancels in the
+  // normalization); log(1/M) outside the crop.
+  ConstArrayMap log_p(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
+  const float log_p_max = log_p.maxCoeff();
+  impl_->tempered.resize(frame.log_prob.size());
+  ArrayMap(impl_->tempered.data(), static_cast<Eigen::Index>(impl_->tempered.size())) =
+      (log_p > kLogZero).select((w * (log_p - log_p_max)).exp(), 0.0f);
+  const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - log_p_max)));
+
+  std::vector<float> gps_factor;
   if (config_.gps_prior && gps != nullptr) {
-    gps_term.resize(n);
+    gps_factor.resize(n);
     const double sigma_cells = gps->sigma_m / kCellM;
     for (int v = 0; v < H; ++v)
       for (int u = 0; u < W; ++u) {
         const double du = u - gps->u, dv = v - gps->v;
-        gps_term[static_cast<std::size_t>(v) * W + u] =
-            static_cast<float>(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells));
+        gps_factor[static_cast<std::size_t>(v) * W + u] =
+            static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
       }
   }
 
-  // Update: b = w * log p + b_hat per slice, with each slice's max and sum of exp while it is hot.
-  std::vector<double> slice_max(static_cast<std::size_t>(R)), slice_sum(static_cast<std::size_t>(R));
-  detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
-    auto& worker = impl_->workers[static_cast<std::size_t>(t)];
-    for (int k = k0; k < k1; ++k) {
-      impl_->sample_frame(frame, crop, belief_.bin_heading_deg(k), W, H, worker, worker.sample.data());
-      ArrayMap b(belief_.slice(k), static_cast<Eigen::Index>(n));
-      b += w * ConstArrayMap(worker.sample.data(), static_cast<Eigen::Index>(n));
-      if (!gps_term.empty()) b += ConstArrayMap(gps_term.data(), static_cast<Eigen::Index>(n));
-      const float m = b.maxCoeff();
-      slice_max[static_cast<std::size_t>(k)] = m;
-      worker.t0 = (b - m).exp();
-      slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(worker.t0.sum());
-    }
-  });
-  const double global_max = *std::max_element(slice_max.begin(), slice_max.end());
+  // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum.
+  std::vector<double> slice_sum(static_cast<std::size_t>(R));
+  auto update_slices = [&](bool with_prior) {
+    detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
+      auto& worker = impl_->workers[static_cast<std::size_t>(t)];
+      for (int k = k0; k < k1; ++k) {
+        detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
+                             belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
+        ArrayMap b(belief_.slice(k), N);
+        ConstArrayMap sample(worker.sample.data(), N);
+        if (with_prior) {
+          b *= sample;
+        } else {
+          b = sample;
+        }
+        if (!gps_factor.empty()) b *= ConstArrayMap(gps_factor.data(), N);
+        slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(b.sum());
+      }
+    });
+  };
+  update_slices(true);
   double total = 0;
-  for (int k = 0; k < R; ++k) {
-    total += slice_sum[static_cast<std::size_t>(k)] * std::exp(slice_max[static_cast<std::size_t>(k)] - global_max);
+  for (double x : slice_sum) total += x;
+  if (!(total > 0) || !std::isfinite(total)) {
+    // Belief and frame share no support that float can represent: the frame alone decides.
+    update_slices(false);
+    total = 0;
+    for (double x : slice_sum) total += x;
+    if (!(total > 0)) throw FilterError("the frame volume has no mass inside the window");
   }
-  const auto lse = static_cast<float>(global_max + std::log(total));
 
-  // Normalize, MGR, argmax.
-  std::vector<float> log_eps_q;
+  // Normalize, MGR (b <- log((1 - eps) exp(b) + eps q) is, in probabilities, an affine blend),
+  // and the argmax of every slice.
+  std::vector<float> eps_q;
   if (config_.mgr) {
-    log_eps_q = road_prior_log_q(road_distance_m, W, H, R, config_.mgr_sigma_m);
-    const auto log_eps = static_cast<float>(std::log(config_.mgr_epsilon));
-    for (float& l : log_eps_q) l += log_eps;
+    eps_q = road_prior_log_q(road_distance_m, W, H, R, config_.mgr_sigma_m);
+    const auto eps = static_cast<float>(config_.mgr_epsilon);
+    for (float& l : eps_q) l = eps * std::exp(l);
   }
-  const auto shift = static_cast<float>(lse - (config_.mgr ? std::log1p(-config_.mgr_epsilon) : 0.0));
-  std::vector<float> best_value(static_cast<std::size_t>(R), -std::numeric_limits<float>::infinity());
-  std::vector<Eigen::Index> best_index(static_cast<std::size_t>(R), 0);
-  detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
-    auto& worker = impl_->workers[static_cast<std::size_t>(t)];
+  const auto keep = static_cast<float>((config_.mgr ? 1.0 - config_.mgr_epsilon : 1.0) / total);
+  std::vector<float> best_value(static_cast<std::size_t>(R), -1.0f), least_value(static_cast<std::size_t>(R));
+  detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
     for (int k = k0; k < k1; ++k) {
-      ArrayMap b(belief_.slice(k), static_cast<Eigen::Index>(n));
+      ArrayMap b(belief_.slice(k), N);
       if (config_.mgr) {
-        // log((1 - eps) e^b' + eps q) = max + log1p(exp(-|x - y|)) with x = b' + log(1 - eps), y = log(eps q).
-        ConstArrayMap y(log_eps_q.data(), static_cast<Eigen::Index>(n));
-        worker.t0 = b - shift;
-        worker.t1 = worker.t0.max(y);
-        b = worker.t1 + (-(worker.t0 - y).abs()).exp().log1p();
+        b = b * keep + ConstArrayMap(eps_q.data(), N);
       } else {
-        b -= shift;
+        b *= keep;
       }
-      Eigen::Index index = 0;
-      best_value[static_cast<std::size_t>(k)] = b.maxCoeff(&index);
-      best_index[static_cast<std::size_t>(k)] = index;
+      // Value-only reductions vectorize; the argmax's index is searched in one slice below.
+      best_value[static_cast<std::size_t>(k)] = b.maxCoeff();
+      least_value[static_cast<std::size_t>(k)] = b.minCoeff();
     }
   });
   int k_star = 0;
   for (int k = 1; k < R; ++k) {
     if (best_value[static_cast<std::size_t>(k)] > best_value[static_cast<std::size_t>(k_star)]) k_star = k;
   }
-  const auto cell = static_cast<int>(best_index[static_cast<std::size_t>(k_star)]);
+  cached_min_ = *std::min_element(least_value.begin(), least_value.end());
+  const float* star_slice = belief_.slice(k_star);
+  const auto cell = static_cast<int>(std::find(star_slice, star_slice + n, best_value[static_cast<std::size_t>(k_star)]) -
+                                     star_slice);
   const int u_star = cell % W, v_star = cell / W;
-  result.peak_log_belief = best_value[static_cast<std::size_t>(k_star)];
+  result.peak_log_belief = std::log(best_value[static_cast<std::size_t>(k_star)]);
   result.argmax = {static_cast<double>(u_star), static_cast<double>(v_star), belief_.bin_heading_deg(k_star)};
   result.pose = result.argmax;
 
@@ -543,7 +548,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
     double sx = 0, sy = 0;
     for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
       const int k = (k_star + i + R) % R;
-      const double weight = std::exp(static_cast<double>(belief_.at(u_star, v_star, k) - result.peak_log_belief));
+      const double weight = belief_.prob(u_star, v_star, k);
       const double h = belief_.bin_heading_deg(k) * kDegToRad;
       sx += weight * std::sin(h);
       sy += weight * std::cos(h);

@@ -42,21 +42,20 @@ Volume random_volume(std::mt19937& rng, int h, int w, int n) {
   return v;
 }
 
-// Float32 against double: every value is a sum of a few terms of magnitude up to ~50, each
-// rounded to float (relative 6e-8), through interpolation and log-sum-exp, five steps deep; 1e-4
-// absolute (plus 1e-6 relative for deep tails) is two orders of magnitude above that drift and
-// far below any difference a bug in an index or a weight would make (>= 1e-2 on these inputs).
+// The fast filter keeps float probabilities, the reference double log-probabilities. Each
+// probability goes through a few dozen float operations per step (relative rounding 6e-8 each),
+// five steps deep: 2e-4 relative is over two orders of magnitude above that drift and far below
+// what a wrong index or weight does (>= 1e-2 on these inputs). Below 1e-12 (mass that no
+// decision can see) float may also round to zero, hence the absolute floor.
 void expect_same_belief(const BeliefVolume& fast, const ReferenceFilter& ref, const std::string& what) {
-  double worst = 0;
   for (int k = 0; k < fast.headings(); ++k)
     for (int v = 0; v < fast.height(); ++v)
       for (int u = 0; u < fast.width(); ++u) {
-        const double r = ref.at(u, v, k);
-        const double diff = std::abs(fast.at(u, v, k) - r);
-        worst = std::max(worst, diff);
-        ASSERT_LE(diff, 1e-4 + 1e-6 * std::abs(r)) << what << " at (" << u << ", " << v << ", " << k << ")";
+        const double r = std::exp(ref.at(u, v, k));
+        const double diff = std::abs(fast.prob(u, v, k) - r);
+        ASSERT_LE(diff, 2e-4 * r + 1e-12) << what << " at (" << u << ", " << v << ", " << k << "): fast "
+                                          << fast.prob(u, v, k) << ", reference " << r;
       }
-  SUCCEED() << what << ": worst difference " << worst;
 }
 
 struct Variant {
@@ -146,30 +145,31 @@ TEST(Analytic, WholeCellTranslationMovesADeltaExactly) {
   FilterConfig c = small_config();
   SeqLocFilter filter(c);
   BeliefVolume& b = filter.belief();
-  std::fill(b.data(), b.data() + b.size(), -1000.0f);
-  b.at(10, 10, 0) = 0;  // heading 0: north
-  b.at(10, 10, 4) = 0;  // heading 90: east
+  std::fill(b.data(), b.data() + b.size(), 0.0f);
+  b.prob(10, 10, 0) = 0.5f;  // heading 0: north
+  b.prob(10, 10, 4) = 0.5f;  // heading 90: east
   filter.predict({2.0, 0.0, 0.0});  // 2 m = 4 cells forward
-  EXPECT_EQ(b.at(10, 6, 0), 0.0f) << "north: v decreases";
-  EXPECT_EQ(b.at(14, 10, 4), 0.0f) << "east: u increases";
-  EXPECT_LE(b.at(10, 10, 0), -1000.0f);
+  EXPECT_EQ(b.prob(10, 6, 0), 0.5f) << "north: v decreases";
+  EXPECT_EQ(b.prob(14, 10, 4), 0.5f) << "east: u increases";
+  EXPECT_EQ(b.prob(10, 10, 0), 0.0f);
   filter.predict({0.0, 1.0, 0.0});  // 1 m left = 2 cells
-  EXPECT_EQ(b.at(8, 6, 0), 0.0f) << "left of north is west";
-  EXPECT_EQ(b.at(14, 8, 4), 0.0f) << "left of east is north";
+  EXPECT_EQ(b.prob(8, 6, 0), 0.5f) << "left of north is west";
+  EXPECT_EQ(b.prob(14, 8, 4), 0.5f) << "left of east is north";
+  EXPECT_EQ(b.total_probability(), 1.0);
 }
 
 TEST(Analytic, YawShiftsHeadingBinsTheRightWay) {
   FilterConfig c = small_config();
   SeqLocFilter filter(c);
   BeliefVolume& b = filter.belief();
-  std::fill(b.data(), b.data() + b.size(), -1000.0f);
-  b.at(10, 10, 4) = 0;  // east
+  std::fill(b.data(), b.data() + b.size(), 0.0f);
+  b.prob(10, 10, 4) = 1;  // east
   filter.predict({0.0, 0.0, 45.0});  // a left turn of 45 degrees: east becomes north-east
-  EXPECT_EQ(b.at(10, 10, 2), 0.0f);
+  EXPECT_EQ(b.prob(10, 10, 2), 1.0f);
   filter.predict({0.0, 0.0, -11.25});  // half a bin to the right: the mass splits between two bins
-  EXPECT_NEAR(b.at(10, 10, 2), std::log(0.5f), 1e-6);
-  EXPECT_NEAR(b.at(10, 10, 3), std::log(0.5f), 1e-6);
-  EXPECT_NEAR(b.total_probability(), 1.0, 1e-5);
+  EXPECT_NEAR(b.prob(10, 10, 2), 0.5, 1e-6);
+  EXPECT_NEAR(b.prob(10, 10, 3), 0.5, 1e-6);
+  EXPECT_NEAR(b.total_probability(), 1.0, 1e-6);
 }
 
 TEST(Analytic, ALoopOfOdometryReturnsTheBelief) {
@@ -178,13 +178,13 @@ TEST(Analytic, ALoopOfOdometryReturnsTheBelief) {
   SeqLocFilter filter(c);
   BeliefVolume& b = filter.belief();
   // A delta at heading 0; a square of 10 m sides with 90-degree left turns (4 bins exactly).
-  std::fill(b.data(), b.data() + b.size(), -1000.0f);
-  b.at(40, 40, 0) = 0;
+  std::fill(b.data(), b.data() + b.size(), 0.0f);
+  b.prob(40, 40, 0) = 1;
   for (int side = 0; side < 4; ++side) {
     filter.predict({10.0, 0.0, 0.0});
     filter.predict({0.0, 0.0, 90.0});
   }
-  EXPECT_EQ(b.at(40, 40, 0), 0.0f) << "integral moves: exact";
+  EXPECT_EQ(b.prob(40, 40, 0), 1.0f) << "integral moves: exact";
   // An octagon with a smooth belief: sub-cell moves interpolate, so the peak returns within a cell.
   b.set_gaussian(32, 32, 2.0);
   const BeliefVolume before = b;
@@ -192,16 +192,16 @@ TEST(Analytic, ALoopOfOdometryReturnsTheBelief) {
     filter.predict({3.3, 0.0, 45.0});
   }
   int best_u = 0, best_v = 0;
-  float best = -1e30f;
+  float best = -1;
   for (int v = 0; v < 64; ++v)
     for (int u = 0; u < 64; ++u)
-      if (b.at(u, v, 0) > best) {
-        best = b.at(u, v, 0);
+      if (b.prob(u, v, 0) > best) {
+        best = b.prob(u, v, 0);
         best_u = u;
         best_v = v;
       }
   EXPECT_LE(std::hypot(best_u - 32, best_v - 32), 1.0);
-  EXPECT_NEAR(b.total_probability(), before.total_probability(), 0.02) << "mass is kept (none left the window)";
+  EXPECT_NEAR(b.total_probability(), before.total_probability(), 1e-4) << "mass is kept (none left the window)";
 }
 
 TEST(Analytic, BeliefSumsToOneAfterEveryStep) {
@@ -242,22 +242,22 @@ TEST(Analytic, MgrKeepsEverySuppressedCellAtLeastEpsQ) {
   const auto log_q = road_prior_log_q(road.data(), c.width, c.height, c.headings, c.mgr_sigma_m);
   for (int k = 0; k < c.headings; ++k)
     for (std::size_t i = 0; i < log_q.size(); ++i) {
-      ASSERT_GE(filter.belief().slice(k)[i], log_q[i] + std::log(c.mgr_epsilon) - 1e-5);
+      ASSERT_GE(filter.belief().slice(k)[i], c.mgr_epsilon * std::exp(log_q[i]) * (1 - 1e-6));
     }
 }
 
 TEST(Analytic, PasOfSymmetricAndAsymmetricPeaks) {
   BeliefVolume b(16, 16, 4);
-  std::fill(b.data(), b.data() + b.size(), -1000.0f);
+  std::fill(b.data(), b.data() + b.size(), 0.0f);
   for (int k = 0; k < 4; ++k) {
-    b.at(8, 8, k) = std::log(0.1f);
-    b.at(7, 8, k) = b.at(9, 8, k) = b.at(8, 7, k) = b.at(8, 9, k) = std::log(0.05f);
+    b.prob(8, 8, k) = 0.1f;
+    b.prob(7, 8, k) = b.prob(9, 8, k) = b.prob(8, 7, k) = b.prob(8, 9, k) = 0.05f;
   }
   Pose p = peak_anchored_position(b, 8, 8, 3);
   EXPECT_NEAR(p.u, 8.0, 1e-9);
   EXPECT_NEAR(p.v, 8.0, 1e-9);
   // Heavier to the east: the exact weighted mean.
-  for (int k = 0; k < 4; ++k) b.at(10, 8, k) = std::log(0.07f);
+  for (int k = 0; k < 4; ++k) b.prob(10, 8, k) = 0.07f;
   p = peak_anchored_position(b, 8, 8, 3);
   const double m8 = 0.4, m_side = 0.2, m10 = 0.28;
   const double expected_u = (8 * m8 + 7 * m_side + 9 * m_side + 8 * m_side * 2 + 10 * m10) / (m8 + 4 * m_side + m10);
@@ -309,7 +309,10 @@ TEST(Intake, MinusInfinityIsAZeroWithoutNaN) {
     Volume vol = random_volume(rng, 9, 11, 16);
     for (std::size_t i = 0; i < vol.values.size(); i += 3) vol.values[i] = -std::numeric_limits<float>::infinity();
     filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {2, 0, 30}, nullptr);
-    for (std::size_t i = 0; i < filter.belief().size(); ++i) ASSERT_TRUE(std::isfinite(filter.belief().data()[i])) << i;
+    for (std::size_t i = 0; i < filter.belief().size(); ++i) {
+      ASSERT_TRUE(std::isfinite(filter.belief().data()[i]) && filter.belief().data()[i] >= 0) << i;
+    }
+    EXPECT_NEAR(filter.belief().total_probability(), 1.0, 1e-4);
   }
 }
 

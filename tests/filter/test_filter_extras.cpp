@@ -114,13 +114,13 @@ TEST(Intake, FewerAndMoreBinsThanTheWindowMapToTheRightHeadings) {
 
 TEST(Window, RecentreMovesContentAndFillsWithTheMinimum) {
   BeliefVolume b(10, 8, 4);
-  std::fill(b.data(), b.data() + b.size(), -5.0f);
-  b.at(2, 3, 1) = -1.0f;
-  b.at(9, 7, 0) = -9.0f;
+  std::fill(b.data(), b.data() + b.size(), 0.5f);
+  b.prob(2, 3, 1) = 0.9f;
+  b.prob(9, 7, 0) = 0.1f;
   b.recentre(-3, 2);  // the window moves 3 cells west and 2 south
-  EXPECT_EQ(b.at(5, 1, 1), -1.0f);
-  EXPECT_EQ(b.at(0, 7, 2), -9.0f) << "entering cells get the minimum";
-  EXPECT_EQ(b.at(0, 0, 3), -9.0f);
+  EXPECT_EQ(b.prob(5, 1, 1), 0.9f);
+  EXPECT_EQ(b.prob(0, 7, 2), 0.1f) << "entering cells get the minimum";
+  EXPECT_EQ(b.prob(0, 0, 3), 0.1f);
 }
 
 TEST(Beyond, SubBinHeadingRefinesBetweenBins) {
@@ -146,7 +146,7 @@ TEST(Beyond, MotionNoiseDiffusesButKeepsMass) {
   const float peak_before = *std::max_element(b.data(), b.data() + b.size());
   filter.predict({4.0, 0.0, 0.0});
   const float peak_after = *std::max_element(b.data(), b.data() + b.size());
-  EXPECT_LT(peak_after, peak_before - 0.1f) << "the belief spread out";
+  EXPECT_LT(peak_after, 0.8f * peak_before) << "the belief spread out";
   EXPECT_NEAR(b.total_probability(), 1.0, 0.02);
   c.motion_noise = false;
   SeqLocFilter plain(c);

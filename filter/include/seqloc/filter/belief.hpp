@@ -1,7 +1,12 @@
 #pragma once
-// The belief: log-probabilities over a window of W x H cells (0.5 m) and R heading bins
-// (conventions.md section 6). Stored heading-major: slice k is one contiguous W x H image
-// (row v, column u), so that motion, resampling and reductions run over long contiguous rows.
+// The belief over a window of W x H cells (0.5 m) and R heading bins (conventions.md section 6).
+//
+// Stored as normalized probabilities in float, heading-major: slice k is one contiguous W x H
+// image (row v, column u), so that motion, resampling and reductions run over long contiguous
+// rows. The log-belief b of the conventions is log(prob); probabilities make the motion
+// mass-preserving and MGR an affine blend, with no exp or log per cell. Float spans 87 nats below
+// 1 (and the peak of a normalized belief is at least 1 / (W H R)), so only cells more than about
+// 70 nats below the peak can round to zero.
 
 #include <cstddef>
 #include <cstdint>
@@ -21,10 +26,13 @@ class BeliefVolume {
   /// Grid heading (degrees, clockwise) of bin k.
   [[nodiscard]] double bin_heading_deg(int k) const { return k * 360.0 / headings_; }
 
+  /// Probabilities of heading bin k, W x H row-major.
   [[nodiscard]] float* slice(int k) { return data_.data() + static_cast<std::size_t>(k) * slice_cells(); }
   [[nodiscard]] const float* slice(int k) const { return data_.data() + static_cast<std::size_t>(k) * slice_cells(); }
-  [[nodiscard]] float& at(int u, int v, int k) { return slice(k)[static_cast<std::size_t>(v) * width_ + u]; }
-  [[nodiscard]] float at(int u, int v, int k) const { return slice(k)[static_cast<std::size_t>(v) * width_ + u]; }
+  [[nodiscard]] float& prob(int u, int v, int k) { return slice(k)[static_cast<std::size_t>(v) * width_ + u]; }
+  [[nodiscard]] float prob(int u, int v, int k) const { return slice(k)[static_cast<std::size_t>(v) * width_ + u]; }
+  /// The log-belief b(u, v, k) (-inf where the probability is 0).
+  [[nodiscard]] double log_at(int u, int v, int k) const;
   [[nodiscard]] float* data() { return data_.data(); }
   [[nodiscard]] const float* data() const { return data_.data(); }
 
@@ -38,9 +46,9 @@ class BeliefVolume {
   void recentre(int du, int dv);
 
   [[nodiscard]] float min_value() const;
-  /// Sum of exp over all cells (1 for a normalized belief).
+  /// Sum of the probabilities (1 for a normalized belief).
   [[nodiscard]] double total_probability() const;
-  /// Marginal over headings of one cell: sum_k exp(b(u, v, k)).
+  /// Marginal over headings of one cell: sum_k prob(u, v, k).
   [[nodiscard]] double position_mass(int u, int v) const;
 
  private:

@@ -44,9 +44,10 @@ struct PreparedFrame {
   }
 };
 
-/// Checks and normalizes a volume. Throws FilterError for a wrong shape, NaN, +inf, negative
-/// probabilities or a volume without mass; a -inf log-probability is a valid zero.
-[[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings);
+/// Checks and normalizes a volume (with `threads` workers). Throws FilterError for a wrong shape,
+/// NaN, +inf, negative probabilities or a volume without mass (naming the first bad cell by its
+/// index in (H, W, N) order); a -inf log-probability is a valid zero.
+[[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1);
 
 /// ETU weight of a frame (conventions.md section 6, step 2).
 [[nodiscard]] inline double etu_weight(double normalized_entropy) {
@@ -80,7 +81,11 @@ class SeqLocFilter {
 
   [[nodiscard]] const FilterConfig& config() const { return config_; }
   [[nodiscard]] const BeliefVolume& belief() const { return belief_; }
-  [[nodiscard]] BeliefVolume& belief() { return belief_; }
+  /// For callers that set the belief themselves (tests, hand-made priors).
+  [[nodiscard]] BeliefVolume& belief() {
+    cached_min_.reset();
+    return belief_;
+  }
 
   /// Starts a sequence: the next step() does not predict. Uniform belief, or a Gaussian around a
   /// GPS fix (sigma in metres).
@@ -104,6 +109,7 @@ class SeqLocFilter {
   std::unique_ptr<Impl> impl_;
   bool first_ = true;
   std::optional<Pose> last_estimate_;
+  std::optional<float> cached_min_;  ///< the belief's minimum, known at the end of a step
 };
 
 /// PAS (conventions.md section 6, step 5): the mass-weighted mean position over the
