@@ -36,6 +36,10 @@ class BeliefVolume {
   [[nodiscard]] float* data() { return data_.data(); }
   [[nodiscard]] const float* data() const { return data_.data(); }
 
+  /// Region-grid cell (u east, v south) of window cell (0, 0); recentre() moves it.
+  std::int64_t origin_u = 0;
+  std::int64_t origin_v = 0;
+
   /// Uniform over the window.
   void set_uniform();
   /// A Gaussian in position (sigma in cells) around (u, v), uniform in heading, normalized.
