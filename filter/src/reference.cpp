@@ -9,6 +9,17 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// log(sum_i w_i exp(l_i)) over the terms of positive weight, computed stably.
+double weighted_log_sum_exp(const std::vector<std::pair<double, double>>& terms) {
+  double m = -std::numeric_limits<double>::infinity();
+  for (const auto& [l, w] : terms)
+    if (w > 0) m = std::max(m, l);
+  double sum = 0;
+  for (const auto& [l, w] : terms)
+    if (w > 0) sum += w * std::exp(l - m);
+  return m + std::log(sum);
+}
+
 double wrap360(double d) {
   d = std::fmod(d, 360.0);
   return d < 0 ? d + 360.0 : d;
@@ -82,13 +93,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
             terms.emplace_back(b_[index(x0, y1, j)], wj * (1 - ax) * ay);
             terms.emplace_back(b_[index(x1, y1, j)], wj * ax * ay);
           }
-          double m = -std::numeric_limits<double>::infinity();
-          for (const auto& [l, wt] : terms)
-            if (wt > 0) m = std::max(m, l);
-          double sum = 0;
-          for (const auto& [l, wt] : terms)
-            if (wt > 0) sum += wt * std::exp(l - m);
-          hat[index(u, v, k)] = m + std::log(sum);
+          hat[index(u, v, k)] = weighted_log_sum_exp(terms);
         }
     }
     b_ = hat;
@@ -153,13 +158,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
             terms.emplace_back(at(x0, y1), wj * (1 - ax) * ay);
             terms.emplace_back(at(x1, y1), wj * ax * ay);
           }
-          double m = -std::numeric_limits<double>::infinity();
-          for (const auto& [t, wt] : terms)
-            if (wt > 0) m = std::max(m, t);
-          double weighted = 0;
-          for (const auto& [t, wt] : terms)
-            if (wt > 0) weighted += wt * std::exp(t - m);
-          l = m + std::log(weighted);
+          l = weighted_log_sum_exp(terms);
         }
         double g = 0;
         if (c_.gps_prior && gps) {
