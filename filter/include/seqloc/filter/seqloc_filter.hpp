@@ -10,10 +10,10 @@
 //   probabilities, not log-probabilities: a geometric mean of neighbours would shed mass from
 //   every peak at each step (29 % of a 2-cell-wide peak over eight moves in our tests). A cell
 //   whose source lies outside the window gets the window's minimum before the step.
-// - A frame volume is sampled at each window cell and bin by bilinear interpolation in space and
-//   linear interpolation in heading of its log-probabilities (a likelihood is a weight, not a mass
-//   to conserve, and log-linear sampling keeps sharp ridges sharp); window cells whose centre
-//   falls outside the crop get log(1/M).
+// - The update multiplies the belief by the tempered likelihood p^w (w from ETU), computed on the
+//   frame's own cells and sampled at each window cell and bin by bilinear interpolation in space
+//   and linear interpolation in heading; window cells whose centre falls outside the crop get
+//   (1/M)^w. (The offline baseline, which adds log-likelihoods, interpolates those linearly.)
 
 #include <memory>
 #include <optional>
