@@ -190,6 +190,7 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   });
   // The argmax, first in heading-major order: its value is max - lse exactly.
   const float top = max - static_cast<float>(lse);  // computed as in the pass above
+  f.max_log_prob = top;
   const std::size_t best = static_cast<std::size_t>(std::find(f.log_prob.begin(), f.log_prob.end(), top) - f.log_prob.begin());
   f.argmax_bin = static_cast<int>(static_cast<std::size_t>(best) / slice);
   f.argmax_v = static_cast<int>(static_cast<std::size_t>(best) % slice / static_cast<std::size_t>(W));
@@ -452,11 +453,15 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
 
   // The tempered likelihood p^w on the crop, scaled by its maximum (the scale cancels in the
   // normalization); log(1/M) outside the crop.
-  ConstArrayMap log_p(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
-  const float log_p_max = log_p.maxCoeff();
+  const float log_p_max = frame.max_log_prob;
   impl_->tempered.resize(frame.log_prob.size());
-  ArrayMap(impl_->tempered.data(), static_cast<Eigen::Index>(impl_->tempered.size())) =
-      (log_p > kLogZero).select((w * (log_p - log_p_max)).exp(), 0.0f);
+  const std::size_t frame_slice = static_cast<std::size_t>(frame.width) * frame.height;
+  detail::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
+    const std::size_t begin = static_cast<std::size_t>(j0) * frame_slice;
+    const auto length = static_cast<Eigen::Index>(static_cast<std::size_t>(j1 - j0) * frame_slice);
+    ConstArrayMap log_p(frame.log_prob.data() + begin, length);
+    ArrayMap(impl_->tempered.data() + begin, length) = (log_p > kLogZero).select((w * (log_p - log_p_max)).exp(), 0.0f);
+  });
   const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - log_p_max)));
 
   std::vector<float> gps_factor;

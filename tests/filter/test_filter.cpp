@@ -225,7 +225,9 @@ TEST(Analytic, EtuWeightOfUniformAndDelta) {
   const auto u = prepare_frame(uniform.view(9, 11, 16), 16);
   EXPECT_NEAR(u.entropy, 1.0, 1e-6);
   EXPECT_DOUBLE_EQ(etu_weight(u.entropy), 1e-3);
+  EXPECT_EQ(u.max_log_prob, *std::max_element(u.log_prob.begin(), u.log_prob.end()));
   const auto d = prepare_frame(delta_volume(9, 11, 16, 1, 1, 1).view(9, 11, 16), 16);
+  EXPECT_EQ(d.max_log_prob, 0.0f) << "all the mass in one cell";
   EXPECT_NEAR(d.entropy, 0.0, 1e-9);
   EXPECT_DOUBLE_EQ(etu_weight(d.entropy), 1.0);
 }

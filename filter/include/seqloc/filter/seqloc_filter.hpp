@@ -37,6 +37,7 @@ struct PreparedFrame {
   std::vector<float> log_prob;  ///< [bin][v][u]
   double log_cells = 0;         ///< log M
   double entropy = 0;           ///< H_hat = -sum p log p / log M, in [0, 1]
+  float max_log_prob = 0;       ///< the largest normalized log-probability
   int argmax_v = 0, argmax_u = 0, argmax_bin = 0;
 
   [[nodiscard]] float at(int bin, int v, int u) const {
