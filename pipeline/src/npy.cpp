@@ -1,0 +1,252 @@
+#include "seqloc/pipeline/npy.hpp"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cctype>
+#include <cstring>
+#include <optional>
+#include <vector>
+
+namespace seqloc::pipeline {
+namespace {
+
+// The header is a Python dict literal, e.g. {'descr': '<f4', 'fortran_order': False,
+// 'shape': (128, 128, 256), }. This parser accepts exactly the values NumPy writes.
+struct Header {
+  std::string descr;
+  std::optional<bool> fortran_order;
+  std::optional<std::vector<std::uint64_t>> shape;
+};
+
+class HeaderParser {
+ public:
+  HeaderParser(const std::string& text, const std::string& file) : s_(text), file_(file) {}
+
+  Header parse() {
+    Header h;
+    expect('{');
+    while (true) {
+      skip_space();
+      if (peek() == '}') break;
+      const std::string key = string_literal();
+      expect(':');
+      skip_space();
+      if (key == "descr") {
+        h.descr = string_literal();
+      } else if (key == "fortran_order") {
+        h.fortran_order = boolean();
+      } else if (key == "shape") {
+        h.shape = tuple();
+      } else {
+        fail("unknown header key '" + key + "'");
+      }
+      skip_space();
+      if (peek() == ',') {
+        ++i_;
+        continue;
+      }
+      skip_space();
+      if (peek() != '}') fail("expected ',' or '}' in the header");
+    }
+    return h;
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& what) const {
+    throw DataError(file_ + ": not a valid .npy header: " + what);
+  }
+  char peek() const { return i_ < s_.size() ? s_[i_] : '\0'; }
+  void skip_space() {
+    while (i_ < s_.size() && std::isspace(static_cast<unsigned char>(s_[i_]))) ++i_;
+  }
+  void expect(char c) {
+    skip_space();
+    if (peek() != c) fail(std::string("expected '") + c + "'");
+    ++i_;
+  }
+  std::string string_literal() {
+    skip_space();
+    const char quote = peek();
+    if (quote != '\'' && quote != '"') fail("expected a string");
+    ++i_;
+    const auto end = s_.find(quote, i_);
+    if (end == std::string::npos) fail("unterminated string");
+    std::string out = s_.substr(i_, end - i_);
+    i_ = end + 1;
+    return out;
+  }
+  bool boolean() {
+    if (s_.compare(i_, 4, "True") == 0) {
+      i_ += 4;
+      return true;
+    }
+    if (s_.compare(i_, 5, "False") == 0) {
+      i_ += 5;
+      return false;
+    }
+    fail("expected True or False");
+  }
+  std::vector<std::uint64_t> tuple() {
+    expect('(');
+    std::vector<std::uint64_t> out;
+    while (true) {
+      skip_space();
+      if (peek() == ')') {
+        ++i_;
+        return out;
+      }
+      if (!std::isdigit(static_cast<unsigned char>(peek()))) fail("expected a dimension in the shape");
+      std::uint64_t value = 0;
+      while (std::isdigit(static_cast<unsigned char>(peek()))) {
+        if (value > (1ull << 40)) fail("absurd dimension in the shape");
+        value = value * 10 + static_cast<std::uint64_t>(peek() - '0');
+        ++i_;
+      }
+      out.push_back(value);
+      skip_space();
+      if (peek() == ',') ++i_;
+    }
+  }
+
+  const std::string& s_;
+  std::string file_;
+  std::size_t i_ = 0;
+};
+
+}  // namespace
+
+NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
+  const std::string name = path.string();
+  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw DataError(name + ": cannot open (" + std::strerror(errno) + ")");
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw DataError(name + ": not a regular file");
+  }
+  const auto file_bytes = static_cast<std::uint64_t>(st.st_size);
+  auto fail = [&](const std::string& what) {
+    ::close(fd);
+    throw DataError(name + ": " + what);
+  };
+  // Preamble: magic, version, header length.
+  unsigned char pre[12] = {};
+  const ssize_t got = ::pread(fd, pre, sizeof pre, 0);
+  if (got < 10 || std::memcmp(pre, "\x93NUMPY", 6) != 0) fail(file_bytes == 0 ? "empty file" : "not a .npy file");
+  const int major = pre[6];
+  std::uint64_t header_len = 0, header_start = 0;
+  if (major == 1) {
+    header_len = static_cast<std::uint64_t>(pre[8]) | (static_cast<std::uint64_t>(pre[9]) << 8);
+    header_start = 10;
+  } else if (major == 2 || major == 3) {
+    if (got < 12) fail("truncated .npy preamble");
+    header_len = static_cast<std::uint64_t>(pre[8]) | (static_cast<std::uint64_t>(pre[9]) << 8) |
+                 (static_cast<std::uint64_t>(pre[10]) << 16) | (static_cast<std::uint64_t>(pre[11]) << 24);
+    header_start = 12;
+  } else {
+    fail(".npy format version " + std::to_string(major) + " is not supported (1, 2 or 3)");
+  }
+  if (header_len > (1u << 20) || header_start + header_len > file_bytes) fail("truncated .npy header");
+  std::string text(header_len, '\0');
+  if (::pread(fd, text.data(), header_len, static_cast<off_t>(header_start)) != static_cast<ssize_t>(header_len)) {
+    fail("cannot read the .npy header");
+  }
+  Header h;
+  try {
+    h = HeaderParser(text, name).parse();
+  } catch (const DataError&) {
+    ::close(fd);
+    throw;
+  }
+  std::size_t item = 0;
+  if (h.descr == "<f4") {
+    type_ = filter::VolumeType::float32;
+    item = 4;
+  } else if (h.descr == "<f2") {
+    type_ = filter::VolumeType::float16;
+    item = 2;
+  } else {
+    fail("dtype '" + h.descr + "' is not supported; volumes are little-endian float32 ('<f4') or float16 ('<f2')");
+  }
+  if (!h.fortran_order || !h.shape) fail("the header lacks 'fortran_order' or 'shape'");
+  if (*h.fortran_order) fail("Fortran order is not supported; save a C-ordered array (np.ascontiguousarray)");
+  const auto& shape = *h.shape;
+  if (shape.size() != 3) {
+    std::string dims;
+    for (auto d : shape) dims += (dims.empty() ? "" : ", ") + std::to_string(d);
+    fail("shape (" + dims + ") is not (H, W, N)");
+  }
+  if (shape[0] == 0 || shape[1] == 0 || shape[2] == 0) fail("a dimension of the shape is zero");
+  // Bounded one factor at a time, so that the product cannot overflow.
+  const bool too_large = shape[0] > kMaxVolumeCells || shape[1] > kMaxVolumeCells || shape[2] > kMaxVolumeCells ||
+                         shape[0] * shape[1] > kMaxVolumeCells || shape[0] * shape[1] * shape[2] > kMaxVolumeCells;
+  if (too_large) {
+    fail("shape (" + std::to_string(shape[0]) + ", " + std::to_string(shape[1]) + ", " + std::to_string(shape[2]) +
+         ") exceeds the limit of " + std::to_string(kMaxVolumeCells) + " cells");
+  }
+  const std::uint64_t cells = shape[0] * shape[1] * shape[2];
+  const std::uint64_t data_start = header_start + header_len;
+  const std::uint64_t expected = cells * item;
+  if (file_bytes - data_start != expected) {
+    fail("the header's shape needs " + std::to_string(expected) + " bytes of data but the file holds " +
+         std::to_string(file_bytes - data_start) + (file_bytes - data_start < expected ? " (truncated)" : ""));
+  }
+  height_ = static_cast<int>(shape[0]);
+  width_ = static_cast<int>(shape[1]);
+  bins_ = static_cast<int>(shape[2]);
+  mapping_bytes_ = static_cast<std::size_t>(file_bytes);
+  mapping_ = ::mmap(nullptr, mapping_bytes_, PROT_READ, MAP_PRIVATE, fd, 0);
+  ::close(fd);
+  if (mapping_ == MAP_FAILED) {
+    mapping_ = nullptr;
+    throw DataError(name + ": cannot map the file (" + std::strerror(errno) + ")");
+  }
+  data_ = static_cast<const unsigned char*>(mapping_) + data_start;
+  if (reinterpret_cast<std::uintptr_t>(data_) % item != 0) {
+    release();
+    throw DataError(name + ": data is not aligned to its dtype (header length " + std::to_string(header_len) + ")");
+  }
+}
+
+void NpyVolume::release() {
+  if (mapping_) ::munmap(mapping_, mapping_bytes_);
+  mapping_ = nullptr;
+  data_ = nullptr;
+}
+
+NpyVolume::~NpyVolume() { release(); }
+
+NpyVolume::NpyVolume(NpyVolume&& o) noexcept
+    : path_(std::move(o.path_)),
+      mapping_(o.mapping_),
+      mapping_bytes_(o.mapping_bytes_),
+      data_(o.data_),
+      height_(o.height_),
+      width_(o.width_),
+      bins_(o.bins_),
+      type_(o.type_) {
+  o.mapping_ = nullptr;
+  o.data_ = nullptr;
+}
+
+NpyVolume& NpyVolume::operator=(NpyVolume&& o) noexcept {
+  if (this != &o) {
+    release();
+    path_ = std::move(o.path_);
+    mapping_ = o.mapping_;
+    mapping_bytes_ = o.mapping_bytes_;
+    data_ = o.data_;
+    height_ = o.height_;
+    width_ = o.width_;
+    bins_ = o.bins_;
+    type_ = o.type_;
+    o.mapping_ = nullptr;
+    o.data_ = nullptr;
+  }
+  return *this;
+}
+
+}  // namespace seqloc::pipeline
