@@ -1,0 +1,60 @@
+#pragma once
+// A route directory (conventions.md section 5): route.json and frames.csv, read and checked
+// completely before any work starts, so that a bad row stops the run before an output exists.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "seqloc/filter/types.hpp"
+#include "seqloc/osm/projection.hpp"
+#include "seqloc/pipeline/npy.hpp"
+
+namespace seqloc::pipeline {
+
+struct GpsPrior {
+  osm::GeoPoint where;
+  double sigma_m = 0;
+};
+
+struct GroundTruth {
+  osm::GeoPoint where;
+  std::optional<double> heading_deg;  ///< compass, clockwise from true north
+};
+
+struct RouteFrame {
+  int line = 0;  ///< line in frames.csv (the header is line 1)
+  std::string frame;
+  double timestamp_s = 0;
+  std::filesystem::path volume;  ///< absolute; empty when the frame has an observation
+  std::filesystem::path observation;
+  std::optional<osm::GeoPoint> crop_geo;  ///< crop centre as lat/lon (tangent-plane, true north)
+  std::optional<osm::GridPoint> crop_grid;  ///< or in region-grid coordinates (grid north)
+  filter::Odometry odometry;  ///< from the previous frame (0 on the first)
+  std::optional<GpsPrior> gps;
+  std::optional<GroundTruth> truth;
+};
+
+struct Route {
+  std::filesystem::path dir;
+  std::string name;
+  filter::VolumeValues volume_kind = filter::VolumeValues::log_prob;
+  double cell_m = 0.5;
+  std::vector<RouteFrame> frames;
+};
+
+/// Plausibility limits of the odometry between consecutive frames.
+struct RouteLimits {
+  double max_step_m = 200.0;     ///< one increment's translation
+  double max_speed_mps = 70.0;   ///< translation over the time between frames (250 km/h)
+  double max_yaw_deg = 120.0;    ///< one increment's heading change
+
+  void validate() const;
+};
+
+/// Reads and checks a route directory. Throws DataError: "DIR/route.json: ..." or
+/// "DIR/frames.csv:LINE: ..." naming what is wrong.
+[[nodiscard]] Route read_route(const std::filesystem::path& dir, const RouteLimits& limits = {});
+
+}  // namespace seqloc::pipeline

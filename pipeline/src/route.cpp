@@ -1,0 +1,229 @@
+#include "seqloc/pipeline/route.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace seqloc::pipeline {
+namespace {
+
+// One CSV record (RFC 4180: fields may be quoted, "" is a quote inside quotes).
+std::vector<std::string> split_csv(const std::string& line, bool& ok) {
+  std::vector<std::string> fields(1);
+  bool quoted = false;
+  ok = true;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted) {
+      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+        fields.back() += '"';
+        ++i;
+      } else if (c == '"') {
+        quoted = false;
+      } else {
+        fields.back() += c;
+      }
+    } else if (c == '"' && fields.back().empty()) {
+      quoted = true;
+    } else if (c == ',') {
+      fields.emplace_back();
+    } else {
+      fields.back() += c;
+    }
+  }
+  ok = !quoted;
+  for (auto& f : fields) {
+    while (!f.empty() && (f.back() == ' ' || f.back() == '\t')) f.pop_back();
+    std::size_t start = 0;
+    while (start < f.size() && (f[start] == ' ' || f[start] == '\t')) ++start;
+    f.erase(0, start);
+  }
+  return fields;
+}
+
+const std::set<std::string>& known_columns() {
+  static const std::set<std::string> columns{
+      "frame", "timestamp", "volume", "observation", "crop_lat", "crop_lon", "crop_x", "crop_y",
+      "odo_forward_m", "odo_left_m", "odo_yaw_deg", "gps_lat", "gps_lon", "gps_sigma_m",
+      "gt_lat", "gt_lon", "gt_heading_deg"};
+  return columns;
+}
+
+}  // namespace
+
+void RouteLimits::validate() const {
+  auto fail = [](const std::string& field, double value, const char* constraint) {
+    std::ostringstream s;
+    s << "route limits: " << field << " = " << value << ": " << constraint;
+    throw DataError(s.str());
+  };
+  if (!(max_step_m > 0)) fail("max_step_m", max_step_m, "must be > 0");
+  if (!(max_speed_mps > 0)) fail("max_speed_mps", max_speed_mps, "must be > 0");
+  if (!(max_yaw_deg > 0 && max_yaw_deg <= 360)) fail("max_yaw_deg", max_yaw_deg, "must be in (0, 360]");
+}
+
+Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
+  limits.validate();
+  Route route;
+  route.dir = dir;
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) throw DataError(dir.string() + ": not a route directory");
+
+  // route.json
+  const auto json_path = dir / "route.json";
+  std::ifstream json_in(json_path);
+  if (!json_in) throw DataError(json_path.string() + ": missing (every route directory has route.json)");
+  nlohmann::json meta;
+  try {
+    meta = nlohmann::json::parse(json_in);
+  } catch (const nlohmann::json::exception& e) {
+    throw DataError(json_path.string() + ": not valid JSON: " + e.what());
+  }
+  auto meta_fail = [&](const std::string& what) { throw DataError(json_path.string() + ": " + what); };
+  if (!meta.is_object() || meta.value("format", "") != "seqloc-route") meta_fail("\"format\" must be \"seqloc-route\"");
+  if (!meta.contains("version") || !meta["version"].is_number_integer() || meta["version"].get<int>() != 1) {
+    meta_fail("\"version\" must be 1 (this seqloc reads route format 1)");
+  }
+  route.name = meta.contains("name") && meta["name"].is_string() ? meta["name"].get<std::string>()
+                                                                 : dir.filename().string();
+  const std::string kind = meta.value("volume_kind", "log_prob");
+  if (kind == "log_prob") {
+    route.volume_kind = filter::VolumeValues::log_prob;
+  } else if (kind == "prob") {
+    route.volume_kind = filter::VolumeValues::prob;
+  } else {
+    meta_fail("\"volume_kind\" must be \"log_prob\" or \"prob\", not \"" + kind + "\"");
+  }
+  if (meta.contains("cell_m")) {
+    if (!meta["cell_m"].is_number() || !(meta["cell_m"].get<double>() > 0)) meta_fail("\"cell_m\" must be > 0");
+    route.cell_m = meta["cell_m"].get<double>();
+  }
+
+  // frames.csv
+  const auto csv_path = dir / "frames.csv";
+  std::ifstream csv(csv_path);
+  if (!csv) throw DataError(csv_path.string() + ": missing (every route directory has frames.csv)");
+  auto fail = [&](int line, const std::string& what) {
+    throw DataError(csv_path.string() + ":" + std::to_string(line) + ": " + what);
+  };
+  std::string text;
+  int line = 0;
+  std::map<std::string, std::size_t> column;
+  std::vector<std::string> names;
+  while (std::getline(csv, text)) {
+    ++line;
+    if (!text.empty() && text.back() == '\r') text.pop_back();
+    if (line == 1 && text.rfind("\xEF\xBB\xBF", 0) == 0) text.erase(0, 3);  // UTF-8 BOM
+    if (text.find_first_not_of(" \t") == std::string::npos) continue;  // blank line
+    bool ok = true;
+    auto fields = split_csv(text, ok);
+    if (!ok) fail(line, "unterminated quoted field");
+    if (column.empty()) {
+      for (std::size_t i = 0; i < fields.size(); ++i) {
+        if (!known_columns().count(fields[i])) fail(line, "unknown column '" + fields[i] + "'");
+        if (column.count(fields[i])) fail(line, "column '" + fields[i] + "' appears twice");
+        column[fields[i]] = i;
+      }
+      names = fields;
+      auto need = [&](std::initializer_list<const char*> all, const char* what) {
+        for (const char* c : all) {
+          if (!column.count(c)) fail(line, std::string("missing column '") + c + "' (" + what + ")");
+        }
+      };
+      need({"frame", "timestamp", "odo_forward_m", "odo_left_m", "odo_yaw_deg"}, "required");
+      if (column.count("volume") == column.count("observation")) {
+        fail(line, "exactly one of the columns 'volume' and 'observation' is needed");
+      }
+      const bool geo = column.count("crop_lat") || column.count("crop_lon");
+      const bool grid = column.count("crop_x") || column.count("crop_y");
+      if (geo == grid) fail(line, "the crop needs either 'crop_lat, crop_lon' or 'crop_x, crop_y'");
+      if (geo) need({"crop_lat", "crop_lon"}, "crop as lat/lon");
+      if (grid) need({"crop_x", "crop_y"}, "crop in grid coordinates");
+      if (column.count("gps_lat") || column.count("gps_lon") || column.count("gps_sigma_m")) {
+        need({"gps_lat", "gps_lon", "gps_sigma_m"}, "GPS prior");
+      }
+      if (column.count("gt_lat") || column.count("gt_lon") || column.count("gt_heading_deg")) {
+        need({"gt_lat", "gt_lon"}, "ground truth");
+      }
+      continue;
+    }
+    if (fields.size() != names.size()) {
+      fail(line, std::to_string(fields.size()) + " fields, but the header has " + std::to_string(names.size()));
+    }
+    auto field = [&](const char* name) -> const std::string& { return fields[column.at(name)]; };
+    auto has = [&](const char* name) { return column.count(name) && !fields[column.at(name)].empty(); };
+    auto number = [&](const char* name) {
+      const std::string& s = field(name);
+      double value = 0;
+      const auto [end, error] = std::from_chars(s.data(), s.data() + s.size(), value);
+      if (s.empty() || error != std::errc() || end != s.data() + s.size() || !std::isfinite(value)) {
+        fail(line, std::string(name) + " '" + s + "' is not a finite number");
+      }
+      return value;
+    };
+    RouteFrame f;
+    f.line = line;
+    f.frame = field("frame");
+    if (f.frame.empty()) fail(line, "empty frame id");
+    f.timestamp_s = number("timestamp");
+    const char* data_column = column.count("volume") ? "volume" : "observation";
+    const std::string& relative = field(data_column);
+    if (relative.empty()) fail(line, std::string("empty ") + data_column + " path");
+    const auto absolute = std::filesystem::path(relative).is_absolute() ? std::filesystem::path(relative) : dir / relative;
+    if (!std::filesystem::is_regular_file(absolute, ec)) {
+      fail(line, std::string(data_column) + " '" + relative + "' does not exist");
+    }
+    (column.count("volume") ? f.volume : f.observation) = absolute;
+    if (column.count("crop_lat")) {
+      f.crop_geo = osm::GeoPoint{number("crop_lat"), number("crop_lon")};
+      if (std::abs(f.crop_geo->lat_deg) > 90 || std::abs(f.crop_geo->lon_deg) > 180) {
+        fail(line, "crop_lat/crop_lon outside [-90, 90] x [-180, 180]");
+      }
+    } else {
+      f.crop_grid = osm::GridPoint{number("crop_x"), number("crop_y")};
+    }
+    f.odometry = {number("odo_forward_m"), number("odo_left_m"), number("odo_yaw_deg")};
+    if (has("gps_lat") || has("gps_lon") || has("gps_sigma_m")) {
+      f.gps = GpsPrior{{number("gps_lat"), number("gps_lon")}, number("gps_sigma_m")};
+      if (!(f.gps->sigma_m > 0)) fail(line, "gps_sigma_m must be > 0");
+    }
+    if (has("gt_lat") || has("gt_lon")) {
+      f.truth = GroundTruth{{number("gt_lat"), number("gt_lon")}, std::nullopt};
+      if (has("gt_heading_deg")) f.truth->heading_deg = number("gt_heading_deg");
+    }
+    if (route.frames.empty()) {
+      if (f.odometry.forward_m != 0 || f.odometry.left_m != 0 || f.odometry.yaw_deg != 0) {
+        fail(line, "the first frame's odometry must be 0 (it is the motion from the previous frame)");
+      }
+    } else {
+      const RouteFrame& previous = route.frames.back();
+      const double dt = f.timestamp_s - previous.timestamp_s;
+      if (!(dt > 0)) {
+        fail(line, "timestamp " + field("timestamp") + " does not come after the previous frame's (line " +
+                       std::to_string(previous.line) + ")");
+      }
+      const double step = std::hypot(f.odometry.forward_m, f.odometry.left_m);
+      std::ostringstream why;
+      if (step > limits.max_step_m) {
+        why << "odometry step of " << step << " m exceeds the limit of " << limits.max_step_m << " m";
+      } else if (step / dt > limits.max_speed_mps) {
+        why << "odometry step of " << step << " m in " << dt << " s is " << step / dt << " m/s, above the limit of "
+            << limits.max_speed_mps << " m/s";
+      } else if (std::abs(f.odometry.yaw_deg) > limits.max_yaw_deg) {
+        why << "odometry yaw of " << f.odometry.yaw_deg << " degrees exceeds the limit of " << limits.max_yaw_deg;
+      }
+      if (!why.str().empty()) fail(line, why.str());
+    }
+    route.frames.push_back(std::move(f));
+  }
+  if (column.empty()) throw DataError(csv_path.string() + ": empty (a header row and one row per frame are needed)");
+  if (route.frames.empty()) throw DataError(csv_path.string() + ": no frames after the header");
+  return route;
+}
+
+}  // namespace seqloc::pipeline

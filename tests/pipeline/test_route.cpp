@@ -1,0 +1,126 @@
+// Route directories: a valid route reads back field by field; every malformed route.json or
+// frames.csv row is one error naming the file and line.
+
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/pipeline/route.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+const char* kJson = R"({"format": "seqloc-route", "version": 1, "name": "valley", "volume_kind": "log_prob", "cell_m": 0.5})";
+const char* kHeader = "frame,timestamp,volume,crop_lat,crop_lon,odo_forward_m,odo_left_m,odo_yaw_deg,gps_lat,gps_lon,"
+                      "gps_sigma_m,gt_lat,gt_lon,gt_heading_deg";
+
+struct RouteDir {
+  test::ScratchDir dir;
+  RouteDir(const std::string& json, const std::string& csv) {
+    std::ofstream(dir / "route.json") << json;
+    std::ofstream(dir / "frames.csv") << csv;
+    for (const char* v : {"v0.npy", "v1.npy", "v2.npy", "a,b.npy"}) std::ofstream(dir / v) << "x";
+  }
+};
+
+std::string rows(std::initializer_list<const char*> lines) {
+  std::string s = std::string(kHeader) + "\n";
+  for (const char* l : lines) s += std::string(l) + "\n";
+  return s;
+}
+
+TEST(Route, ReadsAValidRoute) {
+  RouteDir r(kJson, "\xEF\xBB\xBF" + rows({"0,10.0,v0.npy,47.95,11.25,0,0,0,47.9501,11.2502,32,47.95,11.25,90",
+                                           "1,10.5,v1.npy,47.9501,11.25,5.0,0.1,-2.5,,,,47.9501,11.25,88\r",
+                                           "",
+                                           "2,11.0,\"a,b.npy\",47.9502,11.25,5.0,0.0,0.0,,,,47.9502,11.25,"}));
+  const Route route = read_route(r.dir.path());
+  EXPECT_EQ(route.name, "valley");
+  EXPECT_EQ(route.volume_kind, filter::VolumeValues::log_prob);
+  ASSERT_EQ(route.frames.size(), 3u);
+  const auto& f0 = route.frames[0];
+  EXPECT_EQ(f0.line, 2);
+  EXPECT_EQ(f0.frame, "0");
+  EXPECT_EQ(f0.volume, r.dir / "v0.npy");
+  ASSERT_TRUE(f0.crop_geo.has_value());
+  EXPECT_DOUBLE_EQ(f0.crop_geo->lat_deg, 47.95);
+  ASSERT_TRUE(f0.gps.has_value());
+  EXPECT_DOUBLE_EQ(f0.gps->sigma_m, 32);
+  ASSERT_TRUE(f0.truth && f0.truth->heading_deg);
+  EXPECT_DOUBLE_EQ(*f0.truth->heading_deg, 90);
+  const auto& f1 = route.frames[1];
+  EXPECT_FALSE(f1.gps.has_value());
+  EXPECT_DOUBLE_EQ(f1.odometry.forward_m, 5.0);
+  EXPECT_DOUBLE_EQ(f1.odometry.left_m, 0.1);
+  EXPECT_DOUBLE_EQ(f1.odometry.yaw_deg, -2.5);
+  EXPECT_EQ(route.frames[2].line, 5) << "the blank line counts";
+  EXPECT_EQ(route.frames[2].volume, r.dir / "a,b.npy");
+  EXPECT_FALSE(route.frames[2].truth->heading_deg.has_value());
+}
+
+TEST(Route, GridCropsAndProbVolumes) {
+  RouteDir r(R"({"format": "seqloc-route", "version": 1, "volume_kind": "prob"})",
+             "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg\n"
+             "a,0,v0.npy,-120.5,33.25,0,0,0\nb,1,v1.npy,-115.5,33.25,5,0,0\n");
+  const Route route = read_route(r.dir.path());
+  EXPECT_EQ(route.volume_kind, filter::VolumeValues::prob);
+  EXPECT_EQ(route.name, r.dir.path().filename().string());
+  ASSERT_TRUE(route.frames[1].crop_grid.has_value());
+  EXPECT_DOUBLE_EQ(route.frames[1].crop_grid->x_m, -115.5);
+}
+
+void expect_error(const std::string& json, const std::string& csv, const std::string& fragment,
+                  const RouteLimits& limits = {}) {
+  RouteDir r(json, csv);
+  try {
+    (void)read_route(r.dir.path(), limits);
+    FAIL() << "no error, expected '" << fragment << "'";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(r.dir.path().string()), std::string::npos) << e.what();
+  }
+}
+
+TEST(Route, BadRouteJson) {
+  const std::string csv = rows({"0,0,v0.npy,47.95,11.25,0,0,0,,,,,,"});
+  expect_error("{not json", csv, "route.json: not valid JSON");
+  expect_error(R"({"format": "other", "version": 1})", csv, "\"format\" must be \"seqloc-route\"");
+  expect_error(R"({"format": "seqloc-route", "version": 2})", csv, "\"version\" must be 1");
+  expect_error(R"({"format": "seqloc-route", "version": 1, "volume_kind": "logits"})", csv,
+               "\"volume_kind\" must be \"log_prob\" or \"prob\"");
+  expect_error(R"({"format": "seqloc-route", "version": 1, "cell_m": 0})", csv, "\"cell_m\" must be > 0");
+}
+
+TEST(Route, BadFramesCsvRowsNameTheLine) {
+  const char* ok0 = "0,0,v0.npy,47.95,11.25,0,0,0,,,,,,";
+  expect_error(kJson, "frame,timestamp,volume,crop_lat,crop_lon,odo_forwrd_m,odo_left_m,odo_yaw_deg\n",
+               "frames.csv:1: unknown column 'odo_forwrd_m'");
+  expect_error(kJson, "frame,timestamp,volume,crop_lat,crop_lon,odo_left_m,odo_yaw_deg\n",
+               "frames.csv:1: missing column 'odo_forward_m'");
+  expect_error(kJson, "frame,timestamp,volume,observation,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg\n",
+               "exactly one of the columns 'volume' and 'observation'");
+  expect_error(kJson, "frame,timestamp,volume,crop_lat,crop_x,odo_forward_m,odo_left_m,odo_yaw_deg\n",
+               "either 'crop_lat, crop_lon' or 'crop_x, crop_y'");
+  expect_error(kJson, rows({ok0, "1,1,v1.npy,47.95,11.25,5,0,0,,,"}), "frames.csv:3: 11 fields, but the header has 14");
+  expect_error(kJson, rows({"0,abc,v0.npy,47.95,11.25,0,0,0,,,,,,"}), "frames.csv:2: timestamp 'abc' is not a finite");
+  expect_error(kJson, rows({ok0, "1,1,v1.npy,nan,11.25,5,0,0,,,,,,"}), "frames.csv:3: crop_lat 'nan'");
+  expect_error(kJson, rows({ok0, "1,1,v1.npy,47.95,11.25,5,0,0,,,,,,", "2,0.5,v2.npy,47.95,11.25,5,0,0,,,,,,"}),
+               "frames.csv:4: timestamp 0.5 does not come after the previous frame's (line 3)");
+  expect_error(kJson, rows({ok0, "1,1,v1.npy,47.95,11.25,250,0,0,,,,,,"}), "frames.csv:3: odometry step of 250 m");
+  expect_error(kJson, rows({ok0, "1,0.1,v1.npy,47.95,11.25,20,0,0,,,,,,"}), "200 m/s, above the limit of 70 m/s");
+  expect_error(kJson, rows({ok0, "1,1,v1.npy,47.95,11.25,5,0,170,,,,,,"}), "odometry yaw of 170 degrees");
+  RouteLimits strict;
+  strict.max_step_m = 3;
+  expect_error(kJson, rows({ok0, "1,1,v1.npy,47.95,11.25,5,0,0,,,,,,"}), "limit of 3 m", strict);
+  expect_error(kJson, rows({ok0, "1,1,v9.npy,47.95,11.25,5,0,0,,,,,,"}), "frames.csv:3: volume 'v9.npy' does not exist");
+  expect_error(kJson, rows({"0,0,v0.npy,47.95,11.25,1,0,0,,,,,,"}), "frames.csv:2: the first frame's odometry must be 0");
+  expect_error(kJson, rows({"0,0,v0.npy,47.95,11.25,0,0,0,47.95,11.25,0,,,"}), "gps_sigma_m must be > 0");
+  expect_error(kJson, rows({"0,0,v0.npy,95,11.25,0,0,0,,,,,,"}), "outside [-90, 90]");
+  expect_error(kJson, rows({"0,0,\"v0.npy,47.95,11.25,0,0,0,,,,,,"}), "frames.csv:2: unterminated quoted field");
+  expect_error(kJson, std::string(kHeader) + "\n", "frames.csv: no frames after the header");
+  expect_error(kJson, "", "frames.csv: empty");
+}
+
+}  // namespace
+}  // namespace seqloc::pipeline
