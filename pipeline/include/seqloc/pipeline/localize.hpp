@@ -1,0 +1,65 @@
+#pragma once
+// Localizing a route against a region cache with the SeqLoc filter (or a baseline): the belief
+// window follows the vehicle, the road-distance window is stitched from the cache's tiles, and
+// every pose crosses the interface in the conventions' terms (conventions.md sections 1 and 7).
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "seqloc/filter/config.hpp"
+#include "seqloc/pipeline/route.hpp"
+#include "seqloc/raster/cache.hpp"
+
+namespace seqloc::pipeline {
+
+enum class Mode { seqloc, online, single };
+[[nodiscard]] const char* mode_name(Mode mode);
+
+struct LocalizeOptions {
+  filter::FilterConfig filter;  ///< window size, components, threads (online mode turns ETU/MGR/PAS off)
+  /// Re-centre the window when the estimate comes closer than this fraction of the window's
+  /// size to an edge.
+  double recentre_margin = 0.25;
+
+  void validate() const;
+};
+
+struct FramePose {
+  std::string frame;
+  double timestamp_s = 0;
+  double x_m = 0, y_m = 0;       ///< region CRS
+  double lat_deg = 0, lon_deg = 0;
+  double compass_heading_deg = 0;  ///< clockwise from true north
+  double entropy = 0;              ///< the frame volume's normalized entropy
+  double etu_weight = 1;
+  bool relocalized = false;
+  std::optional<double> position_error_m, heading_error_deg, lateral_error_m, longitudinal_error_m;
+};
+
+struct RouteResult {
+  std::string route;
+  Mode mode = Mode::seqloc;
+  std::vector<FramePose> poses;
+  int recentres = 0;  ///< how often the window moved
+};
+
+/// Runs one route. Throws DataError (volumes), filter::FilterError or raster::CacheError.
+[[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+                                         Mode mode);
+
+/// conventions.md section 7, over every frame with ground truth.
+struct Metrics {
+  std::size_t frames = 0;  ///< frames with ground truth
+  double position_recall[3] = {};  ///< % of frames within 1, 3, 5 m
+  double heading_recall[3] = {};   ///< % within 1, 3, 5 degrees (frames with a true heading)
+  double mean_position_error_m = 0, median_position_error_m = 0;
+  double mean_heading_error_deg = 0, median_heading_error_deg = 0;
+  double mean_abs_lateral_m = 0, mean_abs_longitudinal_m = 0;
+};
+[[nodiscard]] Metrics compute_metrics(const std::vector<const FramePose*>& poses);
+
+/// Compass heading difference: min(|a - b| mod 360, 360 - |a - b| mod 360).
+[[nodiscard]] double heading_difference_deg(double a, double b);
+
+}  // namespace seqloc::pipeline

@@ -1,0 +1,222 @@
+#include "seqloc/pipeline/localize.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/pipeline/npy.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+constexpr double kCellM = raster::kCellM;
+
+double wrap360(double d) {
+  d = std::fmod(d, 360.0);
+  return d < 0 ? d + 360.0 : d;
+}
+
+// The region's raster geometry: grid metres <-> region pixels (continuous, integral at centres).
+struct RegionFrame {
+  raster::RegionGrid grid;
+  osm::RegionProjection projection;
+
+  [[nodiscard]] double pixel_u(double x) const { return (x - grid.min_x()) / kCellM - 0.5; }
+  [[nodiscard]] double pixel_v(double y) const { return (grid.max_y() - y) / kCellM - 0.5; }
+  [[nodiscard]] double x_of(double u) const { return grid.min_x() + (u + 0.5) * kCellM; }
+  [[nodiscard]] double y_of(double v) const { return grid.max_y() - (v + 0.5) * kCellM; }
+};
+
+// The crop of a frame in region-grid metres, and the rotation of its north from grid north
+// (clockwise): 0 for grid crops, -gamma for lat/lon crops (true north is at grid heading -gamma).
+struct GridCrop {
+  double x = 0, y = 0, rotation_deg = 0;
+};
+
+GridCrop grid_crop(const RouteFrame& f, const RegionFrame& region) {
+  if (f.crop_grid) return {f.crop_grid->x_m, f.crop_grid->y_m, 0.0};
+  double gamma = 0;
+  const auto g = region.projection.forward(*f.crop_geo, gamma);
+  return {g.x_m, g.y_m, -gamma};
+}
+
+}  // namespace
+
+const char* mode_name(Mode mode) {
+  switch (mode) {
+    case Mode::seqloc:
+      return "seqloc";
+    case Mode::online:
+      return "online";
+    case Mode::single:
+      break;
+  }
+  return "single";
+}
+
+void LocalizeOptions::validate() const {
+  filter.validate();
+  if (!(recentre_margin > 0 && recentre_margin < 0.5)) {
+    std::ostringstream s;
+    s << "localize options: recentre_margin = " << recentre_margin << ": must be in (0, 0.5)";
+    throw filter::FilterError(s.str());
+  }
+}
+
+double heading_difference_deg(double a, double b) {
+  const double d = std::fmod(std::abs(a - b), 360.0);
+  return std::min(d, 360.0 - d);
+}
+
+RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode) {
+  options.validate();
+  const RegionFrame region{cache.grid(), cache.metadata().projection()};
+  filter::FilterConfig config = options.filter;
+  if (mode == Mode::online) config.etu = config.mgr = config.pas = false;
+  const int W = config.width, H = config.height;
+
+  RouteResult result;
+  result.route = route.name;
+  result.mode = mode;
+
+  std::optional<filter::SeqLocFilter> filter;
+  std::vector<float> road_m(static_cast<std::size_t>(W) * H);
+  std::vector<std::uint16_t> road_cm;
+  std::int64_t origin_u = 0, origin_v = 0;  // region pixel of window cell (0, 0)
+  auto load_road = [&] {
+    cache.read_road_distance(origin_u, origin_v, W, H, road_cm, /*fill_outside=*/true);
+    for (std::size_t i = 0; i < road_m.size(); ++i) road_m[i] = static_cast<float>(road_cm[i] * 0.01);
+  };
+  auto centre_on = [&](double region_u, double region_v) {
+    origin_u = static_cast<std::int64_t>(std::lround(region_u)) - W / 2;
+    origin_v = static_cast<std::int64_t>(std::lround(region_v)) - H / 2;
+  };
+
+  for (std::size_t i = 0; i < route.frames.size(); ++i) {
+    const RouteFrame& f = route.frames[i];
+    const NpyVolume npy(f.volume);
+    const filter::PreparedFrame frame =
+        filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), config.headings, config.threads);
+    const GridCrop crop = grid_crop(f, region);
+
+    double x = 0, y = 0, grid_heading = 0;
+    FramePose pose;
+    if (mode == Mode::single) {
+      // The volume's own argmax, relative to its crop centre.
+      const filter::Pose p = filter::single_frame_pose(frame, {0, 0, crop.rotation_deg});
+      x = crop.x + p.u * kCellM;
+      y = crop.y - p.v * kCellM;
+      grid_heading = p.heading_deg;
+      pose.entropy = frame.entropy;
+      pose.etu_weight = filter::etu_weight(frame.entropy);
+    } else {
+      if (!filter) {
+        filter.emplace(config);
+        // Centred on the GPS fix when the first frame has one (its Gaussian is the prior), else
+        // on the first crop with a uniform prior.
+        double cx = crop.x, cy = crop.y;
+        if (f.gps) {
+          const auto g = region.projection.forward(f.gps->where);
+          cx = g.x_m;
+          cy = g.y_m;
+        }
+        centre_on(region.pixel_u(cx), region.pixel_v(cy));
+        filter->belief().origin_u = origin_u;
+        filter->belief().origin_v = origin_v;
+        if (f.gps) {
+          filter->reset_gaussian(region.pixel_u(cx) - static_cast<double>(origin_u),
+                                 region.pixel_v(cy) - static_cast<double>(origin_v), f.gps->sigma_m);
+        } else {
+          filter->reset_uniform();
+        }
+        load_road();
+      }
+      const filter::CropPose window_crop{region.pixel_u(crop.x) - static_cast<double>(origin_u),
+                                         region.pixel_v(crop.y) - static_cast<double>(origin_v), crop.rotation_deg};
+      const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data());
+      x = region.x_of(r.pose.u + static_cast<double>(origin_u));
+      y = region.y_of(r.pose.v + static_cast<double>(origin_v));
+      grid_heading = r.pose.heading_deg;
+      pose.entropy = r.frame_entropy;
+      pose.etu_weight = r.etu_weight;
+      pose.relocalized = r.relocalized;
+      // Keep the window on the vehicle: re-centre by whole cells near an edge.
+      const double mu = options.recentre_margin * W, mv = options.recentre_margin * H;
+      if (r.pose.u < mu || r.pose.u > W - 1 - mu || r.pose.v < mv || r.pose.v > H - 1 - mv) {
+        const auto du = static_cast<int>(std::lround(r.pose.u)) - W / 2;
+        const auto dv = static_cast<int>(std::lround(r.pose.v)) - H / 2;
+        filter->recentre(du, dv);
+        origin_u += du;
+        origin_v += dv;
+        load_road();
+        ++result.recentres;
+      }
+    }
+    double gamma = 0;
+    const osm::GeoPoint geo = region.projection.reverse({x, y}, gamma);
+    pose.frame = f.frame;
+    pose.timestamp_s = f.timestamp_s;
+    pose.x_m = x;
+    pose.y_m = y;
+    pose.lat_deg = geo.lat_deg;
+    pose.lon_deg = geo.lon_deg;
+    pose.compass_heading_deg = wrap360(grid_heading + gamma);  // compass = grid + gamma
+    if (f.truth) {
+      double gamma_true = 0;
+      const auto t = region.projection.forward(f.truth->where, gamma_true);
+      const double ex = x - t.x_m, ey = y - t.y_m;
+      pose.position_error_m = std::hypot(ex, ey);
+      if (f.truth->heading_deg) {
+        pose.heading_error_deg = heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
+        const double h = (*f.truth->heading_deg - gamma_true) * M_PI / 180.0;  // true grid heading
+        pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);
+        pose.lateral_error_m = -ex * std::cos(h) + ey * std::sin(h);
+      }
+    }
+    result.poses.push_back(std::move(pose));
+  }
+  return result;
+}
+
+Metrics compute_metrics(const std::vector<const FramePose*>& poses) {
+  Metrics m;
+  std::vector<double> position, heading;
+  double lateral = 0, longitudinal = 0;
+  std::size_t body = 0;
+  for (const FramePose* p : poses) {
+    if (!p->position_error_m) continue;
+    position.push_back(*p->position_error_m);
+    if (p->heading_error_deg) heading.push_back(*p->heading_error_deg);
+    if (p->lateral_error_m) {
+      lateral += std::abs(*p->lateral_error_m);
+      longitudinal += std::abs(*p->longitudinal_error_m);
+      ++body;
+    }
+  }
+  m.frames = position.size();
+  auto fill = [](std::vector<double>& errors, double* recall, double& mean, double& median,
+                 std::initializer_list<double> thresholds) {
+    if (errors.empty()) return;
+    int i = 0;
+    for (double t : thresholds) {
+      recall[i++] = 100.0 * static_cast<double>(std::count_if(errors.begin(), errors.end(), [t](double e) { return e < t; })) /
+                    static_cast<double>(errors.size());
+    }
+    double sum = 0;
+    for (double e : errors) sum += e;
+    mean = sum / static_cast<double>(errors.size());
+    std::sort(errors.begin(), errors.end());
+    const std::size_t n = errors.size();
+    median = n % 2 ? errors[n / 2] : (errors[n / 2 - 1] + errors[n / 2]) / 2;
+  };
+  fill(position, m.position_recall, m.mean_position_error_m, m.median_position_error_m, {1.0, 3.0, 5.0});
+  fill(heading, m.heading_recall, m.mean_heading_error_deg, m.median_heading_error_deg, {1.0, 3.0, 5.0});
+  if (body > 0) {
+    m.mean_abs_lateral_m = lateral / static_cast<double>(body);
+    m.mean_abs_longitudinal_m = longitudinal / static_cast<double>(body);
+  }
+  return m;
+}
+
+}  // namespace seqloc::pipeline

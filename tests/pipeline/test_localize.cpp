@@ -1,0 +1,154 @@
+// Localizing routes end to end against caches built from synthetic maps, with volumes whose
+// answer is known: a delta at the true pose must give zero error in every mode.
+
+#include <cmath>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/osm/synthetic.hpp"
+#include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+constexpr int kSide = 15, kBins = 64;  // volumes: odd side, so the centre cell is the crop centre
+
+// A float32 .npy volume with all its mass in one cell (log-prob 0, -inf elsewhere).
+void write_delta(const std::filesystem::path& path, int v, int u, int bin) {
+  std::vector<float> values(kSide * kSide * kBins, -std::numeric_limits<float>::infinity());
+  values[static_cast<std::size_t>((v * kSide + u) * kBins + bin)] = 0;
+  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (15, 15, 64), }";
+  while ((10 + header.size() + 1) % 64 != 0) header += ' ';
+  header += '\n';
+  std::ofstream out(path, std::ios::binary);
+  out << "\x93NUMPY" << '\x01' << '\0';
+  out.put(static_cast<char>(header.size() & 0xFF)).put(static_cast<char>(header.size() >> 8));
+  out << header;
+  out.write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * 4));
+}
+
+struct Region {
+  test::ScratchDir dir;
+  std::filesystem::path cache;
+};
+
+// A cache of a synthetic map centred on (lat0, lon0) with an east-west road at y = 0 from x0 to x1.
+std::unique_ptr<Region> make_region(double lat0, double lon0, double x0, double x1, double half_lon, double half_lat) {
+  auto r = std::make_unique<Region>();
+  osm::SyntheticMap map(lat0, lon0);
+  map.way({{x0, 0.25}, {x1, 0.25}}, {{"highway", "track"}});
+  map.write(r->dir / "map.osm.pbf");
+  PreprocessOptions options;
+  options.input = r->dir / "map.osm.pbf";
+  options.output = r->dir / "region.gpkg";
+  options.bbox = osm::GeoBox{lon0 - half_lon, lat0 - half_lat, lon0 + half_lon, lat0 + half_lat};
+  preprocess_region(options);
+  r->cache = options.output;
+  return r;
+}
+
+LocalizeOptions small_options() {
+  LocalizeOptions o;
+  o.filter.width = o.filter.height = 64;
+  o.filter.headings = kBins;
+  return o;
+}
+
+TEST(Localize, DeltaAtTheTruthGivesZeroErrorInEveryMode) {
+  const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  const auto projection = cache.metadata().projection();
+  // The vehicle drives east along the road, 5 m per frame, on cell centres (x = 0.25 + k / 2).
+  test::ScratchDir dir;
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "east"})";
+  std::ofstream csv(dir / "frames.csv");
+  csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
+  csv.precision(12);
+  const int frames = 16;
+  for (int t = 0; t < frames; ++t) {
+    const double x = -40.25 + 5.0 * t, y = 0.25;
+    write_delta(dir / ("v" + std::to_string(t) + ".npy"), 7, 7, 16);  // grid heading 90: east
+    double gamma = 0;
+    const auto gt = projection.reverse({x, y}, gamma);
+    csv << t << "," << t * 0.5 << ",v" << t << ".npy," << x << "," << y << "," << (t ? 5.0 : 0.0) << ",0,0," << gt.lat_deg
+        << "," << gt.lon_deg << "," << 90.0 + gamma << "\n";
+  }
+  csv.close();
+  const Route route = read_route(dir.path());
+  for (const Mode mode : {Mode::seqloc, Mode::online, Mode::single}) {
+    const RouteResult result = localize_route(route, cache, small_options(), mode);
+    ASSERT_EQ(result.poses.size(), static_cast<std::size_t>(frames));
+    for (const auto& p : result.poses) {
+      // Exact but for MGR's eps * q mass around the peak, which moves PAS's mean by < 1e-4 m here.
+      EXPECT_LT(*p.position_error_m, 1e-3) << mode_name(mode) << " frame " << p.frame;
+      EXPECT_LT(*p.heading_error_deg, 1e-6) << mode_name(mode) << " frame " << p.frame;
+    }
+    if (mode != Mode::single) {
+      EXPECT_GT(result.recentres, 0) << "75 m of driving in a 32 m window";
+    }
+  }
+}
+
+TEST(Localize, HeadingsAreCompassHeadingsFarFromTheCentre) {
+  // 11.3 km east of the region centre at 47.5 N the meridian convergence is 0.11 degrees.
+  const double lat0 = 47.5, lon0 = 10.5;
+  const auto region = make_region(lat0, lon0, 11000, 11400, 0.16, 0.003);
+  raster::CacheReader cache(region->cache);
+  const auto projection = cache.metadata().projection();
+  double gamma = 0;
+  const auto crop = projection.reverse({11200.25, 0.25}, gamma);
+  ASSERT_GT(std::abs(gamma), 0.1) << "the test needs grid and true north to differ";
+  // Lat/lon crops are north-up in true north; bin 16 of 64 is compass 90.
+  test::ScratchDir dir;
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1})";
+  std::ofstream csv(dir / "frames.csv");
+  csv.precision(17);
+  csv << "frame,timestamp,volume,crop_lat,crop_lon,odo_forward_m,odo_left_m,odo_yaw_deg\n";
+  write_delta(dir / "v.npy", 0, 7, 16);  // 7 cells = 3.5 m true-north of the crop centre
+  csv << "0,0,v.npy," << crop.lat_deg << "," << crop.lon_deg << ",0,0,0\n";
+  csv.close();
+  const RouteResult r = localize_route(read_route(dir.path()), cache, small_options(), Mode::single);
+  ASSERT_EQ(r.poses.size(), 1u);
+  EXPECT_NEAR(r.poses[0].compass_heading_deg, 90.0, 1e-6);
+  // 3.5 m along true north is 3.5 m along grid heading -gamma: 6.7 mm east of grid north here.
+  // 1e-5 m of tolerance: crop offsets are taken as grid metres, ignoring the Transverse
+  // Mercator scale factor (1 + 1.5e-6 at 11 km, i.e. 5e-6 m over 3.5 m).
+  const double g = -gamma * M_PI / 180.0;
+  EXPECT_NEAR(r.poses[0].x_m, 11200.25 + 3.5 * std::sin(g), 1e-5);
+  EXPECT_NEAR(r.poses[0].y_m, 0.25 + 3.5 * std::cos(g), 1e-5);
+  EXPECT_GT(std::abs(3.5 * std::sin(g)), 6e-3) << "the rotation is what this checks";
+}
+
+TEST(Metrics, RecallsMeansMediansAndBodyFrameErrors) {
+  std::vector<FramePose> poses(4);
+  const double position[] = {0.5, 2.0, 4.0, 10.0}, heading[] = {0.5, 0.9, 4.0, 179.0};
+  for (int i = 0; i < 4; ++i) {
+    poses[static_cast<std::size_t>(i)].position_error_m = position[i];
+    poses[static_cast<std::size_t>(i)].heading_error_deg = heading[i];
+    poses[static_cast<std::size_t>(i)].lateral_error_m = -position[i] / 2;
+    poses[static_cast<std::size_t>(i)].longitudinal_error_m = position[i];
+  }
+  FramePose no_truth;
+  std::vector<const FramePose*> all{&poses[0], &poses[1], &poses[2], &poses[3], &no_truth};
+  const Metrics m = compute_metrics(all);
+  EXPECT_EQ(m.frames, 4u);
+  EXPECT_DOUBLE_EQ(m.position_recall[0], 25);
+  EXPECT_DOUBLE_EQ(m.position_recall[1], 50);
+  EXPECT_DOUBLE_EQ(m.position_recall[2], 75);
+  EXPECT_DOUBLE_EQ(m.heading_recall[0], 50);
+  EXPECT_DOUBLE_EQ(m.heading_recall[2], 75);
+  EXPECT_DOUBLE_EQ(m.mean_position_error_m, 4.125);
+  EXPECT_DOUBLE_EQ(m.median_position_error_m, 3.0);
+  EXPECT_DOUBLE_EQ(m.mean_abs_lateral_m, 4.125 / 2);
+  EXPECT_DOUBLE_EQ(m.mean_abs_longitudinal_m, 4.125);
+  EXPECT_DOUBLE_EQ(heading_difference_deg(350, 10), 20);
+  EXPECT_DOUBLE_EQ(heading_difference_deg(10, 350), 20);
+  EXPECT_DOUBLE_EQ(heading_difference_deg(0, 180), 180);
+  EXPECT_DOUBLE_EQ(heading_difference_deg(725, 5), 0);
+}
+
+}  // namespace
+}  // namespace seqloc::pipeline
