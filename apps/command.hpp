@@ -73,5 +73,7 @@ bool progress_wanted(int flag);
 std::unique_ptr<Command> make_preprocess_command();
 std::unique_ptr<Command> make_cache_info_command();
 std::unique_ptr<Command> make_cache_merge_command();
+std::unique_ptr<Command> make_localize_command();
+std::unique_ptr<Command> make_evaluate_command();
 
 }  // namespace seqloc::app

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 #include <sstream>
 
 #include "seqloc/filter/seqloc_filter.hpp"
@@ -134,7 +135,13 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       }
       const filter::CropPose window_crop{region.pixel_u(crop.x) - static_cast<double>(origin_u),
                                          region.pixel_v(crop.y) - static_cast<double>(origin_v), crop.rotation_deg};
-      const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data());
+      std::optional<filter::GpsFix> fix;
+      if (config.gps_prior && f.gps) {
+        const auto g = region.projection.forward(f.gps->where);
+        fix = filter::GpsFix{region.pixel_u(g.x_m) - static_cast<double>(origin_u),
+                             region.pixel_v(g.y_m) - static_cast<double>(origin_v), f.gps->sigma_m};
+      }
+      const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data(), fix ? &*fix : nullptr);
       x = region.x_of(r.pose.u + static_cast<double>(origin_u));
       y = region.y_of(r.pose.v + static_cast<double>(origin_v));
       grid_heading = r.pose.heading_deg;
@@ -162,6 +169,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     pose.lat_deg = geo.lat_deg;
     pose.lon_deg = geo.lon_deg;
     pose.compass_heading_deg = wrap360(grid_heading + gamma);  // compass = grid + gamma
+    pose.grid_heading_deg = wrap360(grid_heading);
     if (f.truth) {
       double gamma_true = 0;
       const auto t = region.projection.forward(f.truth->where, gamma_true);
@@ -177,6 +185,19 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     result.poses.push_back(std::move(pose));
   }
   return result;
+}
+
+void perturb_odometry(Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (std::size_t i = 1; i < route.frames.size(); ++i) {
+    auto& o = route.frames[i].odometry;
+    const double step = std::hypot(o.forward_m, o.left_m);
+    const double sigma_t = translation_pct / 100.0 * step, sigma_r = rotation_deg_per_m * step;
+    o.forward_m += sigma_t * normal(rng);
+    o.left_m += sigma_t * normal(rng);
+    o.yaw_deg += sigma_r * normal(rng);
+  }
 }
 
 Metrics compute_metrics(const std::vector<const FramePose*>& poses) {

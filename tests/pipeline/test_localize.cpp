@@ -20,14 +20,7 @@ constexpr int kSide = 15, kBins = 64;  // volumes: odd side, so the centre cell 
 void write_delta(const std::filesystem::path& path, int v, int u, int bin) {
   std::vector<float> values(kSide * kSide * kBins, -std::numeric_limits<float>::infinity());
   values[static_cast<std::size_t>((v * kSide + u) * kBins + bin)] = 0;
-  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (15, 15, 64), }";
-  while ((10 + header.size() + 1) % 64 != 0) header += ' ';
-  header += '\n';
-  std::ofstream out(path, std::ios::binary);
-  out << "\x93NUMPY" << '\x01' << '\0';
-  out.put(static_cast<char>(header.size() & 0xFF)).put(static_cast<char>(header.size() >> 8));
-  out << header;
-  out.write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * 4));
+  test::write_npy_float32(path, kSide, kSide, kBins, values);
 }
 
 struct Region {

@@ -40,4 +40,7 @@ std::filesystem::path shared_osm(const std::string& name);
 
 std::string read_file(const std::filesystem::path& path);
 
+/// Writes a float32 .npy file of shape (h, w, n) (NumPy's format 1.0).
+void write_npy_float32(const std::filesystem::path& path, int h, int w, int n, const std::vector<float>& values);
+
 }  // namespace seqloc::test

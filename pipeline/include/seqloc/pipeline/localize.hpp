@@ -3,6 +3,7 @@
 // window follows the vehicle, the road-distance window is stitched from the cache's tiles, and
 // every pose crosses the interface in the conventions' terms (conventions.md sections 1 and 7).
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -31,6 +32,7 @@ struct FramePose {
   double x_m = 0, y_m = 0;       ///< region CRS
   double lat_deg = 0, lon_deg = 0;
   double compass_heading_deg = 0;  ///< clockwise from true north
+  double grid_heading_deg = 0;     ///< clockwise from grid north (for files in the region CRS)
   double entropy = 0;              ///< the frame volume's normalized entropy
   double etu_weight = 1;
   bool relocalized = false;
@@ -47,6 +49,12 @@ struct RouteResult {
 /// Runs one route. Throws DataError (volumes), filter::FilterError or raster::CacheError.
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                                          Mode mode);
+
+/// Zero-mean Gaussian noise on each odometry increment in the KITTI convention: translation sigma
+/// `translation_pct` % of the step length (on forward and left), heading sigma
+/// `rotation_deg_per_m` times the step length; integrated by the filter, so the trajectory drifts.
+/// Deterministic for a seed; ground truth is never touched.
+void perturb_odometry(Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed);
 
 /// conventions.md section 7, over every frame with ground truth.
 struct Metrics {

@@ -1,0 +1,210 @@
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "command.hpp"
+#include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/outputs.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+
+namespace seqloc::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+class LocalizeCommand : public Command {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
+    app.add_option("routes", route_dirs_, "Route folders (route.json + frames.csv, see docs/route-format.md)")
+        ->required();
+    app.add_option("-o,--output", out_, "Output folder (written whole, or not at all)")->required();
+    app.add_option("--mode", mode_, "seqloc, online (naive recursion), single, or all")
+        ->default_val("seqloc")
+        ->check(CLI::IsMember({"seqloc", "online", "single", "all"}));
+    auto& f = options_.filter;
+    app.add_flag("!--no-etu", f.etu, "Switch off Entropy-Tempered Uncertainty");
+    app.add_flag("!--no-mgr", f.mgr, "Switch off Map-Guided Relocalization");
+    app.add_flag("!--no-pas", f.pas, "Switch off Peak-Anchored Smoothing");
+    app.add_option("--epsilon", f.mgr_epsilon, "MGR's eps")->default_val(0.01);
+    app.add_option("--sigma", f.mgr_sigma_m, "MGR's road-prior sigma in metres")->default_val(3.0);
+    app.add_option("--pas-radius", f.pas_radius, "PAS radius in cells")->default_val(3);
+    app.add_flag("--subbin-heading", f.subbin_heading, "Refine the heading between bins (beyond the paper)");
+    app.add_flag("--motion-noise", f.motion_noise, "Diffuse the belief with the step length (beyond the paper)");
+    app.add_flag("--gps-prior", f.gps_prior, "Use every frame's GPS fix as a prior term (beyond the paper)");
+    app.add_option("--window", window_, "Belief window, cells of 0.5 m each way")->default_val(256);
+    app.add_option("--headings", f.headings, "Heading bins R")->default_val(256);
+    app.add_option("--threads", f.threads, "Threads of the filter")->default_val(default_threads());
+    app.add_option("--odometry-noise", noise_, "SIGMA_T_PCT,SIGMA_R_DEG_PER_M: perturb the odometry (KITTI style)");
+    app.add_option("--seed", seed_, "Seed of the odometry noise")->default_val(1);
+    app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->default_val(200.0);
+    app.add_option("--max-speed", limits_.max_speed_mps, "Largest plausible speed, m/s")->default_val(70.0);
+    app.add_option("--max-yaw", limits_.max_yaw_deg, "Largest plausible yaw per step, degrees")->default_val(120.0);
+    app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
+    app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
+    app.footer("Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} and OUT/summary.json,\n"
+               "and prints the recall table. Any bad input stops the run with nothing written.");
+  }
+
+  int run() override {
+    options_.filter.width = options_.filter.height = window_;
+    try {
+      options_.validate();
+      limits_.validate();
+    } catch (const std::exception& e) {
+      throw pipeline::UsageError(e.what());  // option values, not data
+    }
+    std::error_code ec;
+    if (fs::exists(out_, ec) && !overwrite_) {
+      throw pipeline::UsageError(out_.string() + ": already exists; pass --overwrite to replace it");
+    }
+    const auto parent = out_.has_parent_path() ? out_.parent_path() : fs::path(".");
+    if (!fs::is_directory(parent, ec)) {
+      throw pipeline::UsageError(out_.string() + ": output directory '" + parent.string() + "' does not exist");
+    }
+    double noise_t = 0, noise_r = 0;
+    if (!noise_.empty()) {
+      char extra = 0;
+      if (std::sscanf(noise_.c_str(), "%lf,%lf%c", &noise_t, &noise_r, &extra) != 2 || noise_t < 0 || noise_r < 0) {
+        throw pipeline::UsageError("--odometry-noise '" + noise_ + "': expected SIGMA_T_PCT,SIGMA_R_DEG_PER_M >= 0");
+      }
+    }
+    std::vector<pipeline::Mode> modes;
+    if (mode_ == "all") {
+      modes = {pipeline::Mode::single, pipeline::Mode::online, pipeline::Mode::seqloc};
+    } else {
+      modes = {mode_ == "single" ? pipeline::Mode::single
+                                 : (mode_ == "online" ? pipeline::Mode::online : pipeline::Mode::seqloc)};
+    }
+
+    // Everything is read and checked before any work.
+    raster::CacheReader cache(cache_path_, 256);
+    std::vector<pipeline::Route> routes;
+    std::set<std::string> names;
+    long long total_frames = 0;
+    for (const auto& dir : route_dirs_) {
+      routes.push_back(pipeline::read_route(dir, limits_));
+      auto& route = routes.back();
+      if (!names.insert(route.name).second) route.name += "-" + std::to_string(routes.size());
+      names.insert(route.name);
+      if (noise_t > 0 || noise_r > 0) pipeline::perturb_odometry(route, noise_t, noise_r, seed_);
+      total_frames += static_cast<long long>(route.frames.size() * modes.size());
+    }
+    log("localize %zu routes, %lld frames in all", routes.size(), total_frames);
+
+    const fs::path temp = out_.string() + ".partial-" + std::to_string(getpid());
+    fs::remove_all(temp, ec);
+    fs::create_directories(temp);
+    try {
+      ProgressBar bar(progress_wanted(progress_), "frames");
+      long long done = 0;
+      std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
+      std::vector<std::string> route_names;
+      for (const auto& route : routes) {
+        route_names.push_back(route.name);
+        for (const auto mode : modes) {
+          const auto result = pipeline::localize_route(route, cache, options_, mode);
+          const fs::path dir = temp / route.name / pipeline::mode_name(mode);
+          fs::create_directories(dir);
+          pipeline::write_route_outputs(dir, result);
+          auto& all = by_mode[pipeline::mode_name(mode)];
+          all.insert(all.end(), result.poses.begin(), result.poses.end());
+          done += static_cast<long long>(route.frames.size());
+          bar.update(done, total_frames);
+        }
+      }
+      bar.done();
+      pipeline::MetricsByMode metrics;
+      for (const auto& [mode, poses] : by_mode) {
+        std::vector<const pipeline::FramePose*> pointers;
+        for (const auto& p : poses) pointers.push_back(&p);
+        metrics[mode] = pipeline::compute_metrics(pointers);
+      }
+      pipeline::write_summary(temp / "summary.json", metrics, route_names);
+      // Into place: the old folder (if any) is replaced only once the new one is complete.
+      if (fs::exists(out_)) {
+        const fs::path old = out_.string() + ".old-" + std::to_string(getpid());
+        fs::rename(out_, old);
+        fs::rename(temp, out_);
+        fs::remove_all(old, ec);
+      } else {
+        fs::rename(temp, out_);
+      }
+      std::fputs(pipeline::format_table(metrics).c_str(), stdout);
+      std::printf("wrote %s (%zu routes)\n", out_.c_str(), routes.size());
+    } catch (...) {
+      fs::remove_all(temp, ec);
+      throw;
+    }
+    return kExitOk;
+  }
+
+ private:
+  static int default_threads() {
+    const unsigned n = std::thread::hardware_concurrency();
+    return n == 0 ? 1 : static_cast<int>(std::min(n, 64u));
+  }
+
+  fs::path cache_path_;
+  std::vector<fs::path> route_dirs_;
+  fs::path out_;
+  std::string mode_ = "seqloc";
+  pipeline::LocalizeOptions options_;
+  int window_ = 256;
+  std::string noise_;
+  std::uint64_t seed_ = 1;
+  pipeline::RouteLimits limits_;
+  bool overwrite_ = false;
+  int progress_ = 0;
+};
+
+class EvaluateCommand : public Command {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("outputs", outs_, "Output folders of seqloc localize")->required();
+  }
+
+  int run() override {
+    std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
+    for (const auto& out : outs_) {
+      std::error_code ec;
+      if (!fs::is_directory(out, ec)) throw pipeline::DataError(out.string() + ": not an output folder");
+      for (const auto& route : fs::directory_iterator(out)) {
+        if (!route.is_directory()) continue;
+        for (const auto& mode : fs::directory_iterator(route.path())) {
+          const auto poses = mode.path() / "poses.csv";
+          if (!fs::exists(poses)) continue;
+          auto read = pipeline::read_poses_csv(poses);
+          auto& all = by_mode[mode.path().filename().string()];
+          all.insert(all.end(), read.begin(), read.end());
+        }
+      }
+    }
+    if (by_mode.empty()) throw pipeline::DataError("no poses.csv found under the given folders");
+    pipeline::MetricsByMode metrics;
+    for (const auto& [mode, poses] : by_mode) {
+      std::vector<const pipeline::FramePose*> pointers;
+      for (const auto& p : poses) pointers.push_back(&p);
+      metrics[mode] = pipeline::compute_metrics(pointers);
+    }
+    std::fputs(pipeline::format_table(metrics).c_str(), stdout);
+    return kExitOk;
+  }
+
+ private:
+  std::vector<fs::path> outs_;
+};
+
+}  // namespace
+
+std::unique_ptr<Command> make_localize_command() { return std::make_unique<LocalizeCommand>(); }
+std::unique_ptr<Command> make_evaluate_command() { return std::make_unique<EvaluateCommand>(); }
+
+}  // namespace seqloc::app

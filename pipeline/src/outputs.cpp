@@ -1,0 +1,170 @@
+#include "seqloc/pipeline/outputs.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "seqloc/pipeline/npy.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+std::string optional_number(const std::optional<double>& v, int precision) {
+  if (!v) return "";
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.*f", precision, *v);
+  return buffer;
+}
+
+void write_text(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  out.close();
+  if (!out) throw DataError(path.string() + ": cannot write");
+}
+
+nlohmann::ordered_json metrics_json(const Metrics& m) {
+  nlohmann::ordered_json j;
+  j["frames_with_ground_truth"] = m.frames;
+  j["position_recall_pct"] = {{"1m", m.position_recall[0]}, {"3m", m.position_recall[1]}, {"5m", m.position_recall[2]}};
+  j["heading_recall_pct"] = {{"1deg", m.heading_recall[0]}, {"3deg", m.heading_recall[1]}, {"5deg", m.heading_recall[2]}};
+  j["mean_position_error_m"] = m.mean_position_error_m;
+  j["median_position_error_m"] = m.median_position_error_m;
+  j["mean_heading_error_deg"] = m.mean_heading_error_deg;
+  j["median_heading_error_deg"] = m.median_heading_error_deg;
+  j["mean_abs_lateral_error_m"] = m.mean_abs_lateral_m;
+  j["mean_abs_longitudinal_error_m"] = m.mean_abs_longitudinal_m;
+  return j;
+}
+
+}  // namespace
+
+void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r) {
+  // poses.csv
+  std::ostringstream csv;
+  csv << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,relocalized,position_error_m,"
+         "heading_error_deg,lateral_error_m,longitudinal_error_m\n";
+  char line[512];
+  for (const auto& p : r.poses) {
+    std::snprintf(line, sizeof line, "%.6f,%.9f,%.9f,%.4f,%.3f,%.3f,%.6f,%.6f,%d,", p.timestamp_s, p.lat_deg,
+                  p.lon_deg, p.compass_heading_deg, p.x_m, p.y_m, p.entropy, p.etu_weight, p.relocalized ? 1 : 0);
+    csv << p.frame << "," << line << optional_number(p.position_error_m, 4) << ","
+        << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
+        << optional_number(p.longitudinal_error_m, 4) << "\n";
+  }
+  write_text(dir / "poses.csv", csv.str());
+
+  // trajectory.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw counter-clockwise from
+  // the grid's x axis (east): 90 degrees minus the grid heading.
+  std::ostringstream tum;
+  for (const auto& p : r.poses) {
+    const double yaw = (90.0 - p.grid_heading_deg) * M_PI / 180.0;
+    std::snprintf(line, sizeof line, "%.6f %.4f %.4f 0 0 0 %.9f %.9f\n", p.timestamp_s, p.x_m, p.y_m,
+                  std::sin(yaw / 2), std::cos(yaw / 2));
+    tum << line;
+  }
+  write_text(dir / "trajectory.tum", tum.str());
+
+  // track.geojson (RFC 7946: WGS84, [lon, lat]).
+  nlohmann::ordered_json features = nlohmann::json::array();
+  nlohmann::json coordinates = nlohmann::json::array();
+  for (const auto& p : r.poses) coordinates.push_back({p.lon_deg, p.lat_deg});
+  features.push_back({{"type", "Feature"},
+                      {"geometry", {{"type", "LineString"}, {"coordinates", coordinates}}},
+                      {"properties", {{"route", r.route}, {"mode", mode_name(r.mode)}}}});
+  for (const auto& p : r.poses) {
+    nlohmann::ordered_json props = {{"frame", p.frame},         {"timestamp", p.timestamp_s},
+                                    {"heading_deg", p.compass_heading_deg}, {"entropy", p.entropy},
+                                    {"etu_weight", p.etu_weight}, {"relocalized", p.relocalized}};
+    if (p.position_error_m) props["position_error_m"] = *p.position_error_m;
+    if (p.heading_error_deg) props["heading_error_deg"] = *p.heading_error_deg;
+    features.push_back({{"type", "Feature"},
+                        {"geometry", {{"type", "Point"}, {"coordinates", {p.lon_deg, p.lat_deg}}}},
+                        {"properties", props}});
+  }
+  const nlohmann::ordered_json track = {{"type", "FeatureCollection"}, {"features", features}};
+  write_text(dir / "track.geojson", track.dump() + "\n");
+
+  std::vector<const FramePose*> all;
+  for (const auto& p : r.poses) all.push_back(&p);
+  nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
+  metrics.update(metrics_json(compute_metrics(all)));
+  write_text(dir / "metrics.json", metrics.dump(2) + "\n");
+}
+
+std::string format_table(const MetricsByMode& metrics) {
+  std::ostringstream s;
+  char line[256];
+  std::snprintf(line, sizeof line, "%-8s %7s %7s %7s %7s %7s %7s %7s %8s %8s %8s %8s %8s\n", "mode", "frames", "R@1m",
+                "R@3m", "R@5m", "R@1deg", "R@3deg", "R@5deg", "mean m", "median m", "mean deg", "|lat| m", "|lon| m");
+  s << line;
+  for (const auto& [mode, m] : metrics) {
+    std::snprintf(line, sizeof line, "%-8s %7zu %7.1f %7.1f %7.1f %7.1f %7.1f %7.1f %8.2f %8.2f %8.2f %8.2f %8.2f\n",
+                  mode.c_str(), m.frames, m.position_recall[0], m.position_recall[1], m.position_recall[2],
+                  m.heading_recall[0], m.heading_recall[1], m.heading_recall[2], m.mean_position_error_m,
+                  m.median_position_error_m, m.mean_heading_error_deg, m.mean_abs_lateral_m, m.mean_abs_longitudinal_m);
+    s << line;
+  }
+  return s.str();
+}
+
+void write_summary(const std::filesystem::path& path, const MetricsByMode& metrics, const std::vector<std::string>& routes) {
+  nlohmann::ordered_json j;
+  j["routes"] = routes;
+  for (const auto& [mode, m] : metrics) j["modes"][mode] = metrics_json(m);
+  write_text(path, j.dump(2) + "\n");
+}
+
+std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw DataError(path.string() + ": cannot open");
+  std::string text;
+  std::vector<FramePose> poses;
+  int line = 0;
+  auto number = [&](const std::string& s) -> std::optional<double> {
+    if (s.empty()) return std::nullopt;
+    try {
+      std::size_t used = 0;
+      const double v = std::stod(s, &used);
+      if (used != s.size()) throw std::invalid_argument(s);
+      return v;
+    } catch (const std::exception&) {
+      throw DataError(path.string() + ":" + std::to_string(line) + ": '" + s + "' is not a number");
+    }
+  };
+  while (std::getline(in, text)) {
+    ++line;
+    if (line == 1 || text.empty()) continue;
+    std::vector<std::string> f;
+    std::stringstream ss(text);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) f.push_back(cell);
+    if (!text.empty() && text.back() == ',') f.emplace_back();
+    if (f.size() != 14) {
+      throw DataError(path.string() + ":" + std::to_string(line) + ": " + std::to_string(f.size()) +
+                      " fields, expected 14 (a poses.csv written by seqloc localize)");
+    }
+    FramePose p;
+    p.frame = f[0];
+    p.timestamp_s = number(f[1]).value_or(0);
+    p.lat_deg = number(f[2]).value_or(0);
+    p.lon_deg = number(f[3]).value_or(0);
+    p.compass_heading_deg = number(f[4]).value_or(0);
+    p.x_m = number(f[5]).value_or(0);
+    p.y_m = number(f[6]).value_or(0);
+    p.entropy = number(f[7]).value_or(0);
+    p.etu_weight = number(f[8]).value_or(0);
+    p.relocalized = f[9] == "1";
+    p.position_error_m = number(f[10]);
+    p.heading_error_deg = number(f[11]);
+    p.lateral_error_m = number(f[12]);
+    p.longitudinal_error_m = number(f[13]);
+    poses.push_back(std::move(p));
+  }
+  return poses;
+}
+
+}  // namespace seqloc::pipeline

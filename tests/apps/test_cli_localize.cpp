@@ -1,0 +1,156 @@
+// seqloc localize and seqloc evaluate from the command line: the files, the table, exit codes,
+// and nothing written when an input is bad.
+
+#include <cmath>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "seqloc/osm/synthetic.hpp"
+#include "seqloc/pipeline/localize.hpp"
+#include "seqloc/raster/cache.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc {
+namespace {
+
+using test::run_seqloc;
+
+// A cache of an east-west track, and a route driving it with delta volumes at the truth.
+struct Fixture {
+  test::ScratchDir dir;
+  std::filesystem::path cache, route;
+
+  explicit Fixture(bool with_nan = false) {
+    osm::SyntheticMap map(47.5, 10.5);
+    map.way({{-200, 0.25}, {200, 0.25}}, {{"highway", "track"}});
+    map.write(dir / "map.osm.pbf", 60);
+    cache = dir / "region.gpkg";
+    const auto r = run_seqloc({"preprocess", (dir / "map.osm.pbf").string(), "-o", cache.string()});
+    if (r.exit_code != 0) throw std::runtime_error(r.err);
+    const auto projection = raster::CacheReader(cache).metadata().projection();
+    route = dir / "route";
+    std::filesystem::create_directories(route);
+    std::ofstream(route / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "east"})";
+    std::ofstream csv(route / "frames.csv");
+    csv.precision(17);
+    csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
+    for (int t = 0; t < 8; ++t) {
+      const double x = -20.25 + 5.0 * t, y = 0.25;
+      std::vector<float> v(15 * 15 * 64, -std::numeric_limits<float>::infinity());
+      v[(7 * 15 + 7) * 64 + 16] = 0;  // the truth: the centre cell, heading 90
+      if (with_nan && t == 5) v[100] = std::nanf("");
+      test::write_npy_float32(route / ("v" + std::to_string(t) + ".npy"), 15, 15, 64, v);
+      double gamma = 0;
+      const auto gt = projection.reverse({x, y}, gamma);
+      csv << t << "," << t << ",v" << t << ".npy," << x << "," << y << "," << (t ? 5 : 0) << ",0,0," << gt.lat_deg
+          << "," << gt.lon_deg << "," << 90 + gamma << "\n";
+    }
+  }
+};
+
+std::vector<std::string> args(const Fixture& f, const std::filesystem::path& out, std::vector<std::string> extra) {
+  std::vector<std::string> a{"localize", f.cache.string(), f.route.string(), "-o", out.string(), "--window", "64",
+                             "--headings", "64"};
+  a.insert(a.end(), extra.begin(), extra.end());
+  return a;
+}
+
+TEST(CliLocalize, WritesEveryFileAndTheTable) {
+  Fixture f;
+  const auto out = f.dir / "out";
+  const auto r = run_seqloc(args(f, out, {"--mode", "all"}));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+  for (const char* mode : {"seqloc", "online", "single"}) {
+    const auto dir = out / "east" / mode;
+    ASSERT_TRUE(std::filesystem::exists(dir / "poses.csv")) << mode;
+    const std::string poses = test::read_file(dir / "poses.csv");
+    EXPECT_EQ(std::count(poses.begin(), poses.end(), '\n'), 9) << "header + 8 frames";
+    const auto track = nlohmann::json::parse(test::read_file(dir / "track.geojson"));
+    EXPECT_EQ(track["type"], "FeatureCollection");
+    EXPECT_EQ(track["features"][0]["geometry"]["type"], "LineString");
+    EXPECT_EQ(track["features"][0]["geometry"]["coordinates"].size(), 8u);
+    const double lon = track["features"][1]["geometry"]["coordinates"][0];
+    EXPECT_NEAR(lon, 10.5, 0.01) << "RFC 7946 order: [lon, lat]";
+    const std::string tum = test::read_file(dir / "trajectory.tum");
+    EXPECT_EQ(std::count(tum.begin(), tum.end(), '\n'), 8);
+    // Heading east: yaw 0 from the x axis, so qz = 0 and qw = 1.
+    EXPECT_NE(tum.find(" 0 0 0 0.000000000 1.000000000"), std::string::npos) << tum.substr(0, 200);
+    const auto metrics = nlohmann::json::parse(test::read_file(dir / "metrics.json"));
+    EXPECT_EQ(metrics["position_recall_pct"]["1m"], 100.0) << mode;
+    EXPECT_EQ(metrics["heading_recall_pct"]["1deg"], 100.0) << mode;
+  }
+  EXPECT_TRUE(std::filesystem::exists(out / "summary.json"));
+  EXPECT_NE(r.out.find("R@1m"), std::string::npos) << r.out;
+  for (const char* mode : {"seqloc ", "online ", "single "}) {
+    const auto row = r.out.find(mode);
+    ASSERT_NE(row, std::string::npos) << r.out;
+    EXPECT_NE(r.out.substr(row, 60).find("100.0"), std::string::npos) << r.out;
+  }
+  // evaluate recomputes the same table from the files.
+  const auto e = run_seqloc({"evaluate", out.string()});
+  ASSERT_EQ(e.exit_code, 0) << e.err;
+  EXPECT_EQ(e.out, r.out.substr(0, r.out.find("wrote ")));
+}
+
+TEST(CliLocalize, BadVolumeStopsTheRunWithNothingWritten) {
+  Fixture f(/*with_nan=*/true);
+  const auto out = f.dir / "out";
+  const auto r = run_seqloc(args(f, out, {}));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("NaN at cell 100"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  for (const auto& entry : std::filesystem::directory_iterator(f.dir.path())) {
+    EXPECT_EQ(entry.path().filename().string().find("out.partial"), std::string::npos) << "temporary folder left";
+  }
+}
+
+TEST(CliLocalize, UsageErrorsAndOverwrite) {
+  Fixture f;
+  const auto out = f.dir / "out";
+  ASSERT_EQ(run_seqloc(args(f, out, {"--mode", "single"})).exit_code, 0);
+  const auto again = run_seqloc(args(f, out, {}));
+  EXPECT_EQ(again.exit_code, 2);
+  EXPECT_NE(again.err.find("already exists; pass --overwrite"), std::string::npos) << again.err;
+  const auto replaced = run_seqloc(args(f, out, {"--overwrite"}));
+  EXPECT_EQ(replaced.exit_code, 0) << replaced.err;
+  EXPECT_TRUE(std::filesystem::exists(out / "east" / "seqloc" / "poses.csv"));
+  EXPECT_FALSE(std::filesystem::exists(out / "east" / "single")) << "the old folder was replaced whole";
+  EXPECT_EQ(run_seqloc(args(f, f.dir / "x", {"--mode", "offline-ish"})).exit_code, 2);
+  EXPECT_EQ(run_seqloc(args(f, f.dir / "x", {"--odometry-noise", "2"})).exit_code, 2);
+  const auto bad_epsilon = run_seqloc(args(f, f.dir / "x", {"--epsilon", "2"}));
+  EXPECT_EQ(bad_epsilon.exit_code, 2);
+  EXPECT_NE(bad_epsilon.err.find("mgr_epsilon = 2"), std::string::npos) << bad_epsilon.err;
+  EXPECT_EQ(run_seqloc({"localize", "--help"}).exit_code, 0);
+  EXPECT_EQ(run_seqloc({"evaluate", "--help"}).exit_code, 0);
+}
+
+TEST(OdometryNoise, DeterministicZeroMeanAndScaledWithTheStep) {
+  pipeline::Route route;
+  route.frames.resize(20001);
+  for (std::size_t i = 1; i < route.frames.size(); ++i) route.frames[i].odometry = {10.0, 0.0, 0.0};
+  pipeline::Route a = route, b = route;
+  pipeline::perturb_odometry(a, 2.0, 0.01, 7);
+  pipeline::perturb_odometry(b, 2.0, 0.01, 7);
+  double sum_f = 0, sum_f2 = 0, sum_y2 = 0;
+  for (std::size_t i = 1; i < a.frames.size(); ++i) {
+    EXPECT_EQ(a.frames[i].odometry.forward_m, b.frames[i].odometry.forward_m);
+    const double df = a.frames[i].odometry.forward_m - 10.0;
+    sum_f += df;
+    sum_f2 += df * df;
+    sum_y2 += a.frames[i].odometry.yaw_deg * a.frames[i].odometry.yaw_deg;
+  }
+  const double n = 20000;
+  // sigma_t = 2 % of 10 m = 0.2 m; sigma_r = 0.01 deg/m * 10 m = 0.1 deg. 20,000 samples: the
+  // sample mean is within 4 standard errors (0.2 / sqrt(n) * 4 = 0.0057 m), the sd within 3 %.
+  EXPECT_NEAR(sum_f / n, 0.0, 0.0057);
+  EXPECT_NEAR(std::sqrt(sum_f2 / n), 0.2, 0.006);
+  EXPECT_NEAR(std::sqrt(sum_y2 / n), 0.1, 0.003);
+  EXPECT_EQ(a.frames[0].odometry.forward_m, 0.0) << "the first frame has no motion";
+}
+
+}  // namespace
+}  // namespace seqloc
