@@ -26,9 +26,12 @@ class LocalizeCommand : public Command {
     app.add_option("routes", route_dirs_, "Route folders (route.json + frames.csv, see docs/route-format.md)")
         ->required();
     app.add_option("-o,--output", out_, "Output folder (written whole, or not at all)")->required();
-    app.add_option("--mode", mode_, "seqloc, online (naive recursion), single, or all")
+    app.add_option("--mode", mode_, "seqloc, online (naive recursion), single, offline (uses future frames), or all")
         ->default_val("seqloc")
-        ->check(CLI::IsMember({"seqloc", "online", "single", "all"}));
+        ->check(CLI::IsMember({"seqloc", "online", "single", "offline", "all"}));
+    app.add_option("--offline-window", options_.offline_half_window,
+                   "Offline mode: frames within K of each frame are aligned and summed (-1: all)")
+        ->default_val(10);
     auto& f = options_.filter;
     app.add_flag("!--no-etu", f.etu, "Switch off Entropy-Tempered Uncertainty");
     app.add_flag("!--no-mgr", f.mgr, "Switch off Map-Guided Relocalization");
@@ -78,10 +81,15 @@ class LocalizeCommand : public Command {
     }
     std::vector<pipeline::Mode> modes;
     if (mode_ == "all") {
-      modes = {pipeline::Mode::single, pipeline::Mode::online, pipeline::Mode::seqloc};
+      modes = {pipeline::Mode::single, pipeline::Mode::offline, pipeline::Mode::online, pipeline::Mode::seqloc};
+    } else if (mode_ == "single") {
+      modes = {pipeline::Mode::single};
+    } else if (mode_ == "offline") {
+      modes = {pipeline::Mode::offline};
+    } else if (mode_ == "online") {
+      modes = {pipeline::Mode::online};
     } else {
-      modes = {mode_ == "single" ? pipeline::Mode::single
-                                 : (mode_ == "online" ? pipeline::Mode::online : pipeline::Mode::seqloc)};
+      modes = {pipeline::Mode::seqloc};
     }
 
     // Everything is read and checked before any work.

@@ -26,22 +26,70 @@ Odometry invert(const Odometry& m) {
   return {-(c * m.forward_m + s * m.left_m), -(-s * m.forward_m + c * m.left_m), -m.yaw_deg};
 }
 
+namespace {
+
+// Frame s's log-likelihood placed in the window, in its own pose space.
+void place(const OfflineFrame& f, BeliefVolume& out, std::vector<float>& blend) {
+  for (int k = 0; k < out.headings(); ++k) {
+    // Log-likelihoods are sampled (and later warped) linearly: here they are weights to add up.
+    detail::sample_slice(f.frame->log_prob.data(), f.frame->bins, f.frame->height, f.frame->width, f.frame->cell_m,
+                         f.crop, out.bin_heading_deg(k), out.width(), out.height(),
+                         static_cast<float>(-f.frame->log_cells), blend, out.slice(k));
+  }
+}
+
+// Motion from frame s to frame t: the increments in between, inverted when s is later.
+Odometry motion_between(const std::vector<OfflineFrame>& frames, std::size_t s, std::size_t t) {
+  std::vector<Odometry> steps;
+  for (std::size_t i = std::min(s, t) + 1; i <= std::max(s, t); ++i) steps.push_back(frames[i].from_previous);
+  const Odometry m = compose(steps);
+  return s > t ? invert(m) : m;
+}
+
+Pose argmax_pose(const BeliefVolume& sum) {
+  const auto best = std::max_element(sum.data(), sum.data() + sum.size()) - sum.data();
+  const auto cells = static_cast<std::ptrdiff_t>(sum.slice_cells());
+  const int k = static_cast<int>(best / cells);
+  const auto rest = best % cells;
+  return {static_cast<double>(rest % sum.width()), static_cast<double>(rest / sum.width()), sum.bin_heading_deg(k)};
+}
+
+}  // namespace
+
+Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,
+                     int half_window) {
+  config.validate();
+  const int W = config.width, H = config.height, R = config.headings;
+  const std::size_t n = frames.size();
+  const std::size_t s0 = half_window < 0 ? 0 : (t > static_cast<std::size_t>(half_window) ? t - static_cast<std::size_t>(half_window) : 0);
+  const std::size_t s1 = half_window < 0 ? n - 1 : std::min(n - 1, t + static_cast<std::size_t>(half_window));
+  BeliefVolume sum(W, H, R), placed(W, H, R), warped(W, H, R);
+  std::fill(sum.data(), sum.data() + sum.size(), 0.0f);
+  std::vector<float> blend;
+  for (std::size_t s = s0; s <= s1; ++s) {
+    place(frames[s], placed, blend);
+    const BeliefVolume* source = &placed;
+    if (s != t) {
+      const float no_info = static_cast<float>(-frames[s].frame->log_cells);
+      detail::warp_volume(placed, warped, motion_between(frames, s, t), no_info, config.threads);
+      source = &warped;
+    }
+    for (std::size_t i = 0; i < sum.size(); ++i) sum.data()[i] += source->data()[i];
+  }
+  return argmax_pose(sum);
+}
+
 std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const FilterConfig& config, int half_window) {
   config.validate();
   const int n = static_cast<int>(frames.size());
   const int W = config.width, H = config.height, R = config.headings;
-  // Each frame's log-likelihood placed in the window, in its own pose space.
+  // Each frame's log-likelihood placed once, shared by every t.
   std::vector<BeliefVolume> placed;
   placed.reserve(frames.size());
   std::vector<float> blend;
   for (const auto& f : frames) {
     placed.emplace_back(W, H, R);
-    for (int k = 0; k < R; ++k) {
-      // Log-likelihoods are sampled (and later warped) linearly: here they are weights to add up.
-      detail::sample_slice(f.frame->log_prob.data(), f.frame->bins, f.frame->height, f.frame->width, f.frame->cell_m,
-                           f.crop, placed.back().bin_heading_deg(k), W, H, static_cast<float>(-f.frame->log_cells),
-                           blend, placed.back().slice(k));
-    }
+    place(f, placed.back(), blend);
   }
   std::vector<Pose> poses;
   BeliefVolume sum(W, H, R), warped(W, H, R);
@@ -52,22 +100,15 @@ std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const F
     for (int s = s0; s <= s1; ++s) {
       const BeliefVolume* source = &placed[static_cast<std::size_t>(s)];
       if (s != t) {
-        // Motion from s to t: the increments in between, inverted when s is later.
-        std::vector<Odometry> steps;
-        for (int i = std::min(s, t) + 1; i <= std::max(s, t); ++i) steps.push_back(frames[static_cast<std::size_t>(i)].from_previous);
-        Odometry motion = compose(steps);
-        if (s > t) motion = invert(motion);
         const float no_info = static_cast<float>(-frames[static_cast<std::size_t>(s)].frame->log_cells);
-        detail::warp_volume(*source, warped, motion, no_info, config.threads);
+        detail::warp_volume(*source, warped,
+                            motion_between(frames, static_cast<std::size_t>(s), static_cast<std::size_t>(t)), no_info,
+                            config.threads);
         source = &warped;
       }
       for (std::size_t i = 0; i < sum.size(); ++i) sum.data()[i] += source->data()[i];
     }
-    const auto best = std::max_element(sum.data(), sum.data() + sum.size()) - sum.data();
-    const auto cells = static_cast<std::ptrdiff_t>(sum.slice_cells());
-    const int k = static_cast<int>(best / cells);
-    const auto rest = best % cells;
-    poses.push_back({static_cast<double>(rest % W), static_cast<double>(rest / W), sum.bin_heading_deg(k)});
+    poses.push_back(argmax_pose(sum));
   }
   return poses;
 }

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <random>
 #include <sstream>
 
+#include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/pipeline/npy.hpp"
 
@@ -50,6 +52,8 @@ const char* mode_name(Mode mode) {
       return "seqloc";
     case Mode::online:
       return "online";
+    case Mode::offline:
+      return "offline";
     case Mode::single:
       break;
   }
@@ -94,23 +98,54 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     origin_v = static_cast<std::int64_t>(std::lround(region_v)) - H / 2;
   };
 
+  // Offline: the prepared frames of the sliding range [t - K, t + K].
+  std::map<std::size_t, filter::PreparedFrame> kept;
+  auto prepared = [&](std::size_t s) -> const filter::PreparedFrame& {
+    auto it = kept.find(s);
+    if (it == kept.end()) {
+      const NpyVolume npy(route.frames[s].volume);
+      it = kept.emplace(s, filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), config.headings,
+                                                 config.threads)).first;
+    }
+    return it->second;
+  };
+
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
     const RouteFrame& f = route.frames[i];
-    const NpyVolume npy(f.volume);
-    const filter::PreparedFrame frame =
-        filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), config.headings, config.threads);
+    const filter::PreparedFrame& frame = prepared(i);
     const GridCrop crop = grid_crop(f, region);
 
     double x = 0, y = 0, grid_heading = 0;
     FramePose pose;
-    if (mode == Mode::single) {
+    pose.entropy = frame.entropy;
+    pose.etu_weight = filter::etu_weight(frame.entropy);
+    if (mode == Mode::offline) {
+      // A window centred on frame t's crop; every frame of the range placed by its own crop and
+      // warped to t by the relative motion.
+      const std::size_t k = options.offline_half_window < 0 ? route.frames.size()
+                                                             : static_cast<std::size_t>(options.offline_half_window);
+      const std::size_t s0 = i > k ? i - k : 0, s1 = std::min(route.frames.size() - 1, i + k);
+      while (!kept.empty() && kept.begin()->first < s0) kept.erase(kept.begin());
+      centre_on(region.pixel_u(crop.x), region.pixel_v(crop.y));
+      std::vector<filter::OfflineFrame> range;
+      for (std::size_t s = s0; s <= s1; ++s) {
+        const GridCrop c = grid_crop(route.frames[s], region);
+        range.push_back({&prepared(s),
+                         {region.pixel_u(c.x) - static_cast<double>(origin_u),
+                          region.pixel_v(c.y) - static_cast<double>(origin_v), c.rotation_deg},
+                         route.frames[s].odometry});
+      }
+      const filter::Pose p = filter::offline_pose_at(range, i - s0, config, -1);
+      x = region.x_of(p.u + static_cast<double>(origin_u));
+      y = region.y_of(p.v + static_cast<double>(origin_v));
+      grid_heading = p.heading_deg;
+    } else if (mode == Mode::single) {
       // The volume's own argmax, relative to its crop centre.
       const filter::Pose p = filter::single_frame_pose(frame, {0, 0, crop.rotation_deg});
       x = crop.x + p.u * kCellM;
       y = crop.y - p.v * kCellM;
       grid_heading = p.heading_deg;
-      pose.entropy = frame.entropy;
-      pose.etu_weight = filter::etu_weight(frame.entropy);
+      kept.clear();
     } else {
       if (!filter) {
         filter.emplace(config);
@@ -142,6 +177,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
                              region.pixel_v(g.y_m) - static_cast<double>(origin_v), f.gps->sigma_m};
       }
       const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data(), fix ? &*fix : nullptr);
+      kept.clear();
       x = region.x_of(r.pose.u + static_cast<double>(origin_u));
       y = region.y_of(r.pose.v + static_cast<double>(origin_v));
       grid_heading = r.pose.heading_deg;

@@ -63,7 +63,7 @@ TEST(CliLocalize, WritesEveryFileAndTheTable) {
   const auto r = run_seqloc(args(f, out, {"--mode", "all"}));
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err, "");
-  for (const char* mode : {"seqloc", "online", "single"}) {
+  for (const char* mode : {"seqloc", "online", "single", "offline"}) {
     const auto dir = out / "east" / mode;
     ASSERT_TRUE(std::filesystem::exists(dir / "poses.csv")) << mode;
     const std::string poses = test::read_file(dir / "poses.csv");
@@ -84,7 +84,7 @@ TEST(CliLocalize, WritesEveryFileAndTheTable) {
   }
   EXPECT_TRUE(std::filesystem::exists(out / "summary.json"));
   EXPECT_NE(r.out.find("R@1m"), std::string::npos) << r.out;
-  for (const char* mode : {"seqloc ", "online ", "single "}) {
+  for (const char* mode : {"seqloc ", "online ", "single ", "offline "}) {
     const auto row = r.out.find(mode);
     ASSERT_NE(row, std::string::npos) << r.out;
     EXPECT_NE(r.out.substr(row, 60).find("100.0"), std::string::npos) << r.out;

@@ -96,6 +96,12 @@ TEST(Baselines, OfflineRecoversAStraightRoute) {
   }
   const auto windowed = offline_poses(input, c, 1);
   EXPECT_EQ(windowed.size(), static_cast<std::size_t>(n));
+  for (int t = 0; t < n; ++t) {
+    const Pose at = offline_pose_at(input, static_cast<std::size_t>(t), c, 1);
+    EXPECT_EQ(at.u, windowed[static_cast<std::size_t>(t)].u);
+    EXPECT_EQ(at.v, windowed[static_cast<std::size_t>(t)].v);
+    EXPECT_EQ(at.heading_deg, windowed[static_cast<std::size_t>(t)].heading_deg);
+  }
 }
 
 TEST(Intake, FewerAndMoreBinsThanTheWindowMapToTheRightHeadings) {

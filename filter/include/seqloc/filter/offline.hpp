@@ -23,6 +23,11 @@ struct OfflineFrame {
 /// The motion that undoes `motion` (expressed in the body frame of its end).
 [[nodiscard]] Odometry invert(const Odometry& motion);
 
+/// The pose of frame `t` alone: the frames' crops must be given in a window of `config` (the
+/// caller may centre one on frame t); frames s with |s - t| <= half_window (all when < 0) count.
+[[nodiscard]] Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,
+                                   int half_window = -1);
+
 /// One pose per frame, in the window of `config` (width, height, headings, threads).
 /// `half_window` < 0 aggregates all frames.
 [[nodiscard]] std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const FilterConfig& config,

@@ -14,7 +14,7 @@
 
 namespace seqloc::pipeline {
 
-enum class Mode { seqloc, online, single };
+enum class Mode { seqloc, online, single, offline };
 [[nodiscard]] const char* mode_name(Mode mode);
 
 struct LocalizeOptions {
@@ -22,6 +22,8 @@ struct LocalizeOptions {
   /// Re-centre the window when the estimate comes closer than this fraction of the window's
   /// size to an edge.
   double recentre_margin = 0.25;
+  /// Offline mode: frames within this many of t are aligned to t and summed (< 0: all of them).
+  int offline_half_window = 10;
 
   void validate() const;
 };
