@@ -2,7 +2,9 @@
 // answer is known: a delta at the true pose must give zero error in every mode.
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
+#include <random>
 
 #include <gtest/gtest.h>
 
@@ -141,6 +143,65 @@ TEST(Metrics, RecallsMeansMediansAndBodyFrameErrors) {
   EXPECT_DOUBLE_EQ(heading_difference_deg(10, 350), 20);
   EXPECT_DOUBLE_EQ(heading_difference_deg(0, 180), 180);
   EXPECT_DOUBLE_EQ(heading_difference_deg(725, 5), 0);
+}
+
+}  // namespace
+}  // namespace seqloc::pipeline
+
+namespace seqloc::pipeline {
+namespace {
+
+// Ridge-shaped volumes along a straight road (the paper's failure case of single frames): every
+// frame says "somewhere on this road, heading east", with noise along the ridge; one frame in
+// the middle is distinctive. Single frames stay ambiguous; SeqLoc locks on and keeps it.
+TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
+  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
+  raster::CacheReader cache(region->cache);
+  const auto projection = cache.metadata().projection();
+  test::ScratchDir dir;
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "ridge"})";
+  std::ofstream csv(dir / "frames.csv");
+  csv.precision(17);
+  csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
+  std::mt19937 rng(21);
+  std::normal_distribution<float> noise(0.0f, 0.6f);
+  std::uniform_int_distribution<int> offset(-10, 10);  // crop centre off the truth, along the road
+  const int frames = 24, distinctive = 10, side = 41, centre = 20;
+  for (int t = 0; t < frames; ++t) {
+    const double x = -100.25 + 5.0 * t, y = 0.25;
+    const int shift = offset(rng);  // cells: the truth sits at column centre - shift of the crop
+    std::vector<float> v(static_cast<std::size_t>(side * side * kBins));
+    for (int row = 0; row < side; ++row)
+      for (int col = 0; col < side; ++col)
+        for (int j = 0; j < kBins; ++j) {
+          const double dj = std::min(std::abs(j - 16), kBins - std::abs(j - 16));
+          float value = static_cast<float>(-(row - centre) * (row - centre) / 2.0 - dj * dj / 2.0);
+          if (row == centre) value += noise(rng);  // where along the road: nobody knows
+          if (t == distinctive && std::abs(col - (centre - shift)) > 1) value -= 6.0f;
+          v[static_cast<std::size_t>((row * side + col) * kBins + j)] = value;
+        }
+    test::write_npy_float32(dir / ("v" + std::to_string(t) + ".npy"), side, side, kBins, v);
+    double gamma = 0;
+    const auto gt = projection.reverse({x, y}, gamma);
+    csv << t << "," << t << ",v" << t << ".npy," << x + shift * 0.5 << "," << y << "," << (t ? 5 : 0) << ",0,0,"
+        << gt.lat_deg << "," << gt.lon_deg << "," << 90 + gamma << "\n";
+  }
+  csv.close();
+  const Route route = read_route(dir.path());
+  LocalizeOptions options = small_options();
+  options.filter.width = options.filter.height = 96;
+  auto mean_error_after = [&](const RouteResult& r) {
+    double sum = 0;
+    for (int t = distinctive + 1; t < frames; ++t) sum += *r.poses[static_cast<std::size_t>(t)].position_error_m;
+    return sum / (frames - distinctive - 1);
+  };
+  const double single = mean_error_after(localize_route(route, cache, options, Mode::single));
+  const RouteResult seqloc = localize_route(route, cache, options, Mode::seqloc);
+  const double sequence = mean_error_after(seqloc);
+  std::printf("mean error after the distinctive frame: single %.2f m, seqloc %.2f m\n", single, sequence);
+  EXPECT_GT(single, 2.0) << "single frames are ambiguous along the ridge";
+  EXPECT_LT(sequence, 1.0) << "SeqLoc keeps the position the distinctive frame gave";
+  EXPECT_LT(*seqloc.poses[distinctive].position_error_m, 1.0);
 }
 
 }  // namespace
