@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <random>
 
@@ -202,6 +203,78 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
   EXPECT_GT(single, 2.0) << "single frames are ambiguous along the ridge";
   EXPECT_LT(sequence, 1.0) << "SeqLoc keeps the position the distinctive frame gave";
   EXPECT_LT(*seqloc.poses[distinctive].position_error_m, 1.0);
+}
+
+}  // namespace
+}  // namespace seqloc::pipeline
+
+namespace seqloc::pipeline {
+namespace {
+
+long status_kb(const char* key) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(key, 0) == 0) return std::stol(line.substr(std::strlen(key)));
+  }
+  return -1;
+}
+
+// A route of `frames` frames driving east at 5 m per frame from x0, delta volumes at the truth.
+Route straight_route(const test::ScratchDir& dir, const osm::RegionProjection& projection, double x0, int frames) {
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "long"})";
+  std::ofstream csv(dir / "frames.csv");
+  csv.precision(17);
+  csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
+  write_delta(dir / "v.npy", 7, 7, 16);  // the same file for every frame
+  for (int t = 0; t < frames; ++t) {
+    const double x = x0 + 5.0 * t, y = 0.25;
+    double gamma = 0;
+    const auto gt = projection.reverse({x, y}, gamma);
+    csv << t << "," << t * 0.4 << ",v.npy," << x << "," << y << "," << (t ? 5 : 0) << ",0,0," << gt.lat_deg << ","
+        << gt.lon_deg << "," << 90 + gamma << "\n";
+  }
+  csv.close();
+  return read_route(dir.path());
+}
+
+TEST(Localize, MemoryStaysConstantAlongA20KmRoute) {
+  const auto region = make_region(47.5, 10.5, -10500, 10500, 0.145, 0.0015);
+  raster::CacheReader cache(region->cache, /*lru_tiles=*/16);
+  const auto projection = cache.metadata().projection();
+  const LocalizeOptions options = small_options();
+  test::ScratchDir short_dir, long_dir;
+  const Route short_route = straight_route(short_dir, projection, -10000.25, 400);   // 2 km
+  const Route long_route = straight_route(long_dir, projection, -10000.25, 4001);    // 20 km
+  const auto short_result = localize_route(short_route, cache, options, Mode::seqloc);
+  const long after_short = status_kb("VmRSS:");
+  const auto long_result = localize_route(long_route, cache, options, Mode::seqloc);
+  const long after_long = status_kb("VmRSS:");
+  std::printf("20 km route: %d re-centres, RSS %ld kB after 2 km, %ld kB after 20 km, peak %ld kB\n",
+              long_result.recentres, after_short, after_long, status_kb("VmHWM:"));
+  EXPECT_GT(long_result.recentres, 400);
+  // The poses themselves (4,000 x ~200 bytes) are the only thing that grows with the route.
+  EXPECT_LT(after_long - after_short, 8 * 1024) << "kB";
+  double worst = 0;
+  for (const auto& p : long_result.poses) worst = std::max(worst, *p.position_error_m);
+  EXPECT_LT(worst, 1e-3) << "the window followed the vehicle for 20 km";
+  EXPECT_EQ(short_result.poses.size(), 400u);
+}
+
+TEST(Localize, ARouteLeavingTheRegionKeepsGoingWithoutMap) {
+  // The region spans about +-300 m; the route drives from inside to 150 m beyond its east edge.
+  // Outside, the road distance is the clamp (no map information), so MGR's prior is flat there.
+  const auto region = make_region(47.5, 10.5, -300, 300, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  const double east_edge = cache.grid().max_x();
+  test::ScratchDir dir;
+  const Route route = straight_route(dir, cache.metadata().projection(), east_edge - 100.25, 50);
+  for (const Mode mode : {Mode::seqloc, Mode::single}) {
+    const auto r = localize_route(route, cache, small_options(), mode);
+    ASSERT_EQ(r.poses.size(), 50u);
+    EXPECT_GT(r.poses.back().x_m, east_edge + 100) << "the last frames are outside the region";
+    for (const auto& p : r.poses) EXPECT_LT(*p.position_error_m, 1e-3) << mode_name(mode) << " " << p.frame;
+  }
 }
 
 }  // namespace
