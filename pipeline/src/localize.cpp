@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <chrono>
+#include <future>
 #include <map>
 #include <random>
 #include <sstream>
@@ -98,14 +100,41 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     origin_v = static_cast<std::int64_t>(std::lround(region_v)) - H / 2;
   };
 
-  // Offline: the prepared frames of the sliding range [t - K, t + K].
+  using Clock = std::chrono::steady_clock;
+  auto seconds_since = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
+  // Reading and preparing a volume (run ahead of the filter on a background task).
+  auto load = [&route, &config](std::size_t s, double* seconds) {
+    const auto t0 = Clock::now();
+    const NpyVolume npy(route.frames[s].volume);
+    auto frame = filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), config.headings, config.threads);
+    *seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    return frame;
+  };
+  // The prepared frames in use: for offline the sliding range [t - K, t + K], else frame t.
   std::map<std::size_t, filter::PreparedFrame> kept;
+  std::future<filter::PreparedFrame> next;  // frame kept.size() ahead, being prepared
+  std::size_t next_index = 0;
+  double next_seconds = 0;
   auto prepared = [&](std::size_t s) -> const filter::PreparedFrame& {
     auto it = kept.find(s);
     if (it == kept.end()) {
-      const NpyVolume npy(route.frames[s].volume);
-      it = kept.emplace(s, filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), config.headings,
-                                                 config.threads)).first;
+      filter::PreparedFrame frame;
+      if (next.valid() && next_index == s) {
+        const auto t0 = Clock::now();
+        frame = next.get();  // rethrows the volume's error, in frame order
+        result.wait_seconds += seconds_since(t0);
+        result.prepare_seconds += next_seconds;
+      } else {
+        double seconds = 0;
+        frame = load(s, &seconds);
+        result.prepare_seconds += seconds;
+      }
+      it = kept.emplace(s, std::move(frame)).first;
+    }
+    // Start on the following frame while the caller works on this one.
+    if (mode != Mode::offline && s + 1 < route.frames.size() && !(next.valid() && next_index == s + 1)) {
+      next_index = s + 1;
+      next = std::async(std::launch::async, load, s + 1, &next_seconds);
     }
     return it->second;
   };
@@ -135,7 +164,9 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
                           region.pixel_v(c.y) - static_cast<double>(origin_v), c.rotation_deg},
                          route.frames[s].odometry});
       }
+      const auto t0 = Clock::now();
       const filter::Pose p = filter::offline_pose_at(range, i - s0, config, -1);
+      result.filter_seconds += seconds_since(t0);
       x = region.x_of(p.u + static_cast<double>(origin_u));
       y = region.y_of(p.v + static_cast<double>(origin_v));
       grid_heading = p.heading_deg;
@@ -145,7 +176,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       x = crop.x + p.u * kCellM;
       y = crop.y - p.v * kCellM;
       grid_heading = p.heading_deg;
-      kept.clear();
+      kept.erase(i);
     } else {
       if (!filter) {
         filter.emplace(config);
@@ -176,8 +207,10 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
         fix = filter::GpsFix{region.pixel_u(g.x_m) - static_cast<double>(origin_u),
                              region.pixel_v(g.y_m) - static_cast<double>(origin_v), f.gps->sigma_m};
       }
+      const auto t0 = Clock::now();
       const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data(), fix ? &*fix : nullptr);
-      kept.clear();
+      result.filter_seconds += seconds_since(t0);
+      kept.erase(i);
       x = region.x_of(r.pose.u + static_cast<double>(origin_u));
       y = region.y_of(r.pose.v + static_cast<double>(origin_v));
       grid_heading = r.pose.heading_deg;

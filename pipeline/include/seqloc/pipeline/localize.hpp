@@ -46,6 +46,11 @@ struct RouteResult {
   Mode mode = Mode::seqloc;
   std::vector<FramePose> poses;
   int recentres = 0;  ///< how often the window moved
+  /// Where the time went (seconds). Reading and preparing the next frame's volume overlaps the
+  /// filter's step on the current one; `wait_seconds` is what the filter waited for it.
+  double prepare_seconds = 0;
+  double filter_seconds = 0;
+  double wait_seconds = 0;
 };
 
 /// Runs one route. Throws DataError (volumes), filter::FilterError or raster::CacheError.
