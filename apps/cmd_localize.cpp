@@ -1,5 +1,9 @@
 #include <unistd.h>
 
+#include <atomic>
+#include <exception>
+#include <mutex>
+
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -44,7 +48,8 @@ class LocalizeCommand : public Command {
     app.add_flag("--gps-prior", f.gps_prior, "Use every frame's GPS fix as a prior term (beyond the paper)");
     app.add_option("--window", window_, "Belief window, cells of 0.5 m each way")->default_val(256);
     app.add_option("--headings", f.headings, "Heading bins R")->default_val(256);
-    app.add_option("--threads", f.threads, "Threads of the filter")->default_val(default_threads());
+    app.add_option("--threads", f.threads, "Threads: routes run side by side, or one route's filter uses them all")
+        ->default_val(default_threads());
     app.add_option("--odometry-noise", noise_, "SIGMA_T_PCT,SIGMA_R_DEG_PER_M: perturb the odometry (KITTI style)");
     app.add_option("--seed", seed_, "Seed of the odometry noise")->default_val(1);
     app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->default_val(200.0);
@@ -112,23 +117,58 @@ class LocalizeCommand : public Command {
     fs::create_directories(temp);
     try {
       ProgressBar bar(progress_wanted(progress_), "frames");
-      long long done = 0;
+      // Several routes run side by side, one filter thread each; a single route gets them all.
+      struct Job {
+        std::size_t route;
+        pipeline::Mode mode;
+      };
+      std::vector<Job> jobs;
+      for (std::size_t r = 0; r < routes.size(); ++r) {
+        for (const auto mode : modes) jobs.push_back({r, mode});
+      }
+      const int threads = options_.filter.threads;
+      const int workers = std::max(1, std::min(threads, static_cast<int>(jobs.size())));
+      pipeline::LocalizeOptions job_options = options_;
+      if (workers > 1) job_options.filter.threads = std::max(1, threads / workers);
+      std::vector<pipeline::RouteResult> results(jobs.size());
+      std::atomic<std::size_t> next_job{0};
+      std::atomic<long long> done{0};
+      std::mutex progress_mutex, error_mutex;
+      std::exception_ptr error;
+      std::atomic<bool> failed{false};
+      auto work = [&] {
+        try {
+          for (std::size_t j = next_job++; j < jobs.size() && !failed; j = next_job++) {
+            results[j] = pipeline::localize_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, [&] {
+              const long long d = ++done;
+              std::lock_guard lock(progress_mutex);
+              bar.update(d, total_frames);
+            });
+          }
+        } catch (...) {
+          std::lock_guard lock(error_mutex);
+          if (!error) error = std::current_exception();
+          failed = true;
+        }
+      };
+      {
+        std::vector<std::jthread> pool;
+        for (int w = 1; w < workers; ++w) pool.emplace_back(work);
+        work();
+      }
+      if (error) std::rethrow_exception(error);
+      bar.done();
       std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
       std::vector<std::string> route_names;
-      for (const auto& route : routes) {
-        route_names.push_back(route.name);
-        for (const auto mode : modes) {
-          const auto result = pipeline::localize_route(route, cache, options_, mode);
-          const fs::path dir = temp / route.name / pipeline::mode_name(mode);
-          fs::create_directories(dir);
-          pipeline::write_route_outputs(dir, result);
-          auto& all = by_mode[pipeline::mode_name(mode)];
-          all.insert(all.end(), result.poses.begin(), result.poses.end());
-          done += static_cast<long long>(route.frames.size());
-          bar.update(done, total_frames);
-        }
+      for (const auto& route : routes) route_names.push_back(route.name);
+      for (std::size_t j = 0; j < jobs.size(); ++j) {
+        const auto& result = results[j];
+        const fs::path dir = temp / routes[jobs[j].route].name / pipeline::mode_name(jobs[j].mode);
+        fs::create_directories(dir);
+        pipeline::write_route_outputs(dir, result);
+        auto& all = by_mode[pipeline::mode_name(jobs[j].mode)];
+        all.insert(all.end(), result.poses.begin(), result.poses.end());
       }
-      bar.done();
       pipeline::MetricsByMode metrics;
       for (const auto& [mode, poses] : by_mode) {
         std::vector<const pipeline::FramePose*> pointers;

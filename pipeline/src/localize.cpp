@@ -76,7 +76,8 @@ double heading_difference_deg(double a, double b) {
   return std::min(d, 360.0 - d);
 }
 
-RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode) {
+RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
+                           const std::function<void()>& on_frame) {
   options.validate();
   const RegionFrame region{cache.grid(), cache.metadata().projection()};
   filter::FilterConfig config = options.filter;
@@ -252,6 +253,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       }
     }
     result.poses.push_back(std::move(pose));
+    if (on_frame) on_frame();
   }
   return result;
 }

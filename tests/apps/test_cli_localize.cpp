@@ -95,6 +95,25 @@ TEST(CliLocalize, WritesEveryFileAndTheTable) {
   EXPECT_EQ(e.out, r.out.substr(0, r.out.find("wrote ")));
 }
 
+TEST(CliLocalize, RoutesSideBySideGiveTheSameFiles) {
+  Fixture f;
+  const auto parallel = f.dir / "parallel", serial = f.dir / "serial";
+  std::vector<std::string> two{"localize", f.cache.string(), f.route.string(), f.route.string(), "--window", "64",
+                               "--headings", "64", "--mode", "all"};
+  auto p = two, s = two;
+  p.insert(p.end(), {"-o", parallel.string(), "--threads", "2"});
+  s.insert(s.end(), {"-o", serial.string(), "--threads", "1"});
+  ASSERT_EQ(run_seqloc(p).exit_code, 0);
+  ASSERT_EQ(run_seqloc(s).exit_code, 0);
+  for (const char* route : {"east", "east-2"}) {
+    for (const char* mode : {"seqloc", "online", "single", "offline"}) {
+      EXPECT_EQ(test::read_file(parallel / route / mode / "poses.csv"), test::read_file(serial / route / mode / "poses.csv"))
+          << route << "/" << mode;
+    }
+  }
+  EXPECT_EQ(test::read_file(parallel / "summary.json"), test::read_file(serial / "summary.json"));
+}
+
 TEST(CliLocalize, BadVolumeStopsTheRunWithNothingWritten) {
   Fixture f(/*with_nan=*/true);
   const auto out = f.dir / "out";

@@ -4,6 +4,7 @@
 // every pose crosses the interface in the conventions' terms (conventions.md sections 1 and 7).
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -53,9 +54,11 @@ struct RouteResult {
   double wait_seconds = 0;
 };
 
-/// Runs one route. Throws DataError (volumes), filter::FilterError or raster::CacheError.
+/// Runs one route; `on_frame` (optional) is called after each frame, from the calling thread.
+/// Throws DataError (volumes), filter::FilterError or raster::CacheError. Routes may run in
+/// parallel threads on one CacheReader.
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
-                                         Mode mode);
+                                         Mode mode, const std::function<void()>& on_frame = {});
 
 /// Zero-mean Gaussian noise on each odometry increment in the KITTI convention: translation sigma
 /// `translation_pct` % of the step length (on forward and left), heading sigma
