@@ -59,6 +59,17 @@ TEST(Route, ReadsAValidRoute) {
   EXPECT_FALSE(route.frames[2].truth->heading_deg.has_value());
 }
 
+TEST(Route, GapsInTimestampsAreAllowedAndJudgedOverTheRealInterval) {
+  // An hour without frames, then 150 m of odometry: 0.04 m/s, plausible. The same step one
+  // second after the previous frame would be 150 m/s, beyond the limit.
+  RouteDir gap(kJson, rows({"0,0,v0.npy,47.95,11.25,0,0,0,,,,,,", "1,3600,v1.npy,47.95,11.25,150,0,0,,,,,,"}));
+  const Route route = read_route(gap.dir.path());
+  ASSERT_EQ(route.frames.size(), 2u);
+  EXPECT_DOUBLE_EQ(route.frames[1].timestamp_s, 3600);
+  RouteDir fast(kJson, rows({"0,0,v0.npy,47.95,11.25,0,0,0,,,,,,", "1,1,v1.npy,47.95,11.25,150,0,0,,,,,,"}));
+  EXPECT_THROW((void)read_route(fast.dir.path()), DataError);
+}
+
 TEST(Route, GridCropsAndProbVolumes) {
   RouteDir r(R"({"format": "seqloc-route", "version": 1, "volume_kind": "prob"})",
              "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg\n"
