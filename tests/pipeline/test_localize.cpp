@@ -53,27 +53,42 @@ LocalizeOptions small_options() {
   return o;
 }
 
+long status_kb(const char* key) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(key, 0) == 0) return std::stol(line.substr(std::strlen(key)));
+  }
+  return -1;
+}
+
+// A route of `frames` frames driving east at 5 m per frame from x0, delta volumes at the truth.
+Route straight_route(const test::ScratchDir& dir, const osm::RegionProjection& projection, double x0, int frames) {
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "long"})";
+  std::ofstream csv(dir / "frames.csv");
+  csv.precision(17);
+  csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
+  write_delta(dir / "v.npy", 7, 7, 16);  // the same file for every frame
+  for (int t = 0; t < frames; ++t) {
+    const double x = x0 + 5.0 * t, y = 0.25;
+    double gamma = 0;
+    const auto gt = projection.reverse({x, y}, gamma);
+    csv << t << "," << t * 0.4 << ",v.npy," << x << "," << y << "," << (t ? 5 : 0) << ",0,0," << gt.lat_deg << ","
+        << gt.lon_deg << "," << 90 + gamma << "\n";
+  }
+  csv.close();
+  return read_route(dir.path());
+}
+
+
 TEST(Localize, DeltaAtTheTruthGivesZeroErrorInEveryMode) {
   const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
   raster::CacheReader cache(region->cache);
   const auto projection = cache.metadata().projection();
   // The vehicle drives east along the road, 5 m per frame, on cell centres (x = 0.25 + k / 2).
   test::ScratchDir dir;
-  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "east"})";
-  std::ofstream csv(dir / "frames.csv");
-  csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
-  csv.precision(12);
   const int frames = 16;
-  for (int t = 0; t < frames; ++t) {
-    const double x = -40.25 + 5.0 * t, y = 0.25;
-    write_delta(dir / ("v" + std::to_string(t) + ".npy"), 7, 7, 16);  // grid heading 90: east
-    double gamma = 0;
-    const auto gt = projection.reverse({x, y}, gamma);
-    csv << t << "," << t * 0.5 << ",v" << t << ".npy," << x << "," << y << "," << (t ? 5.0 : 0.0) << ",0,0," << gt.lat_deg
-        << "," << gt.lon_deg << "," << 90.0 + gamma << "\n";
-  }
-  csv.close();
-  const Route route = read_route(dir.path());
+  const Route route = straight_route(dir, projection, -40.25, frames);
   for (const Mode mode : {Mode::seqloc, Mode::online, Mode::single, Mode::offline}) {
     const RouteResult result = localize_route(route, cache, small_options(), mode);
     ASSERT_EQ(result.poses.size(), static_cast<std::size_t>(frames));
@@ -210,33 +225,6 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
 
 namespace seqloc::pipeline {
 namespace {
-
-long status_kb(const char* key) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind(key, 0) == 0) return std::stol(line.substr(std::strlen(key)));
-  }
-  return -1;
-}
-
-// A route of `frames` frames driving east at 5 m per frame from x0, delta volumes at the truth.
-Route straight_route(const test::ScratchDir& dir, const osm::RegionProjection& projection, double x0, int frames) {
-  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "long"})";
-  std::ofstream csv(dir / "frames.csv");
-  csv.precision(17);
-  csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
-  write_delta(dir / "v.npy", 7, 7, 16);  // the same file for every frame
-  for (int t = 0; t < frames; ++t) {
-    const double x = x0 + 5.0 * t, y = 0.25;
-    double gamma = 0;
-    const auto gt = projection.reverse({x, y}, gamma);
-    csv << t << "," << t * 0.4 << ",v.npy," << x << "," << y << "," << (t ? 5 : 0) << ",0,0," << gt.lat_deg << ","
-        << gt.lon_deg << "," << 90 + gamma << "\n";
-  }
-  csv.close();
-  return read_route(dir.path());
-}
 
 TEST(Localize, MemoryStaysConstantAlongA20KmRoute) {
 #if defined(__SANITIZE_ADDRESS__)
