@@ -454,17 +454,21 @@ void CacheWriter::write_roads(const std::vector<RoadLine>& roads) {
 void CacheWriter::write_tile(const EncodedTile& tile) {
   assert(metadata_.grid.contains_tile(tile.col, tile.row));
   begin();
-  detail::Statement classes(*db_, "INSERT OR REPLACE INTO classes (zoom_level, tile_column, tile_row, tile_data) "
-                                  "VALUES (0, ?, ?, ?)");
-  classes.bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.classes_png);
-  classes.run();
-  detail::Statement distance(*db_, "INSERT OR REPLACE INTO road_distance (zoom_level, tile_column, tile_row, "
-                                   "tile_data) VALUES (0, ?, ?, ?)");
-  distance.bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.distance_png);
-  distance.run();
+  if (!insert_classes_) {
+    insert_classes_ = std::make_unique<detail::Statement>(
+        *db_, "INSERT OR REPLACE INTO classes (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
+    insert_distance_ = std::make_unique<detail::Statement>(
+        *db_, "INSERT OR REPLACE INTO road_distance (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
+    insert_ancillary_ = std::make_unique<detail::Statement>(
+        *db_, "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, scale, offset, min, max, "
+              "mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
+  }
+  insert_classes_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.classes_png);
+  insert_classes_->run();
+  insert_distance_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.distance_png);
+  insert_distance_->run();
   const std::int64_t id = sqlite3_last_insert_rowid(db_->get());
-  detail::Statement ancillary(*db_, "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, "
-                                    "scale, offset, min, max, mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
+  detail::Statement& ancillary = *insert_ancillary_;
   ancillary.bind(1, id)
       .bind(2, tile.distance_min_m)
       .bind(3, tile.distance_max_m)
@@ -485,6 +489,9 @@ void CacheWriter::finish() {
       }
     }
   }
+  insert_classes_.reset();
+  insert_distance_.reset();
+  insert_ancillary_.reset();
   metadata_.complete = true;
   db_->exec("BEGIN");
   write_metadata();
@@ -571,15 +578,23 @@ std::vector<std::uint8_t> CacheReader::tile_blob(Layer layer, std::int64_t col, 
                           ", rows 0.." + std::to_string(grid().tiles_high() - 1) + ")");
   }
   std::lock_guard lock(mutex_);
-  detail::Statement s(*db_, std::string("SELECT tile_data FROM ") + table +
-                                " WHERE zoom_level = 0 AND tile_column = ? AND tile_row = ?");
+  auto& statement = select_tile_[layer == Layer::classes ? 0 : 1];
+  if (!statement) {
+    statement = std::make_unique<detail::Statement>(
+        *db_, std::string("SELECT tile_data FROM ") + table + " WHERE zoom_level = 0 AND tile_column = ? AND tile_row = ?");
+  }
+  detail::Statement& s = *statement;
+  s.reset();
   s.bind(1, col).bind(2, row);
   if (!s.step()) {
+    s.reset();
     throw CacheRangeError(path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
                           table + "' is missing from the cache");
   }
   const auto blob = s.column_blob(0);
-  return {blob.begin(), blob.end()};
+  std::vector<std::uint8_t> out(blob.begin(), blob.end());
+  s.reset();
+  return out;
 }
 
 bool CacheReader::has_tile(Layer layer, std::int64_t col, std::int64_t row) {

@@ -30,6 +30,7 @@ namespace seqloc::raster {
 
 namespace detail {
 class Database;
+class Statement;
 }
 
 /// Base of the cache's data and I/O errors. Messages name the file (and tile) concerned.
@@ -128,6 +129,8 @@ class CacheWriter {
   std::filesystem::path partial_;
   CacheMetadata metadata_;
   std::unique_ptr<detail::Database> db_;
+  // Prepared once, used for every tile (declared after db_: finalized before it closes).
+  std::unique_ptr<detail::Statement> insert_classes_, insert_distance_, insert_ancillary_;
   std::unordered_map<std::int64_t, bool> done_;  // key col * 2^32 + row
   bool resumed_ = false;
   bool in_transaction_ = false;
@@ -192,6 +195,7 @@ class CacheReader {
 
   std::filesystem::path path_;
   std::unique_ptr<detail::Database> db_;
+  std::unique_ptr<detail::Statement> select_tile_[2];  ///< per layer, prepared on first use
   CacheMetadata metadata_;
   std::size_t capacity_;
   mutable std::mutex mutex_;
