@@ -39,10 +39,6 @@ struct PreparedFrame {
   double entropy = 0;           ///< H_hat = -sum p log p / log M, in [0, 1]
   float max_log_prob = 0;       ///< the largest normalized log-probability
   int argmax_v = 0, argmax_u = 0, argmax_bin = 0;
-
-  [[nodiscard]] float at(int bin, int v, int u) const {
-    return log_prob[(static_cast<std::size_t>(bin) * height + v) * width + u];
-  }
 };
 
 /// Checks and normalizes a volume (with `threads` workers). Throws FilterError for a wrong shape,
