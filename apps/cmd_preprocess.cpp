@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "command.hpp"
+#include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 
 namespace seqloc::app {
@@ -94,15 +95,7 @@ class PreprocessCommand : public Command {
     j["encode_cpu_seconds"] = r.encode_cpu_seconds;
     j["write_seconds"] = r.write_seconds;
     j["features"] = {{"nodes", r.nodes}, {"lines", r.lines}, {"areas", r.areas}, {"roads", r.roads}};
-    const std::string tmp = report_path_ + ".tmp";
-    {
-      std::FILE* f = std::fopen(tmp.c_str(), "w");
-      if (!f) throw std::runtime_error(report_path_ + ": cannot write the report");
-      const std::string text = j.dump(2) + "\n";
-      std::fwrite(text.data(), 1, text.size(), f);
-      std::fclose(f);
-    }
-    std::filesystem::rename(tmp, report_path_);
+    pipeline::write_text_file(report_path_, j.dump(2) + "\n");
   }
 
  private:

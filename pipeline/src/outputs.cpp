@@ -19,13 +19,6 @@ std::string optional_number(const std::optional<double>& v, int precision) {
   return buffer;
 }
 
-void write_text(const std::filesystem::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-  out.close();
-  if (!out) throw DataError(path.string() + ": cannot write");
-}
-
 nlohmann::ordered_json metrics_json(const Metrics& m) {
   nlohmann::ordered_json j;
   j["frames_with_ground_truth"] = m.frames;
@@ -42,6 +35,19 @@ nlohmann::ordered_json metrics_json(const Metrics& m) {
 
 }  // namespace
 
+void write_text_file(const std::filesystem::path& path, const std::string& text) {
+  const std::filesystem::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary);
+    out << text;
+    out.close();
+    if (!out) throw DataError(path.string() + ": cannot write");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throw DataError(path.string() + ": cannot write: " + ec.message());
+}
+
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r) {
   // poses.csv
   std::ostringstream csv;
@@ -55,7 +61,7 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
         << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
         << optional_number(p.longitudinal_error_m, 4) << "\n";
   }
-  write_text(dir / "poses.csv", csv.str());
+  write_text_file(dir / "poses.csv", csv.str());
 
   // trajectory.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw counter-clockwise from
   // the grid's x axis (east): 90 degrees minus the grid heading.
@@ -66,7 +72,7 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
                   std::sin(yaw / 2), std::cos(yaw / 2));
     tum << line;
   }
-  write_text(dir / "trajectory.tum", tum.str());
+  write_text_file(dir / "trajectory.tum", tum.str());
 
   // track.geojson (RFC 7946: WGS84, [lon, lat]).
   nlohmann::ordered_json features = nlohmann::json::array();
@@ -86,13 +92,13 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
                         {"properties", props}});
   }
   const nlohmann::ordered_json track = {{"type", "FeatureCollection"}, {"features", features}};
-  write_text(dir / "track.geojson", track.dump() + "\n");
+  write_text_file(dir / "track.geojson", track.dump() + "\n");
 
   std::vector<const FramePose*> all;
   for (const auto& p : r.poses) all.push_back(&p);
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   metrics.update(metrics_json(compute_metrics(all)));
-  write_text(dir / "metrics.json", metrics.dump(2) + "\n");
+  write_text_file(dir / "metrics.json", metrics.dump(2) + "\n");
 }
 
 std::string format_table(const MetricsByMode& metrics) {
@@ -115,7 +121,7 @@ void write_summary(const std::filesystem::path& path, const MetricsByMode& metri
   nlohmann::ordered_json j;
   j["routes"] = routes;
   for (const auto& [mode, m] : metrics) j["modes"][mode] = metrics_json(m);
-  write_text(path, j.dump(2) + "\n");
+  write_text_file(path, j.dump(2) + "\n");
 }
 
 std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {

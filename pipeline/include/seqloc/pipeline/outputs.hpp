@@ -12,6 +12,10 @@
 
 namespace seqloc::pipeline {
 
+/// Writes a text file whole: to a temporary name beside it, then renamed over `path`. Throws
+/// DataError naming the file.
+void write_text_file(const std::filesystem::path& path, const std::string& text);
+
 /// Writes the four files of one route and mode into `dir` (which must exist).
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& result);
 
