@@ -33,3 +33,13 @@ add_library(seqloc_geographiclib INTERFACE)
 target_include_directories(seqloc_geographiclib SYSTEM INTERFACE ${GEOGRAPHICLIB_INCLUDE_DIR})
 target_link_libraries(seqloc_geographiclib INTERFACE ${GEOGRAPHICLIB_LIBRARY})
 add_library(seqloc::geographiclib ALIAS seqloc_geographiclib)
+
+# OpenCV: only core (the matcher's FFTs) and imgproc (blurs and the drawing of pictures). Their
+# Debian -dev packages ship no CMake config (libopencv-dev, which does, pulls every module).
+find_path(OPENCV_INCLUDE_DIR opencv2/core.hpp PATH_SUFFIXES opencv4 REQUIRED)
+find_library(OPENCV_CORE_LIBRARY NAMES opencv_core REQUIRED)
+find_library(OPENCV_IMGPROC_LIBRARY NAMES opencv_imgproc REQUIRED)
+add_library(seqloc_opencv INTERFACE)
+target_include_directories(seqloc_opencv SYSTEM INTERFACE ${OPENCV_INCLUDE_DIR})
+target_link_libraries(seqloc_opencv INTERFACE ${OPENCV_IMGPROC_LIBRARY} ${OPENCV_CORE_LIBRARY})
+add_library(seqloc::opencv ALIAS seqloc_opencv)

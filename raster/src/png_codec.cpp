@@ -256,19 +256,33 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
 
 }  // namespace
 
-std::vector<std::uint8_t> encode_png_rgb8(std::span<const std::uint8_t> rgb, int width, int height) {
-  if (rgb.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 3) {
-    throw PngError("encode_png_rgb8: buffer size does not match the image size");
+namespace {
+
+// Filter "none": class rasters and observations are runs of equal bytes, which deflate directly.
+std::vector<std::uint8_t> encode_png8(std::span<const std::uint8_t> pixels, int width, int height, int channels,
+                                      const char* what) {
+  if (width <= 0 || height <= 0 ||
+      pixels.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * static_cast<std::size_t>(channels)) {
+    throw PngError(std::string(what) + ": buffer size does not match the image size");
   }
-  // Filter "none": the class rasters are runs of equal bytes, which deflate directly.
-  const std::size_t stride = static_cast<std::size_t>(width) * 3;
+  const std::size_t stride = static_cast<std::size_t>(width) * static_cast<std::size_t>(channels);
   std::vector<std::uint8_t> filtered((stride + 1) * static_cast<std::size_t>(height));
   for (int r = 0; r < height; ++r) {
     std::uint8_t* row = filtered.data() + static_cast<std::size_t>(r) * (stride + 1);
     row[0] = 0;
-    std::memcpy(row + 1, rgb.data() + static_cast<std::size_t>(r) * stride, stride);
+    std::memcpy(row + 1, pixels.data() + static_cast<std::size_t>(r) * stride, stride);
   }
-  return assemble(filtered, width, height, 8, 0x2, 2);
+  return assemble(filtered, width, height, 8, channels == 4 ? 0x6 : 0x2, 2);
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> encode_png_rgb8(std::span<const std::uint8_t> rgb, int width, int height) {
+  return encode_png8(rgb, width, height, 3, "encode_png_rgb8");
+}
+
+std::vector<std::uint8_t> encode_png_rgba8(std::span<const std::uint8_t> rgba, int width, int height) {
+  return encode_png8(rgba, width, height, 4, "encode_png_rgba8");
 }
 
 std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> values, int width, int height) {

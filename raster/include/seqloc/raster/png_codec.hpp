@@ -1,6 +1,6 @@
 #pragma once
-// PNG encoding and decoding of tiles in memory: 8-bit RGB for the class raster and
-// 16-bit grey for the road distance, the two tile encodings of the region cache.
+// PNG encoding and decoding in memory: 8-bit RGB for the class raster, 16-bit grey for the road
+// distance (the two tile encodings of the region cache), 8-bit RGBA for BEV observations.
 
 #include <cstdint>
 #include <span>
@@ -27,6 +27,7 @@ struct PngImage {
 /// Written with libdeflate (level 1) and a fixed filter per encoding; any PNG decodes (libpng
 /// handles what the fast path does not: palettes, other depths, interlacing).
 [[nodiscard]] std::vector<std::uint8_t> encode_png_rgb8(std::span<const std::uint8_t> rgb, int width, int height);
+[[nodiscard]] std::vector<std::uint8_t> encode_png_rgba8(std::span<const std::uint8_t> rgba, int width, int height);
 [[nodiscard]] std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> values, int width, int height);
 /// Throws PngError (with `what` naming the blob's origin) on corrupt data.
 [[nodiscard]] PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what);

@@ -1,0 +1,76 @@
+#pragma once
+// The built-in backbone: scores a BEV observation against the cached class raster at every
+// position and heading of a crop, and returns a pose likelihood volume in the layout of
+// conventions.md section 4 (docs/matcher.md).
+//
+// The score of a pose is the log-likelihood of the visible observed cells given the map placed
+// under them, with a per-channel confusion model (missed classes, spurious detections, wrong
+// classes) and a positional tolerance (the map's class indicators blurred by a Gaussian), divided
+// by a temperature that accounts for neighbouring cells not being independent. As OrienterNet
+// scores its templates, it is one FFT correlation per heading: the observation is rotated, the
+// map is not. Rotations by a multiple of 90 degrees are exact array rotations, so only a quarter
+// of the headings need rotated templates and their transforms.
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "seqloc/pipeline/observation.hpp"
+
+namespace seqloc::pipeline {
+
+struct MatcherConfig {
+  int size = 128;        ///< the volume's side H = W in 0.5 m cells (even)
+  int headings = 256;    ///< N heading bins (a multiple of 4)
+  double temperature = 8.0;  ///< the log-likelihood is divided by this
+  double miss_rate = 0.3;    ///< P(observed background | the map has a class there)
+  double spurious_rate = 0.05;  ///< P(observed some class | the map has background)
+  double confusion_rate = 0.1;  ///< P(observed another class of the channel | the map has a class)
+  double tolerance_m = 1.0;     ///< sigma of the Gaussian that blurs the map's class indicators
+  int threads = 1;
+
+  /// Throws std::invalid_argument naming the bad field.
+  void validate() const;
+};
+
+class BevMatcher {
+ public:
+  explicit BevMatcher(const MatcherConfig& config);
+
+  [[nodiscard]] const MatcherConfig& config() const { return config_; }
+
+  /// Side of the map crop needed for an observation of side `observation_size`: the volume's
+  /// side plus the observation's, minus one. The crop's centre (a cell corner) is the volume's.
+  [[nodiscard]] int map_side(int observation_size) const { return config_.size + observation_size - 1; }
+
+  /// The volume (size, size, headings), float32 log-likelihoods (not normalized), grid north:
+  /// bin k is the grid heading k * 360 / headings. `map_rgb` is the north-up class crop of side
+  /// map_side(observation.size), RGB interleaved. Throws std::invalid_argument on a size mismatch.
+  [[nodiscard]] std::vector<float> match(const Observation& observation, std::span<const std::uint8_t> map_rgb) const;
+
+  /// The per-cell score of observing code `observed` of `channel` where the map's soft class
+  /// indicators are `map_share` (one share per code of the channel, summing to 1), before the
+  /// temperature: log P(observed | map) - log P(observed | background).
+  [[nodiscard]] double cell_score(int channel, int observed, std::span<const double> map_share) const;
+
+  /// The map term of one observed code over a map crop: cell_score with the blurred indicators,
+  /// side * side values, row-major.
+  [[nodiscard]] std::vector<float> map_term(int channel, int observed, std::span<const std::uint8_t> map_rgb,
+                                            int side) const;
+
+  /// The observation's indicator of one code, visible cells only, rotated to grid heading
+  /// `heading_deg` (clockwise) about the camera and sampled bilinearly: the template laid on the
+  /// map, north-up, observation.size squared values.
+  [[nodiscard]] std::vector<float> rotated_template(const Observation& observation, int channel, int code,
+                                                    double heading_deg) const;
+
+  /// The (channel, code) pairs seen in the observation's visible cells, background included.
+  [[nodiscard]] static std::vector<std::array<int, 2>> observed_codes(const Observation& observation);
+
+ private:
+  MatcherConfig config_;
+  std::array<std::vector<double>, 3> likelihood_;  ///< [channel][observed * (K+1) + map] = P(o | m)
+};
+
+}  // namespace seqloc::pipeline
