@@ -55,9 +55,17 @@ class LocalizeCommand : public Command {
     app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->default_val(200.0);
     app.add_option("--max-speed", limits_.max_speed_mps, "Largest plausible speed, m/s")->default_val(70.0);
     app.add_option("--max-yaw", limits_.max_yaw_deg, "Largest plausible yaw per step, degrees")->default_val(120.0);
+    auto& m = options_.matcher;
+    app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
+        ->default_val(m.size);
+    app.add_option("--matcher-temperature", m.temperature, "Built-in matcher: the log-likelihood is divided by this")
+        ->default_val(m.temperature);
+    app.add_option("--matcher-tolerance", m.tolerance_m, "Built-in matcher: positional tolerance (sigma, m)")
+        ->default_val(m.tolerance_m);
     app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
     app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
-    app.footer("Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} and OUT/summary.json,\n"
+    app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"
+               "Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} and OUT/summary.json,\n"
                "and prints the recall table. Any bad input stops the run with nothing written.");
   }
 
@@ -130,6 +138,7 @@ class LocalizeCommand : public Command {
       const int workers = std::max(1, std::min(threads, static_cast<int>(jobs.size())));
       pipeline::LocalizeOptions job_options = options_;
       if (workers > 1) job_options.filter.threads = std::max(1, threads / workers);
+      job_options.matcher.threads = job_options.filter.threads;
       std::vector<pipeline::RouteResult> results(jobs.size());
       std::atomic<std::size_t> next_job{0};
       std::atomic<long long> done{0};

@@ -75,5 +75,6 @@ std::unique_ptr<Command> make_cache_info_command();
 std::unique_ptr<Command> make_cache_merge_command();
 std::unique_ptr<Command> make_localize_command();
 std::unique_ptr<Command> make_evaluate_command();
+std::unique_ptr<Command> make_simulate_command();
 
 }  // namespace seqloc::app

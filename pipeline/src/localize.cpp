@@ -11,6 +11,7 @@
 #include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/observation.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -33,20 +34,50 @@ struct RegionFrame {
   [[nodiscard]] double y_of(double v) const { return grid.max_y() - (v + 0.5) * kCellM; }
 };
 
-// The crop of a frame in region-grid metres, and the rotation of its north from grid north
-// (clockwise): 0 for grid crops, -gamma for lat/lon crops (true north is at grid heading -gamma).
-struct GridCrop {
-  double x = 0, y = 0, rotation_deg = 0;
-};
+}  // namespace
 
-GridCrop grid_crop(const RouteFrame& f, const RegionFrame& region) {
-  if (f.crop_grid) return {f.crop_grid->x_m, f.crop_grid->y_m, 0.0};
-  double gamma = 0;
-  const auto g = region.projection.forward(*f.crop_geo, gamma);
-  return {g.x_m, g.y_m, -gamma};
+GridCrop frame_crop(const RouteFrame& f, const raster::RegionGrid& grid, const osm::RegionProjection& projection) {
+  GridCrop crop;
+  if (f.crop_grid) {
+    crop = {f.crop_grid->x_m, f.crop_grid->y_m, 0.0};
+  } else {
+    double gamma = 0;
+    const auto g = projection.forward(*f.crop_geo, gamma);
+    crop = {g.x_m, g.y_m, -gamma};  // true north is at grid heading -gamma
+  }
+  if (!f.observation.empty()) {
+    crop.x = grid.min_x() + std::round((crop.x - grid.min_x()) / kCellM) * kCellM;
+    crop.y = grid.max_y() - std::round((grid.max_y() - crop.y) / kCellM) * kCellM;
+    crop.rotation_deg = 0;
+  }
+  return crop;
 }
 
-}  // namespace
+FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
+  auto matcher = std::make_shared<const BevMatcher>(options.matcher);
+  const int headings = options.filter.headings, threads = options.filter.threads;
+  return [&route, &cache, matcher, headings, threads](std::size_t i) {
+    const RouteFrame& f = route.frames[i];
+    if (f.observation.empty()) {
+      const NpyVolume npy(f.volume);
+      return std::make_shared<const filter::PreparedFrame>(
+          filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), headings, threads));
+    }
+    const Observation obs = read_observation(f.observation);
+    const GridCrop crop = frame_crop(f, cache.grid(), cache.metadata().projection());
+    // The crop centre is a cell corner: region pixel edges at integers.
+    const int side = matcher->map_side(obs.size);
+    const auto corner_u = static_cast<std::int64_t>(std::lround((crop.x - cache.grid().min_x()) / kCellM));
+    const auto corner_v = static_cast<std::int64_t>(std::lround((cache.grid().max_y() - crop.y) / kCellM));
+    std::vector<std::uint8_t> map;
+    cache.read_classes(corner_u - side / 2, corner_v - side / 2, side, side, map, /*fill_outside=*/true);
+    const auto values = matcher->match(obs, map);
+    const int size = matcher->config().size;
+    const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
+                                     size, size, matcher->config().headings, kCellM};
+    return std::make_shared<const filter::PreparedFrame>(filter::prepare_frame(volume, headings, threads));
+  };
+}
 
 const char* mode_name(Mode mode) {
   switch (mode) {
@@ -64,6 +95,7 @@ const char* mode_name(Mode mode) {
 
 void LocalizeOptions::validate() const {
   filter.validate();
+  matcher.validate();
   if (!(recentre_margin > 0 && recentre_margin < 0.5)) {
     std::ostringstream s;
     s << "localize options: recentre_margin = " << recentre_margin << ": must be in (0, 0.5)";
@@ -77,8 +109,9 @@ double heading_difference_deg(double a, double b) {
 }
 
 RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
-                           const std::function<void()>& on_frame) {
+                           const std::function<void()>& on_frame, FrameSource source) {
   options.validate();
+  if (!source) source = route_frames(route, cache, options);
   const RegionFrame region{cache.grid(), cache.metadata().projection()};
   filter::FilterConfig config = options.filter;
   if (mode == Mode::online) config.etu = config.mgr = config.pas = false;
@@ -104,22 +137,22 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
   using Clock = std::chrono::steady_clock;
   auto seconds_since = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
   // Reading and preparing a volume (run ahead of the filter on a background task).
-  auto load = [&route, &config](std::size_t s, double* seconds) {
+  auto load = [&source](std::size_t s, double* seconds) {
     const auto t0 = Clock::now();
-    const NpyVolume npy(route.frames[s].volume);
-    auto frame = filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), config.headings, config.threads);
+    auto frame = source(s);
     *seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     return frame;
   };
   // The prepared frames in use: for offline the sliding range [t - K, t + K], else frame t.
-  std::map<std::size_t, filter::PreparedFrame> kept;
-  std::future<filter::PreparedFrame> next;  // frame kept.size() ahead, being prepared
+  using Frame = std::shared_ptr<const filter::PreparedFrame>;
+  std::map<std::size_t, Frame> kept;
+  std::future<Frame> next;  // frame kept.size() ahead, being prepared
   std::size_t next_index = 0;
   double next_seconds = 0;
   auto prepared = [&](std::size_t s) -> const filter::PreparedFrame& {
     auto it = kept.find(s);
     if (it == kept.end()) {
-      filter::PreparedFrame frame;
+      Frame frame;
       if (next.valid() && next_index == s) {
         const auto t0 = Clock::now();
         frame = next.get();  // rethrows the volume's error, in frame order
@@ -137,13 +170,13 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       next_index = s + 1;
       next = std::async(std::launch::async, load, s + 1, &next_seconds);
     }
-    return it->second;
+    return *it->second;
   };
 
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
     const RouteFrame& f = route.frames[i];
     const filter::PreparedFrame& frame = prepared(i);
-    const GridCrop crop = grid_crop(f, region);
+    const GridCrop crop = frame_crop(f, region.grid, region.projection);
 
     double x = 0, y = 0, grid_heading = 0;
     FramePose pose;
@@ -159,7 +192,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       centre_on(region.pixel_u(crop.x), region.pixel_v(crop.y));
       std::vector<filter::OfflineFrame> range;
       for (std::size_t s = s0; s <= s1; ++s) {
-        const GridCrop c = grid_crop(route.frames[s], region);
+        const GridCrop c = frame_crop(route.frames[s], region.grid, region.projection);
         range.push_back({&prepared(s),
                          {region.pixel_u(c.x) - static_cast<double>(origin_u),
                           region.pixel_v(c.y) - static_cast<double>(origin_v), c.rotation_deg},

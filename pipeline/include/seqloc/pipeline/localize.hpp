@@ -5,11 +5,14 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "seqloc/filter/config.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/pipeline/matcher.hpp"
 #include "seqloc/pipeline/route.hpp"
 #include "seqloc/raster/cache.hpp"
 
@@ -25,6 +28,8 @@ struct LocalizeOptions {
   double recentre_margin = 0.25;
   /// Offline mode: frames within this many of t are aligned to t and summed (< 0: all of them).
   int offline_half_window = 10;
+  /// The built-in matcher, for frames with an observation instead of a volume.
+  MatcherConfig matcher;
 
   void validate() const;
 };
@@ -54,11 +59,30 @@ struct RouteResult {
   double wait_seconds = 0;
 };
 
+/// Where frame i's prepared (normalized) volume comes from. Called from a background task as
+/// well as from the calling thread, never twice at once.
+using FrameSource = std::function<std::shared_ptr<const filter::PreparedFrame>(std::size_t frame)>;
+
+/// The route's own frames: its .npy volumes, or the built-in matcher run on its observations
+/// against the cache's class raster. Throws DataError naming the file.
+[[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
+
+/// The region-grid centre of a frame's crop (x, y in metres) and the rotation of its north from
+/// grid north (degrees clockwise). Observation frames are matched on a crop in grid coordinates
+/// whose centre is snapped to the nearest cell corner, so that volume and map cells coincide.
+struct GridCrop {
+  double x = 0, y = 0, rotation_deg = 0;
+};
+[[nodiscard]] GridCrop frame_crop(const RouteFrame& frame, const raster::RegionGrid& grid,
+                                  const osm::RegionProjection& projection);
+
 /// Runs one route; `on_frame` (optional) is called after each frame, from the calling thread.
-/// Throws DataError (volumes), filter::FilterError or raster::CacheError. Routes may run in
-/// parallel threads on one CacheReader.
+/// `source` defaults to route_frames(route, cache, options); a caller running several modes on
+/// one route may share one that keeps the frames. Throws DataError (volumes), filter::FilterError
+/// or raster::CacheError. Routes may run in parallel threads on one CacheReader.
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
-                                         Mode mode, const std::function<void()>& on_frame = {});
+                                         Mode mode, const std::function<void()>& on_frame = {},
+                                         FrameSource source = {});
 
 /// Zero-mean Gaussian noise on each odometry increment in the KITTI convention: translation sigma
 /// `translation_pct` % of the step length (on forward and left), heading sigma
