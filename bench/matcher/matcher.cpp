@@ -1,0 +1,79 @@
+// bench/matcher: frames per second of the built-in matcher for a 128 x 128 x 256 volume from
+// observations rendered on a real region (north-Bayreuth, 20 m panorama, default noise), with 1
+// and 2 threads; the peer is one forward + one inverse 2-D FFT of the same size, times 256 headings
+// (the cost a matcher would pay with a single channel and no quarter-turn reuse).
+//   bench_matcher CACHE.gpkg
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "seqloc/pipeline/matcher.hpp"
+#include "seqloc/pipeline/simulate.hpp"
+
+using namespace seqloc;
+using Clock = std::chrono::steady_clock;
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: bench_matcher CACHE.gpkg\n");
+    return 2;
+  }
+  raster::CacheReader cache(argv[1], 256);
+  const auto roads = cache.roads();
+  // Observations at 16 points of the road network, headings along the road.
+  pipeline::ObservationModel camera;
+  std::vector<pipeline::Observation> observations;
+  std::vector<std::vector<std::uint8_t>> maps;
+  pipeline::MatcherConfig config;
+  std::size_t codes = 0;
+  for (std::size_t r = 0; r < roads.size() && observations.size() < 16; r += std::max<std::size_t>(1, roads.size() / 16)) {
+    const auto& pts = roads[r].points;
+    if (pts.size() < 2) continue;
+    const auto& a = pts[0];
+    const auto& b = pts[1];
+    const pipeline::GridPose pose{a.x_m, a.y_m, std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * 180 / M_PI};
+    observations.push_back(pipeline::render_observation(cache, pose, camera));
+    codes += pipeline::BevMatcher::observed_codes(observations.back()).size();
+    const int side = config.size + observations.back().size - 1;
+    const auto u = std::llround((a.x_m - cache.grid().min_x()) / 0.5), v = std::llround((cache.grid().max_y() - a.y_m) / 0.5);
+    maps.emplace_back();
+    cache.read_classes(u - side / 2, v - side / 2, side, side, maps.back(), true);
+  }
+  const double mean_codes = static_cast<double>(codes) / static_cast<double>(observations.size());
+  std::printf("%zu observations of %d x %d cells, %.1f observed codes (channels) on average\n", observations.size(),
+              observations[0].size, observations[0].size, mean_codes);
+
+  double fps[2] = {};
+  for (int threads : {1, 2}) {
+    config.threads = threads;
+    const pipeline::BevMatcher matcher(config);
+    (void)matcher.match(observations[0], maps[0]);  // warm-up
+    const auto t0 = Clock::now();
+    for (std::size_t i = 0; i < observations.size(); ++i) (void)matcher.match(observations[i], maps[i]);
+    const double s = std::chrono::duration<double>(Clock::now() - t0).count() / static_cast<double>(observations.size());
+    fps[threads - 1] = 1.0 / s;
+    std::printf("128x128x256 volume, %d thread%s: %.1f ms/frame, %.2f frames/s\n", threads, threads > 1 ? "s" : "",
+                s * 1000, 1.0 / s);
+  }
+  // Peer: 256 single-channel correlations by FFT (forward + inverse) of the same size, 1 thread.
+  const int n = cv::getOptimalDFTSize(config.size + observations[0].size - 1);
+  cv::Mat a(n, n, CV_32F), f, back;
+  cv::randu(a, 0, 1);
+  const auto t0 = Clock::now();
+  for (int k = 0; k < 256; ++k) {
+    cv::dft(a, f);
+    cv::dft(f, back, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT);
+  }
+  const double peer_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  std::printf("peer: 256 forward + inverse FFTs of %d x %d, 1 thread: %.1f ms; matcher (1 thread) / peer = %.2f\n", n, n,
+              peer_ms, 1000.0 / fps[0] / peer_ms);
+  std::printf("{\"benchmark\": \"matcher\", \"volume\": \"128x128x256\", \"observation\": %d, \"mean_channels\": %.1f, "
+              "\"fps_1_thread\": %.2f, \"fps_2_threads\": %.2f, \"peer_256_fft_pairs_ms\": %.1f, \"ratio_to_peer\": %.2f}\n",
+              observations[0].size, mean_codes, fps[0], fps[1], peer_ms, 1000.0 / fps[0] / peer_ms);
+  return 0;
+}
