@@ -76,5 +76,6 @@ std::unique_ptr<Command> make_cache_merge_command();
 std::unique_ptr<Command> make_localize_command();
 std::unique_ptr<Command> make_evaluate_command();
 std::unique_ptr<Command> make_simulate_command();
+std::unique_ptr<Command> make_render_command();
 
 }  // namespace seqloc::app

@@ -65,6 +65,7 @@ int main(int argc, char** argv) {
   add(&app, "localize", "Localize routes against a region cache", app::make_localize_command());
   add(&app, "evaluate", "Recompute the recall table from localize outputs", app::make_evaluate_command());
   add(&app, "simulate", "Simulate routes with BEV observations along a cache's roads", app::make_simulate_command());
+  add(&app, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time", app::make_render_command());
   CLI::App* cache = app.add_subcommand("cache", "Inspect and combine region caches");
   cache->require_subcommand(1);
   add(cache, "info", "Print a cache's metadata", app::make_cache_info_command());

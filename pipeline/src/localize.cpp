@@ -109,7 +109,7 @@ double heading_difference_deg(double a, double b) {
 }
 
 RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
-                           const std::function<void()>& on_frame, FrameSource source) {
+                           const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   options.validate();
   if (!source) source = route_frames(route, cache, options);
   const RegionFrame region{cache.grid(), cache.metadata().projection()};
@@ -210,6 +210,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       x = crop.x + p.u * kCellM;
       y = crop.y - p.v * kCellM;
       grid_heading = p.heading_deg;
+      if (inspect) inspect({i, &frame, crop, nullptr});
       kept.erase(i);
     } else {
       if (!filter) {
@@ -244,6 +245,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       const auto t0 = Clock::now();
       const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data(), fix ? &*fix : nullptr);
       result.filter_seconds += seconds_since(t0);
+      if (inspect) inspect({i, &frame, crop, &filter->belief(), origin_u, origin_v});
       kept.erase(i);
       x = region.x_of(r.pose.u + static_cast<double>(origin_u));
       y = region.y_of(r.pose.v + static_cast<double>(origin_v));

@@ -20,6 +20,7 @@ namespace {
 constexpr double kCellM = raster::kCellM;
 constexpr int kAttempts = 500;      // tries at a route before giving up
 constexpr double kEdgeMarginM = 40;  // routes keep this far from the region's edge
+constexpr double kMaxTurnDeg = 100;  // largest heading change between two frames
 
 double wrap180(double d) {
   d = std::fmod(d + 180.0, 360.0);
@@ -280,9 +281,12 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
       const auto path = walk(graph, length, rng);
       if (path.empty()) continue;
       poses = sample_poses(graph, path, options, rng);
-      if (static_cast<int>(poses.size()) < options.frames || !std::all_of(poses.begin(), poses.end(), inside)) {
-        poses.clear();
+      // Inside the region, and no turn between frames sharper than odometry's plausibility limit.
+      bool ok = static_cast<int>(poses.size()) >= options.frames && std::all_of(poses.begin(), poses.end(), inside);
+      for (std::size_t i = 1; ok && i < poses.size(); ++i) {
+        ok = std::abs(wrap180(poses[i].heading_deg - poses[i - 1].heading_deg)) <= kMaxTurnDeg;
       }
+      if (!ok) poses.clear();
     }
     if (poses.empty()) {
       std::ostringstream s;

@@ -76,13 +76,24 @@ struct GridCrop {
 [[nodiscard]] GridCrop frame_crop(const RouteFrame& frame, const raster::RegionGrid& grid,
                                   const osm::RegionProjection& projection);
 
+/// What a frame left behind, for pictures: its prepared volume and crop, and for the online modes
+/// the belief after the step (window cell (0, 0) is region pixel (origin_u, origin_v)).
+struct FrameInspection {
+  std::size_t index = 0;
+  const filter::PreparedFrame* frame = nullptr;
+  GridCrop crop;
+  const filter::BeliefVolume* belief = nullptr;  ///< null for single and offline
+  std::int64_t origin_u = 0, origin_v = 0;        ///< region pixel of the belief's cell (0, 0)
+};
+using FrameInspector = std::function<void(const FrameInspection&)>;
+
 /// Runs one route; `on_frame` (optional) is called after each frame, from the calling thread.
 /// `source` defaults to route_frames(route, cache, options); a caller running several modes on
 /// one route may share one that keeps the frames. Throws DataError (volumes), filter::FilterError
 /// or raster::CacheError. Routes may run in parallel threads on one CacheReader.
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                                          Mode mode, const std::function<void()>& on_frame = {},
-                                         FrameSource source = {});
+                                         FrameSource source = {}, const FrameInspector& inspect = {});
 
 /// Zero-mean Gaussian noise on each odometry increment in the KITTI convention: translation sigma
 /// `translation_pct` % of the step length (on forward and left), heading sigma

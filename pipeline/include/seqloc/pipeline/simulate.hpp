@@ -18,15 +18,15 @@ namespace seqloc::pipeline {
 /// What the camera sees and how perception fails. The defaults are the calibration recorded in
 /// docs/simulate.md.
 struct ObservationModel {
-  double range_m = 20.0;     ///< visibility radius (the observation's side is 2 * range + 0.5 m)
+  double range_m = 15.0;     ///< visibility radius (the observation's side is 2 * range + 0.5 m)
   double fov_deg = 360.0;    ///< field of view, centred on forward (360 = panorama)
   bool occlusion = true;     ///< buildings hide what lies behind them
-  double class_miss = 0.25;  ///< per frame and seen class: the whole class is missed
-  double cell_dropout = 0.3;  ///< per seen non-background cell: missed
-  double spurious_blobs = 3.0;  ///< mean number (Poisson) of blobs of a wrong class
-  double jitter_m = 0.75;       ///< sigma of the observation's position error
-  double jitter_deg = 2.0;      ///< sigma of its heading error
-  double wrong_frame = 0.05;    ///< probability that a frame shows another place altogether
+  double class_miss = 0.5;   ///< per frame and seen class: the whole class is missed
+  double cell_dropout = 0.5;  ///< per seen non-background cell: missed
+  double spurious_blobs = 8.0;  ///< mean number (Poisson) of blobs of a wrong class
+  double jitter_m = 1.5;        ///< sigma of the observation's position error
+  double jitter_deg = 4.0;      ///< sigma of its heading error
+  double wrong_frame = 0.1;     ///< probability that a frame shows another place altogether
 
   void validate() const;  ///< throws std::invalid_argument naming the field
   [[nodiscard]] int side() const;

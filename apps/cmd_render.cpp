@@ -1,0 +1,69 @@
+#include <cstdio>
+#include <filesystem>
+
+#include "command.hpp"
+#include "seqloc/pipeline/outputs.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/render.hpp"
+
+namespace seqloc::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+class RenderCommand : public Command {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
+    app.add_option("route", route_dir_, "Route folder (route.json + frames.csv)")->required();
+    app.add_option("-o,--output", out_, "Folder for the PNG figures (created)")->required();
+    app.add_option("--localized", localized_,
+                   "An output folder of seqloc localize for this route (its modes' poses are drawn); without it, "
+                   "single and seqloc are run here");
+    app.add_option("--frame", options_.frame, "Frame of the likelihood figure (index from 0)")->default_val(0);
+    app.add_option("--window", window_, "Belief window, cells")->default_val(256);
+    app.add_option("--threads", options_.localize.filter.threads, "Threads")->default_val(2);
+    app.footer("Writes likelihood_K.png (the frame's own likelihood and the SeqLoc belief over the map, the ground\n"
+               "truth as a star), entropy_route.png and error_over_time.png (docs/render.md).");
+  }
+
+  int run() override {
+    options_.localize.filter.width = options_.localize.filter.height = window_;
+    options_.localize.matcher.threads = options_.localize.filter.threads;
+    try {
+      options_.localize.validate();
+    } catch (const std::exception& e) {
+      throw pipeline::UsageError(e.what());
+    }
+    raster::CacheReader cache(cache_path_, 256);
+    const pipeline::Route route = pipeline::read_route(route_dir_);
+    std::vector<std::pair<std::string, std::vector<pipeline::FramePose>>> poses;
+    if (!localized_.empty()) {
+      const fs::path dir = localized_ / route.name;
+      std::error_code ec;
+      if (!fs::is_directory(dir, ec)) {
+        throw pipeline::UsageError(dir.string() + ": no localize results for route '" + route.name + "' there");
+      }
+      for (const char* mode : {"single", "offline", "online", "seqloc"}) {
+        if (fs::exists(dir / mode / "poses.csv")) poses.emplace_back(mode, pipeline::read_poses_csv(dir / mode / "poses.csv"));
+      }
+    } else {
+      for (const auto mode : {pipeline::Mode::single, pipeline::Mode::seqloc}) {
+        poses.emplace_back(pipeline::mode_name(mode), pipeline::localize_route(route, cache, options_.localize, mode).poses);
+      }
+    }
+    for (const auto& file : pipeline::render_route(cache, route, poses, options_, out_)) std::printf("wrote %s\n", file.c_str());
+    return kExitOk;
+  }
+
+ private:
+  fs::path cache_path_, route_dir_, out_, localized_;
+  pipeline::RenderOptions options_;
+  int window_ = 256;
+};
+
+}  // namespace
+
+std::unique_ptr<Command> make_render_command() { return std::make_unique<RenderCommand>(); }
+
+}  // namespace seqloc::app

@@ -1,0 +1,335 @@
+#include "seqloc/pipeline/render.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "seqloc/osm/classes.hpp"
+#include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/raster/png_codec.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+constexpr double kCellM = raster::kCellM;
+using Rgb = cv::Vec3b;
+
+// Colours (RGB) per class code, in the spirit of OpenStreetMap's carto style.
+Rgb area_colour(int code) {
+  static const Rgb colours[] = {{255, 255, 255}, {196, 182, 171}, {238, 238, 238}, {223, 252, 226},
+                                {205, 235, 176}, {200, 250, 204}, {173, 209, 158}, {170, 211, 223}};
+  return colours[std::clamp(code, 0, 7)];
+}
+Rgb way_colour(int code) {
+  static const Rgb colours[] = {{0, 0, 0},       {140, 120, 100}, {150, 150, 150}, {110, 160, 90},  {160, 160, 160},
+                                {140, 140, 140}, {60, 60, 230},   {200, 120, 80},  {70, 70, 70},    {200, 60, 200},
+                                {90, 140, 70}};
+  return colours[std::clamp(code, 0, 10)];
+}
+
+cv::Mat to_mat(Picture& p) { return cv::Mat(p.height, p.width, CV_8UC3, p.rgb.data()); }
+
+Picture from_mat(const cv::Mat& m) {
+  Picture p;
+  p.width = m.cols;
+  p.height = m.rows;
+  p.rgb.assign(m.data, m.data + static_cast<std::size_t>(m.total() * 3));
+  if (!m.isContinuous()) {
+    for (int r = 0; r < m.rows; ++r) std::memcpy(p.rgb.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(m.cols) * 3, m.ptr(r), static_cast<std::size_t>(m.cols) * 3);
+  }
+  return p;
+}
+
+cv::Scalar rgb(int r, int g, int b) { return cv::Scalar(r, g, b); }  // our Mats hold RGB
+
+void text(cv::Mat& m, const std::string& s, cv::Point at, double scale = 0.45, cv::Scalar colour = rgb(0, 0, 0)) {
+  cv::putText(m, s, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv::LINE_AA);
+}
+
+// Viridis-like colour for t in [0, 1], RGB.
+cv::Scalar viridis(double t) {
+  static const double stops[5][3] = {{68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}};
+  t = std::clamp(t, 0.0, 1.0) * 4;
+  const int i = std::min(3, static_cast<int>(t));
+  const double f = t - i;
+  return rgb(static_cast<int>(stops[i][0] + f * (stops[i + 1][0] - stops[i][0])),
+             static_cast<int>(stops[i][1] + f * (stops[i + 1][1] - stops[i][1])),
+             static_cast<int>(stops[i][2] + f * (stops[i + 1][2] - stops[i][2])));
+}
+
+void star(cv::Mat& m, cv::Point2d c, double r) {
+  std::vector<cv::Point> pts;
+  for (int k = 0; k < 10; ++k) {
+    const double a = -M_PI / 2 + k * M_PI / 5, rr = k % 2 ? r * 0.45 : r;
+    pts.emplace_back(static_cast<int>(std::lround(c.x + rr * std::cos(a))), static_cast<int>(std::lround(c.y + rr * std::sin(a))));
+  }
+  // An outline, so that the belief under it stays visible.
+  cv::polylines(m, std::vector<std::vector<cv::Point>>{pts}, true, rgb(0, 0, 0), 3, cv::LINE_AA);
+  cv::polylines(m, std::vector<std::vector<cv::Point>>{pts}, true, rgb(255, 215, 0), 1, cv::LINE_AA);
+}
+
+// Red over the map with opacity growing with the mass (square root: the tails stay visible).
+void overlay_mass(cv::Mat& m, const std::vector<double>& mass) {
+  const double top = *std::max_element(mass.begin(), mass.end());
+  if (!(top > 0)) return;
+  for (int v = 0; v < m.rows; ++v) {
+    for (int u = 0; u < m.cols; ++u) {
+      const double a = 0.85 * std::sqrt(mass[static_cast<std::size_t>(v * m.cols + u)] / top);
+      auto& px = m.at<Rgb>(v, u);
+      px = Rgb(static_cast<std::uint8_t>((1 - a) * px[0] + a * 230), static_cast<std::uint8_t>((1 - a) * px[1] + a * 20),
+               static_cast<std::uint8_t>((1 - a) * px[2] + a * 20));
+    }
+  }
+}
+
+cv::Mat upscale(const cv::Mat& m, int factor) {
+  cv::Mat out;
+  cv::resize(m, out, cv::Size(), factor, factor, cv::INTER_NEAREST);
+  return out;
+}
+
+std::string fmt(double v, int digits) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", digits, v);
+  return b;
+}
+
+double nice_step(double range) {
+  const double raw = range / 5, p = std::pow(10.0, std::floor(std::log10(raw)));
+  for (double m : {1.0, 2.0, 5.0, 10.0}) {
+    if (m * p >= raw) return m * p;
+  }
+  return 10 * p;
+}
+
+}  // namespace
+
+void write_picture(const std::filesystem::path& path, const Picture& picture) {
+  const auto png = raster::encode_png_rgb8(picture.rgb, picture.width, picture.height);
+  const std::filesystem::path partial = path.string() + ".partial";
+  {
+    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
+    out.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+    if (!out.flush()) throw DataError(partial.string() + ": cannot write");
+  }
+  std::error_code ec;
+  std::filesystem::rename(partial, path, ec);
+  if (ec) throw DataError(path.string() + ": cannot rename into place: " + ec.message());
+}
+
+Picture map_picture(std::span<const std::uint8_t> classes_rgb, int width, int height) {
+  Picture p{width, height, std::vector<std::uint8_t>(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 3)};
+  for (std::size_t i = 0; i < static_cast<std::size_t>(width) * static_cast<std::size_t>(height); ++i) {
+    const std::uint8_t* c = classes_rgb.data() + 3 * i;
+    Rgb colour = area_colour(c[0]);
+    if (c[1]) colour = way_colour(c[1]);
+    if (c[2]) colour = c[2] == 1 ? Rgb(40, 130, 40) : Rgb(200, 80, 40);  // trees green, other nodes orange
+    std::copy_n(&colour[0], 3, p.rgb.data() + 3 * i);
+  }
+  return p;
+}
+
+Picture plot(const std::vector<Series>& series, const std::string& title, const std::string& x_label,
+             const std::string& y_label, double y_max) {
+  const int w = 900, h = 520, left = 70, right = 180, top = 40, bottom = 60;
+  cv::Mat m(h, w, CV_8UC3, rgb(255, 255, 255));
+  double x0 = std::numeric_limits<double>::max(), x1 = -x0, y1 = 0;
+  for (const auto& s : series) {
+    for (double x : s.x) x0 = std::min(x0, x), x1 = std::max(x1, x);
+    for (double y : s.y) y1 = std::max(y1, y);
+  }
+  if (x0 > x1) x0 = 0, x1 = 1;
+  if (x1 == x0) x1 = x0 + 1;
+  if (y_max > 0) y1 = y_max;
+  if (!(y1 > 0)) y1 = 1;
+  auto px = [&](double x, double y) {
+    return cv::Point(static_cast<int>(left + (x - x0) / (x1 - x0) * (w - left - right)),
+                     static_cast<int>(h - bottom - std::min(y, y1) / y1 * (h - top - bottom)));
+  };
+  cv::rectangle(m, px(x0, 0), px(x1, y1), rgb(0, 0, 0));
+  const double ys = nice_step(y1), xs = nice_step(x1 - x0);
+  for (double y = 0; y <= y1 + 1e-9; y += ys) {
+    cv::line(m, px(x0, y), px(x1, y), rgb(225, 225, 225));
+    text(m, fmt(y, ys < 1 ? 2 : 0), px(x0, y) + cv::Point(-50, 5), 0.4);
+  }
+  for (double x = std::ceil(x0 / xs) * xs; x <= x1 + 1e-9; x += xs) text(m, fmt(x, xs < 1 ? 2 : 0), px(x, 0) + cv::Point(-10, 18), 0.4);
+  static const cv::Scalar palette[] = {rgb(31, 119, 180), rgb(255, 127, 14), rgb(44, 160, 44), rgb(214, 39, 40),
+                                       rgb(148, 103, 189), rgb(140, 86, 75)};
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    const auto& s = series[k];
+    const cv::Scalar colour = palette[k % 6];
+    for (std::size_t i = 0; i < s.x.size(); ++i) {
+      if (s.points) {
+        cv::circle(m, px(s.x[i], s.y[i]), 2, colour, cv::FILLED, cv::LINE_AA);
+      } else if (i > 0) {
+        cv::line(m, px(s.x[i - 1], s.y[i - 1]), px(s.x[i], s.y[i]), colour, 2, cv::LINE_AA);
+      }
+    }
+    const cv::Point at(w - right + 15, top + 20 + 22 * static_cast<int>(k));
+    cv::rectangle(m, at + cv::Point(0, -10), at + cv::Point(14, 2), colour, cv::FILLED);
+    text(m, s.label, at + cv::Point(20, 0));
+  }
+  text(m, title, cv::Point(left, 25), 0.55);
+  text(m, x_label, cv::Point((w - right) / 2, h - 15));
+  text(m, y_label, cv::Point(5, 25), 0.4);
+  return from_mat(m);
+}
+
+std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, const Route& route,
+                                                const std::vector<std::pair<std::string, std::vector<FramePose>>>& poses_by_mode,
+                                                const RenderOptions& options, const std::filesystem::path& out_dir) {
+  if (options.frame >= route.frames.size()) {
+    throw UsageError("render: frame " + std::to_string(options.frame) + " of route '" + route.name + "', which has " +
+                     std::to_string(route.frames.size()) + " frames");
+  }
+  std::filesystem::create_directories(out_dir);
+  std::vector<std::filesystem::path> written;
+  const auto& grid = cache.grid();
+  const auto projection = cache.metadata().projection();
+  auto pixel_of = [&](double x, double y) { return cv::Point2d((x - grid.min_x()) / kCellM - 0.5, (grid.max_y() - y) / kCellM - 0.5); };
+  std::vector<cv::Point2d> truth;  // region pixels
+  for (const auto& f : route.frames) {
+    if (!f.truth) continue;
+    const auto g = projection.forward(f.truth->where);
+    truth.push_back(pixel_of(g.x_m, g.y_m));
+  }
+
+  // 1. The qualitative figure: run SeqLoc up to the frame, keep its likelihood and the belief.
+  {
+    Route head = route;
+    head.frames.resize(options.frame + 1);
+    std::vector<double> frame_mass, belief_mass;
+    std::int64_t ou = 0, ov = 0;
+    int bw = 0, bh = 0;
+    double entropy = 0;
+    const auto result = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
+      if (in.index != options.frame) return;
+      const auto& b = *in.belief;
+      bw = b.width();
+      bh = b.height();
+      ou = in.origin_u;
+      ov = in.origin_v;
+      entropy = in.frame->entropy;
+      belief_mass.assign(b.slice_cells(), 0.0);
+      for (int k = 0; k < b.headings(); ++k) {
+        const float* s = b.slice(k);
+        for (std::size_t i = 0; i < b.slice_cells(); ++i) belief_mass[i] += s[i];
+      }
+      // The frame's own likelihood, placed by its crop into the window.
+      frame_mass.assign(b.slice_cells(), 0.0);
+      const auto& f = *in.frame;
+      const double cu = (in.crop.x - grid.min_x()) / kCellM - 0.5 - static_cast<double>(ou);
+      const double cv_ = (grid.max_y() - in.crop.y) / kCellM - 0.5 - static_cast<double>(ov);
+      const double rot = in.crop.rotation_deg * M_PI / 180.0, scale = f.cell_m / kCellM;
+      const std::size_t plane = static_cast<std::size_t>(f.height) * static_cast<std::size_t>(f.width);
+      for (int v = 0; v < f.height; ++v) {
+        for (int u = 0; u < f.width; ++u) {
+          double m = 0;
+          for (int k = 0; k < f.bins; ++k) m += std::exp(f.log_prob[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(v * f.width + u)]);
+          const double du = (u - (f.width - 1) / 2.0) * scale, dv = (v - (f.height - 1) / 2.0) * scale;
+          const auto wu = std::lround(cu + du * std::cos(rot) - dv * std::sin(rot));
+          const auto wv = std::lround(cv_ + du * std::sin(rot) + dv * std::cos(rot));
+          if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) frame_mass[static_cast<std::size_t>(wv * bw + wu)] += m;
+        }
+      }
+    });
+    std::vector<std::uint8_t> classes;
+    cache.read_classes(ou, ov, bw, bh, classes, /*fill_outside=*/true);
+    const int factor = bw <= 400 ? 2 : 1;
+    auto panel = [&](const std::vector<double>& mass, const std::string& title) {
+      Picture base = map_picture(classes, bw, bh);
+      cv::Mat m = to_mat(base).clone();
+      overlay_mass(m, mass);
+      m = upscale(m, factor);
+      const auto& f = route.frames[options.frame];
+      if (f.truth) {
+        const auto g = projection.forward(f.truth->where);
+        const auto p = pixel_of(g.x_m, g.y_m);
+        star(m, {(p.x - static_cast<double>(ou) + 0.5) * factor, (p.y - static_cast<double>(ov) + 0.5) * factor}, 11);
+      }
+      cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
+      m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
+      text(framed, title, cv::Point(6, 20), 0.5);
+      return framed;
+    };
+    const auto& last = result.poses.back();
+    std::string err = last.position_error_m ? ", error " + fmt(*last.position_error_m, 1) + " m" : "";
+    cv::Mat a = panel(frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")");
+    cv::Mat b = panel(belief_mass, "SeqLoc belief" + err);
+    cv::Mat both(a.rows, a.cols + b.cols + 10, CV_8UC3, rgb(255, 255, 255));
+    a.copyTo(both(cv::Rect(0, 0, a.cols, a.rows)));
+    b.copyTo(both(cv::Rect(a.cols + 10, 0, b.cols, b.rows)));
+    written.push_back(out_dir / ("likelihood_" + std::to_string(options.frame) + ".png"));
+    write_picture(written.back(), from_mat(both));
+  }
+
+  // 2. The route coloured by the normalized entropy of each frame (SeqLoc's run, else any).
+  const std::vector<FramePose>* poses = nullptr;
+  for (const auto& [mode, p] : poses_by_mode) {
+    if (mode == "seqloc" || !poses) poses = &p;
+  }
+  if (poses && !truth.empty() && poses->size() == route.frames.size()) {
+    double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
+    for (const auto& p : truth) u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
+    const double margin = 60 / kCellM;
+    const auto wu0 = static_cast<std::int64_t>(u0 - margin), wv0 = static_cast<std::int64_t>(v0 - margin);
+    const int ww = static_cast<int>(u1 - u0 + 2 * margin), wh = static_cast<int>(v1 - v0 + 2 * margin);
+    const int down = std::max(1, static_cast<int>(std::ceil(std::max(ww, wh) / 1400.0)));
+    cv::Mat m;
+    if (static_cast<long long>(ww) * wh <= 64LL << 20) {
+      std::vector<std::uint8_t> classes;
+      cache.read_classes(wu0, wv0, ww, wh, classes, true);
+      Picture base = map_picture(classes, ww, wh);
+      cv::resize(to_mat(base), m, cv::Size(ww / down, wh / down), 0, 0, cv::INTER_AREA);
+    } else {
+      m = cv::Mat(wh / down, ww / down, CV_8UC3, rgb(255, 255, 255));
+    }
+    auto at = [&](cv::Point2d p) {
+      return cv::Point(static_cast<int>((p.x - static_cast<double>(wu0)) / down), static_cast<int>((p.y - static_cast<double>(wv0)) / down));
+    };
+    for (std::size_t i = 1; i < truth.size(); ++i) cv::line(m, at(truth[i - 1]), at(truth[i]), rgb(60, 60, 60), 1, cv::LINE_AA);
+    for (std::size_t i = 0; i < truth.size() && i < poses->size(); ++i) {
+      cv::circle(m, at(truth[i]), 5, viridis((*poses)[i].entropy), cv::FILLED, cv::LINE_AA);
+    }
+    // Colour bar.
+    cv::Mat framed(m.rows + 70, std::max(m.cols, 420), CV_8UC3, rgb(255, 255, 255));
+    m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
+    text(framed, route.name + ": frames coloured by normalized entropy of their likelihood", cv::Point(6, 20), 0.5);
+    for (int i = 0; i < 300; ++i) cv::line(framed, cv::Point(60 + i, m.rows + 40), cv::Point(60 + i, m.rows + 55), viridis(i / 299.0));
+    double lo = 1, hi = 0;
+    for (const auto& p : *poses) lo = std::min(lo, p.entropy), hi = std::max(hi, p.entropy);
+    text(framed, "0", cv::Point(45, m.rows + 53), 0.4);
+    text(framed, "1", cv::Point(365, m.rows + 53), 0.4);
+    text(framed, "range in this route: " + fmt(lo, 3) + " .. " + fmt(hi, 3), cv::Point(60, m.rows + 68), 0.4);
+    written.push_back(out_dir / "entropy_route.png");
+    write_picture(written.back(), from_mat(framed));
+  }
+
+  // 3. Position error over time, one line per mode.
+  std::vector<Series> series;
+  for (const auto& [mode, p] : poses_by_mode) {
+    Series s{mode, {}, {}, false};
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (!p[i].position_error_m) continue;
+      s.x.push_back(static_cast<double>(i));
+      s.y.push_back(*p[i].position_error_m);
+    }
+    if (!s.x.empty()) series.push_back(std::move(s));
+  }
+  if (!series.empty()) {
+    written.push_back(out_dir / "error_over_time.png");
+    write_picture(written.back(), plot(series, route.name + ": position error per frame (clipped at 50 m)", "frame",
+                                       "error (m)", 50));
+  }
+  return written;
+}
+
+}  // namespace seqloc::pipeline
