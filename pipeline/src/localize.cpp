@@ -234,6 +234,21 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
         }
         load_road();
       }
+      // A crop far from the window (the estimate wandered off while the frames' evidence stayed
+      // around the GPS-like crops) brings the window to it: evidence outside the window is lost.
+      {
+        const double cu = region.pixel_u(crop.x) - static_cast<double>(origin_u);
+        const double cv = region.pixel_v(crop.y) - static_cast<double>(origin_v);
+        const double mu = options.recentre_margin * W, mv = options.recentre_margin * H;
+        if (cu < mu || cu > W - 1 - mu || cv < mv || cv > H - 1 - mv) {
+          const auto du = static_cast<int>(std::lround(cu)) - W / 2, dv = static_cast<int>(std::lround(cv)) - H / 2;
+          filter->recentre(du, dv);
+          origin_u += du;
+          origin_v += dv;
+          load_road();
+          ++result.recentres;
+        }
+      }
       const filter::CropPose window_crop{region.pixel_u(crop.x) - static_cast<double>(origin_u),
                                          region.pixel_v(crop.y) - static_cast<double>(origin_v), crop.rotation_deg};
       std::optional<filter::GpsFix> fix;
