@@ -1,0 +1,73 @@
+// seqloc simulate, localize on observation routes, and render, from the command line on the
+// sample region (the demo's path); and the errors a user can make on the way.
+
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "support/test_support.hpp"
+
+namespace seqloc {
+namespace {
+
+using test::run_seqloc;
+
+TEST(CliSimulate, SampleRegionToTableAndPictures) {
+  test::ScratchDir dir;
+  const auto cache = (dir / "sample.gpkg").string();
+  auto r = run_seqloc({"preprocess", std::string(SEQLOC_SOURCE_DIR) + "/samples/rural-valley.osm.pbf", "-o", cache});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto routes = (dir / "routes").string();
+  r = run_seqloc({"simulate", cache, "-o", routes, "--routes", "2", "--frames", "10", "--seed", "3"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("2 routes of 10 frames"), std::string::npos) << r.out;
+  // Again without --overwrite: a usage error, the routes untouched.
+  const std::string before = test::read_file(dir / "routes/route_001/frames.csv");
+  r = run_seqloc({"simulate", cache, "-o", routes, "--routes", "1", "--frames", "5"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--overwrite"), std::string::npos) << r.err;
+  EXPECT_EQ(test::read_file(dir / "routes/route_001/frames.csv"), before);
+
+  const auto out = (dir / "localized").string();
+  r = run_seqloc({"localize", cache, routes + "/route_000", routes + "/route_001", "-o", out, "--mode", "all",
+                  "--window", "192", "--threads", "2"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* mode : {"single", "offline", "online", "seqloc"}) {
+    EXPECT_NE(r.out.find(std::string("\n") + mode), std::string::npos) << r.out;
+    EXPECT_TRUE(std::filesystem::exists(dir / "localized/route_000" / mode / "poses.csv")) << mode;
+  }
+  r = run_seqloc({"render", cache, routes + "/route_001", "--localized", out, "-o", (dir / "figures").string(), "--frame",
+                  "4", "--window", "192"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* file : {"likelihood_4.png", "entropy_route.png", "error_over_time.png"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "figures" / file)) << file;
+  }
+  r = run_seqloc({"render", cache, routes + "/route_001", "-o", (dir / "figures").string(), "--frame", "10"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("frame 10"), std::string::npos) << r.err;
+}
+
+TEST(CliSimulate, ABadObservationStopsLocalizeWithNothingWritten) {
+  test::ScratchDir dir;
+  const auto cache = (dir / "sample.gpkg").string();
+  auto r = run_seqloc({"preprocess", std::string(SEQLOC_SOURCE_DIR) + "/samples/rural-valley.osm.pbf", "-o", cache});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run_seqloc({"simulate", cache, "-o", (dir / "routes").string(), "--routes", "1", "--frames", "6"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ofstream(dir / "routes/route_000/observations/000003.png", std::ios::trunc) << "not a png";
+  r = run_seqloc({"localize", cache, (dir / "routes/route_000").string(), "-o", (dir / "out").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("000003.png"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+  // Options out of range are usage errors.
+  r = run_seqloc({"simulate", cache, "-o", (dir / "r2").string(), "--class-miss", "2"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("class_miss"), std::string::npos) << r.err;
+  r = run_seqloc({"localize", cache, (dir / "routes/route_000").string(), "-o", (dir / "out").string(),
+                  "--matcher-temperature", "0"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("temperature"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace seqloc

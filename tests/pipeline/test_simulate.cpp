@@ -1,0 +1,173 @@
+// The route simulator: frames lie on the cache's roads with headings along them, the odometry
+// integrates to the ground truth, crops stay within the GPS error, the same seed gives the same
+// files; and clean observations of a real urban region, scored by the matcher and localized,
+// come back at the truth (simulator, matcher and localize agree on every convention).
+
+#include <cmath>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/render.hpp"
+#include "seqloc/pipeline/simulate.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+struct Simulated {
+  test::ScratchDir dir;
+  std::filesystem::path cache;
+};
+
+// The cache of a shared region, built once per test binary run.
+const std::filesystem::path& region_cache(const std::string& name) {
+  static std::map<std::string, std::filesystem::path> built;
+  static test::ScratchDir dir;
+  auto it = built.find(name);
+  if (it == built.end()) {
+    PreprocessOptions options;
+    options.input = test::shared_osm(name + ".osm.pbf");
+    options.output = dir / (name + ".gpkg");
+    preprocess_region(options);
+    it = built.emplace(name, options.output).first;
+  }
+  return it->second;
+}
+
+double wrap180(double d) {
+  d = std::fmod(d + 180.0, 360.0);
+  return (d < 0 ? d + 360.0 : d) - 180.0;
+}
+
+TEST(Simulate, FramesFollowTheRoadsAndTheOdometryIntegratesToTheTruth) {
+  raster::CacheReader cache(region_cache("north-bayreuth"));
+  test::ScratchDir out;
+  SimulateOptions options;
+  options.routes = 3;
+  options.frames = 40;
+  options.seed = 9;
+  simulate_routes(cache, options, out / "routes");
+  EXPECT_FALSE(std::filesystem::exists(out / "routes.partial"));
+  const auto roads = cache.roads();
+  const auto projection = cache.metadata().projection();
+  for (int r = 0; r < options.routes; ++r) {
+    const Route route = read_route(out / "routes" / ("route_00" + std::to_string(r)));
+    ASSERT_EQ(route.frames.size(), 40u);
+    ASSERT_TRUE(route.frames[0].gps);
+    double x = 0, y = 0, heading = 0;  // integrated odometry, grid frame
+    for (std::size_t i = 0; i < route.frames.size(); ++i) {
+      const auto& f = route.frames[i];
+      ASSERT_TRUE(f.truth && f.truth->heading_deg && f.crop_grid && !f.observation.empty());
+      double gamma = 0;
+      const auto t = projection.forward(f.truth->where, gamma);
+      const double grid_heading = *f.truth->heading_deg - gamma;
+      // On a road segment, heading along it (either direction of the way).
+      double best = 1e9, along = 1e9;
+      for (const auto& road : roads) {
+        for (std::size_t k = 1; k < road.points.size(); ++k) {
+          const auto& a = road.points[k - 1];
+          const auto& b = road.points[k];
+          const double dx = b.x_m - a.x_m, dy = b.y_m - a.y_m, len2 = dx * dx + dy * dy;
+          if (len2 == 0) continue;
+          const double s = std::clamp(((t.x_m - a.x_m) * dx + (t.y_m - a.y_m) * dy) / len2, 0.0, 1.0);
+          const double d = std::hypot(a.x_m + s * dx - t.x_m, a.y_m + s * dy - t.y_m);
+          best = std::min(best, d);
+          if (d < 0.01) {  // at a vertex, either segment may be the one driven
+            const double dir = std::atan2(dx, dy) * 180 / M_PI;
+            along = std::min({along, std::abs(wrap180(grid_heading - dir)), std::abs(wrap180(grid_heading - dir - 180))});
+          }
+        }
+      }
+      EXPECT_LT(best, 0.01) << route.name << " frame " << i;
+      EXPECT_LT(along, 0.01) << route.name << " frame " << i;
+      // The crop is within the GPS error of the truth.
+      EXPECT_LE(std::hypot(f.crop_grid->x_m - t.x_m, f.crop_grid->y_m - t.y_m), options.gps_error_m + 0.01);
+      if (i == 0) {
+        x = t.x_m;
+        y = t.y_m;
+        heading = grid_heading;
+      } else {
+        const double th = heading * M_PI / 180;
+        x += f.odometry.forward_m * std::sin(th) - f.odometry.left_m * std::cos(th);
+        y += f.odometry.forward_m * std::cos(th) + f.odometry.left_m * std::sin(th);
+        heading -= f.odometry.yaw_deg;
+        const double step = std::hypot(f.odometry.forward_m, f.odometry.left_m);
+        EXPECT_LE(step, options.max_spacing_m + 1e-3);
+      }
+      EXPECT_LT(std::hypot(x - t.x_m, y - t.y_m), 0.02) << route.name << " frame " << i;
+      EXPECT_LT(std::abs(wrap180(heading - grid_heading)), 0.01) << route.name << " frame " << i;
+    }
+  }
+}
+
+TEST(Simulate, TheSameSeedWritesTheSameFiles) {
+  raster::CacheReader cache(region_cache("monaco"));
+  test::ScratchDir out;
+  SimulateOptions options;
+  options.routes = 2;
+  options.frames = 8;
+  simulate_routes(cache, options, out / "a");
+  simulate_routes(cache, options, out / "b");
+  options.seed = 2;
+  simulate_routes(cache, options, out / "c");
+  for (const char* file : {"route_001/frames.csv", "route_001/observations/000005.png", "route_000/route.json"}) {
+    EXPECT_EQ(test::read_file(out / "a" / file), test::read_file(out / "b" / file)) << file;
+  }
+  EXPECT_NE(test::read_file(out / "a/route_001/frames.csv"), test::read_file(out / "c/route_001/frames.csv"));
+}
+
+TEST(Simulate, CleanObservationsAreLocalizedAtTheTruth) {
+  raster::CacheReader cache(region_cache("monaco"));
+  test::ScratchDir out;
+  SimulateOptions options;
+  options.routes = 1;
+  options.frames = 12;
+  options.seed = 4;
+  auto& c = options.camera;
+  c.class_miss = c.cell_dropout = c.spurious_blobs = c.jitter_m = c.jitter_deg = c.wrong_frame = 0;
+  simulate_routes(cache, options, out / "routes");
+  const Route route = read_route(out / "routes/route_000");
+  LocalizeOptions lo;
+  lo.filter.width = lo.filter.height = 192;
+  lo.filter.threads = lo.matcher.threads = 2;
+  const auto single = localize_route(route, cache, lo, Mode::single);
+  int within = 0;
+  for (const auto& p : single.poses) {
+    within += *p.position_error_m < 1.0 && *p.heading_error_deg < 3.0;
+  }
+  // Urban, noise-free, 15 m panorama: nearly every frame alone is exact to a cell or two.
+  EXPECT_GE(within, 10) << "of 12";
+  const auto seqloc = localize_route(route, cache, lo, Mode::seqloc);
+  EXPECT_LT(*seqloc.poses.back().position_error_m, 1.0);
+  EXPECT_LT(*seqloc.poses.back().heading_error_deg, 3.0);
+
+  // The pictures of that route.
+  RenderOptions ro;
+  ro.frame = 6;
+  ro.localize = lo;
+  const auto files = render_route(cache, route, {{"single", single.poses}, {"seqloc", seqloc.poses}}, ro, out / "figures");
+  ASSERT_EQ(files.size(), 3u);
+  for (const auto& f : files) {
+    const auto bytes = test::read_file(f);
+    EXPECT_GT(bytes.size(), 1000u) << f;
+    EXPECT_EQ(bytes.substr(1, 3), "PNG") << f;
+  }
+}
+
+TEST(Simulate, RefusesBadOptionsAndARegionWithoutRoads) {
+  SimulateOptions options;
+  options.frames = 1;
+  EXPECT_THROW(options.validate(), std::invalid_argument);
+  options = {};
+  options.camera.class_miss = 1.5;
+  EXPECT_THROW(options.validate(), std::invalid_argument);
+  options = {};
+  options.max_spacing_m = 1;
+  EXPECT_THROW(options.validate(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace seqloc::pipeline
