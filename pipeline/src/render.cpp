@@ -76,13 +76,18 @@ void star(cv::Mat& m, cv::Point2d c, double r) {
   cv::polylines(m, std::vector<std::vector<cv::Point>>{pts}, true, rgb(255, 215, 0), 1, cv::LINE_AA);
 }
 
-// Red over the map with opacity growing with the mass (square root: the tails stay visible).
+// Red over the map, opacity growing from the median mass (transparent) to the largest (square
+// root: the tails stay visible; the median: a nearly flat likelihood does not paint everything).
 void overlay_mass(cv::Mat& m, const std::vector<double>& mass) {
+  std::vector<double> sorted = mass;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+  const double floor = sorted[sorted.size() / 2];
   const double top = *std::max_element(mass.begin(), mass.end());
-  if (!(top > 0)) return;
+  if (!(top > floor)) return;
   for (int v = 0; v < m.rows; ++v) {
     for (int u = 0; u < m.cols; ++u) {
-      const double a = 0.85 * std::sqrt(mass[static_cast<std::size_t>(v * m.cols + u)] / top);
+      const double a =
+          0.85 * std::sqrt(std::max(0.0, mass[static_cast<std::size_t>(v * m.cols + u)] - floor) / (top - floor));
       auto& px = m.at<Rgb>(v, u);
       px = Rgb(static_cast<std::uint8_t>((1 - a) * px[0] + a * 230), static_cast<std::uint8_t>((1 - a) * px[1] + a * 20),
                static_cast<std::uint8_t>((1 - a) * px[2] + a * 20));
