@@ -95,7 +95,7 @@ class PreprocessCommand : public Command {
     j["encode_cpu_seconds"] = r.encode_cpu_seconds;
     j["write_seconds"] = r.write_seconds;
     j["features"] = {{"nodes", r.nodes}, {"lines", r.lines}, {"areas", r.areas}, {"roads", r.roads}};
-    pipeline::write_text_file(report_path_, j.dump(2) + "\n");
+    pipeline::write_file(report_path_, j.dump(2) + "\n");
   }
 
  private:

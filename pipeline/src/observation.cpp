@@ -7,6 +7,7 @@
 
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/raster/png_codec.hpp"
 
 namespace seqloc::pipeline {
@@ -82,15 +83,7 @@ void write_observation(const std::filesystem::path& path, const Observation& obs
     rgba[4 * i + 3] = observation.visible[i] ? 255 : 0;
   }
   const auto png = raster::encode_png_rgba8(rgba, observation.size, observation.size);
-  const std::filesystem::path partial = path.string() + ".partial";
-  {
-    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
-    out.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
-    if (!out.flush()) throw DataError(partial.string() + ": cannot write");
-  }
-  std::error_code ec;
-  std::filesystem::rename(partial, path, ec);
-  if (ec) throw DataError(path.string() + ": cannot rename into place: " + ec.message());
+  write_file(path, std::string(png.begin(), png.end()));
 }
 
 }  // namespace seqloc::pipeline

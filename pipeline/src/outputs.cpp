@@ -35,11 +35,11 @@ nlohmann::ordered_json metrics_json(const Metrics& m) {
 
 }  // namespace
 
-void write_text_file(const std::filesystem::path& path, const std::string& text) {
+void write_file(const std::filesystem::path& path, const std::string& bytes) {
   const std::filesystem::path tmp = path.string() + ".tmp";
   {
     std::ofstream out(tmp, std::ios::binary);
-    out << text;
+    out << bytes;
     out.close();
     if (!out) throw DataError(path.string() + ": cannot write");
   }
@@ -61,7 +61,7 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
         << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
         << optional_number(p.longitudinal_error_m, 4) << "\n";
   }
-  write_text_file(dir / "poses.csv", csv.str());
+  write_file(dir / "poses.csv", csv.str());
 
   // trajectory.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw counter-clockwise from
   // the grid's x axis (east): 90 degrees minus the grid heading.
@@ -72,7 +72,7 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
                   std::sin(yaw / 2), std::cos(yaw / 2));
     tum << line;
   }
-  write_text_file(dir / "trajectory.tum", tum.str());
+  write_file(dir / "trajectory.tum", tum.str());
 
   // track.geojson (RFC 7946: WGS84, [lon, lat]).
   nlohmann::ordered_json features = nlohmann::json::array();
@@ -92,13 +92,13 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
                         {"properties", props}});
   }
   const nlohmann::ordered_json track = {{"type", "FeatureCollection"}, {"features", features}};
-  write_text_file(dir / "track.geojson", track.dump() + "\n");
+  write_file(dir / "track.geojson", track.dump() + "\n");
 
   std::vector<const FramePose*> all;
   for (const auto& p : r.poses) all.push_back(&p);
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   metrics.update(metrics_json(compute_metrics(all)));
-  write_text_file(dir / "metrics.json", metrics.dump(2) + "\n");
+  write_file(dir / "metrics.json", metrics.dump(2) + "\n");
 }
 
 std::string format_table(const MetricsByMode& metrics) {
@@ -121,7 +121,7 @@ void write_summary(const std::filesystem::path& path, const MetricsByMode& metri
   nlohmann::ordered_json j;
   j["routes"] = routes;
   for (const auto& [mode, m] : metrics) j["modes"][mode] = metrics_json(m);
-  write_text_file(path, j.dump(2) + "\n");
+  write_file(path, j.dump(2) + "\n");
 }
 
 std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {

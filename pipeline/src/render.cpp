@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <sstream>
 
@@ -13,6 +12,7 @@
 
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/raster/png_codec.hpp"
 
@@ -119,15 +119,7 @@ double nice_step(double range) {
 
 void write_picture(const std::filesystem::path& path, const Picture& picture) {
   const auto png = raster::encode_png_rgb8(picture.rgb, picture.width, picture.height);
-  const std::filesystem::path partial = path.string() + ".partial";
-  {
-    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
-    out.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
-    if (!out.flush()) throw DataError(partial.string() + ": cannot write");
-  }
-  std::error_code ec;
-  std::filesystem::rename(partial, path, ec);
-  if (ec) throw DataError(path.string() + ": cannot rename into place: " + ec.message());
+  write_file(path, std::string(png.begin(), png.end()));
 }
 
 Picture map_picture(std::span<const std::uint8_t> classes_rgb, int width, int height) {

@@ -88,11 +88,9 @@ std::vector<int> walk(const RoadGraph& graph, double length_m, std::mt19937_64& 
     }
     if (options.empty()) return {};  // a dead end: this attempt fails
     std::sort(options.begin(), options.end());
-    const int chosen = options.size() == 1 || uniform(rng) < 0.7
-                           ? options.front().second
-                           : options[1 + static_cast<std::size_t>(uniform(rng) * static_cast<double>(options.size() - 1)) %
-                                         (options.size() - 1)]
-                                 .second;
+    std::size_t pick = 0;  // straight on, or now and then one of the other branches
+    if (options.size() > 1 && uniform(rng) >= 0.7) pick = std::uniform_int_distribution<std::size_t>(1, options.size() - 1)(rng);
+    const int chosen = options[pick].second;
     driven += std::hypot(graph.at(chosen).x_m - graph.at(here).x_m, graph.at(chosen).y_m - graph.at(here).y_m);
     path.push_back(chosen);
   }
@@ -372,8 +370,16 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
     std::ofstream(dir / "route.json") << route.dump(2) << '\n';
     if (progress) progress(r + 1, options.routes);
   }
-  std::filesystem::remove_all(out, ec);
-  std::filesystem::rename(partial, out);
+  // Into place: an old folder is replaced only once the new one is complete.
+  if (std::filesystem::exists(out, ec)) {
+    const std::filesystem::path old = out.string() + ".old";
+    std::filesystem::remove_all(old, ec);
+    std::filesystem::rename(out, old);
+    std::filesystem::rename(partial, out);
+    std::filesystem::remove_all(old, ec);
+  } else {
+    std::filesystem::rename(partial, out);
+  }
 }
 
 }  // namespace seqloc::pipeline

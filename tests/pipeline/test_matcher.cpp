@@ -164,7 +164,7 @@ TEST(Observation, RoundTripsThroughPng) {
   EXPECT_EQ(back.size, 9);
   EXPECT_EQ(back.classes, obs.classes);
   EXPECT_EQ(back.visible, obs.visible);
-  EXPECT_FALSE(std::filesystem::exists(dir.path() / "obs.png.partial"));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "obs.png.tmp"));
 }
 
 void write_bytes(const std::filesystem::path& path, const std::vector<std::uint8_t>& bytes) {

@@ -12,9 +12,9 @@
 
 namespace seqloc::pipeline {
 
-/// Writes a text file whole: to a temporary name beside it, then renamed over `path`. Throws
+/// Writes a file whole (text or bytes): to a temporary name beside it, then renamed over `path`. Throws
 /// DataError naming the file.
-void write_text_file(const std::filesystem::path& path, const std::string& text);
+void write_file(const std::filesystem::path& path, const std::string& bytes);
 
 /// Writes the four files of one route and mode into `dir` (which must exist).
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& result);
