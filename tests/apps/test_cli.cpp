@@ -28,7 +28,8 @@ int count_lines(const std::string& s) { return static_cast<int>(std::count(s.beg
 TEST(Cli, HelpOnEverySubcommand) {
   for (const std::vector<std::string>& args :
        {std::vector<std::string>{"--help"}, {"preprocess", "--help"}, {"cache", "--help"}, {"cache", "info", "--help"},
-        {"cache", "merge", "--help"}}) {
+        {"cache", "merge", "--help"}, {"localize", "--help"}, {"evaluate", "--help"}, {"simulate", "--help"},
+        {"render", "--help"}}) {
     const auto r = run_seqloc(args);
     EXPECT_EQ(r.exit_code, 0) << args[0];
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
@@ -37,6 +38,13 @@ TEST(Cli, HelpOnEverySubcommand) {
   for (const char* option : {"--bbox", "--max-distance", "--threads", "--shard", "--progress", "--overwrite", "-o"}) {
     EXPECT_NE(help.find(option), std::string::npos) << option;
   }
+  const auto simulate = run_seqloc({"simulate", "--help"}).out;
+  for (const char* option : {"--routes", "--frames", "--seed", "--range", "--fov", "--class-miss", "--wrong-frames", "--clean"}) {
+    EXPECT_NE(simulate.find(option), std::string::npos) << option;
+  }
+  const auto render = run_seqloc({"render", "--help"}).out;
+  for (const char* option : {"--localized", "--frame", "-o"}) EXPECT_NE(render.find(option), std::string::npos) << option;
+  EXPECT_NE(run_seqloc({"localize", "--help"}).out.find("--matcher-temperature"), std::string::npos);
   EXPECT_NE(run_seqloc({"--version"}).out.find("seqloc "), std::string::npos);
 }
 
