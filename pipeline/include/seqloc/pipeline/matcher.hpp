@@ -24,7 +24,7 @@ struct MatcherConfig {
   int size = 128;        ///< the volume's side H = W in 0.5 m cells (even)
   int headings = 256;    ///< N heading bins (a multiple of 4)
   double temperature = 8.0;  ///< the log-likelihood is divided by this
-  double miss_rate = 0.3;    ///< P(observed background | the map has a class there)
+  double miss_rate = 0.75;   ///< P(observed background | the map has a class there); see docs/matcher.md
   double spurious_rate = 0.05;  ///< P(observed some class | the map has background)
   double confusion_rate = 0.1;  ///< P(observed another class of the channel | the map has a class)
   double tolerance_m = 1.0;     ///< sigma of the Gaussian that blurs the map's class indicators
