@@ -134,6 +134,19 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     origin_v = static_cast<std::int64_t>(std::lround(region_v)) - H / 2;
   };
 
+  // Re-centres the window by whole cells on window position (u, v) when it lies within the
+  // margin of an edge (or outside).
+  auto keep_in_window = [&](double u, double v) {
+    const double mu = options.recentre_margin * W, mv = options.recentre_margin * H;
+    if (u >= mu && u <= W - 1 - mu && v >= mv && v <= H - 1 - mv) return;
+    const auto du = static_cast<int>(std::lround(u)) - W / 2, dv = static_cast<int>(std::lround(v)) - H / 2;
+    filter->recentre(du, dv);
+    origin_u += du;
+    origin_v += dv;
+    load_road();
+    ++result.recentres;
+  };
+
   using Clock = std::chrono::steady_clock;
   auto seconds_since = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
   // Reading and preparing a volume (run ahead of the filter on a background task).
@@ -236,19 +249,8 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       }
       // A crop far from the window (the estimate wandered off while the frames' evidence stayed
       // around the GPS-like crops) brings the window to it: evidence outside the window is lost.
-      {
-        const double cu = region.pixel_u(crop.x) - static_cast<double>(origin_u);
-        const double cv = region.pixel_v(crop.y) - static_cast<double>(origin_v);
-        const double mu = options.recentre_margin * W, mv = options.recentre_margin * H;
-        if (cu < mu || cu > W - 1 - mu || cv < mv || cv > H - 1 - mv) {
-          const auto du = static_cast<int>(std::lround(cu)) - W / 2, dv = static_cast<int>(std::lround(cv)) - H / 2;
-          filter->recentre(du, dv);
-          origin_u += du;
-          origin_v += dv;
-          load_road();
-          ++result.recentres;
-        }
-      }
+      keep_in_window(region.pixel_u(crop.x) - static_cast<double>(origin_u),
+                     region.pixel_v(crop.y) - static_cast<double>(origin_v));
       const filter::CropPose window_crop{region.pixel_u(crop.x) - static_cast<double>(origin_u),
                                          region.pixel_v(crop.y) - static_cast<double>(origin_v), crop.rotation_deg};
       std::optional<filter::GpsFix> fix;
@@ -268,17 +270,8 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       pose.entropy = r.frame_entropy;
       pose.etu_weight = r.etu_weight;
       pose.relocalized = r.relocalized;
-      // Keep the window on the vehicle: re-centre by whole cells near an edge.
-      const double mu = options.recentre_margin * W, mv = options.recentre_margin * H;
-      if (r.pose.u < mu || r.pose.u > W - 1 - mu || r.pose.v < mv || r.pose.v > H - 1 - mv) {
-        const auto du = static_cast<int>(std::lround(r.pose.u)) - W / 2;
-        const auto dv = static_cast<int>(std::lround(r.pose.v)) - H / 2;
-        filter->recentre(du, dv);
-        origin_u += du;
-        origin_v += dv;
-        load_road();
-        ++result.recentres;
-      }
+      // Keep the window on the vehicle.
+      keep_in_window(r.pose.u, r.pose.v);
     }
     double gamma = 0;
     const osm::GeoPoint geo = region.projection.reverse({x, y}, gamma);
