@@ -40,7 +40,7 @@ int main(int argc, char** argv) {
     observations.push_back(pipeline::render_observation(cache, pose, camera));
     codes += pipeline::BevMatcher::observed_codes(observations.back()).size();
     const int side = config.size + observations.back().size - 1;
-    const auto u = std::llround((a.x_m - cache.grid().min_x()) / 0.5), v = std::llround((cache.grid().max_y() - a.y_m) / 0.5);
+    const auto u = std::llround(cache.grid().region_u(a.x_m) + 0.5), v = std::llround(cache.grid().region_v(a.y_m) + 0.5);
     maps.emplace_back();
     cache.read_classes(u - side / 2, v - side / 2, side, side, maps.back(), true);
   }

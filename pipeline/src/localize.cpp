@@ -28,8 +28,8 @@ struct RegionFrame {
   raster::RegionGrid grid;
   osm::RegionProjection projection;
 
-  [[nodiscard]] double pixel_u(double x) const { return (x - grid.min_x()) / kCellM - 0.5; }
-  [[nodiscard]] double pixel_v(double y) const { return (grid.max_y() - y) / kCellM - 0.5; }
+  [[nodiscard]] double pixel_u(double x) const { return grid.region_u(x); }
+  [[nodiscard]] double pixel_v(double y) const { return grid.region_v(y); }
   [[nodiscard]] double x_of(double u) const { return grid.min_x() + (u + 0.5) * kCellM; }
   [[nodiscard]] double y_of(double v) const { return grid.max_y() - (v + 0.5) * kCellM; }
 };
@@ -67,8 +67,8 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
     const GridCrop crop = frame_crop(f, cache.grid(), cache.metadata().projection());
     // The crop centre is a cell corner: region pixel edges at integers.
     const int side = matcher->map_side(obs.size);
-    const auto corner_u = static_cast<std::int64_t>(std::lround((crop.x - cache.grid().min_x()) / kCellM));
-    const auto corner_v = static_cast<std::int64_t>(std::lround((cache.grid().max_y() - crop.y) / kCellM));
+    const auto corner_u = std::llround(cache.grid().region_u(crop.x) + 0.5);
+    const auto corner_v = std::llround(cache.grid().region_v(crop.y) + 0.5);
     std::vector<std::uint8_t> map;
     cache.read_classes(corner_u - side / 2, corner_v - side / 2, side, side, map, /*fill_outside=*/true);
     const auto values = matcher->match(obs, map);

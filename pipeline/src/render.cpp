@@ -191,7 +191,7 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
   std::vector<std::filesystem::path> written;
   const auto& grid = cache.grid();
   const auto projection = cache.metadata().projection();
-  auto pixel_of = [&](double x, double y) { return cv::Point2d((x - grid.min_x()) / kCellM - 0.5, (grid.max_y() - y) / kCellM - 0.5); };
+  auto pixel_of = [&](double x, double y) { return cv::Point2d(grid.region_u(x), grid.region_v(y)); };
   std::vector<cv::Point2d> truth;  // region pixels
   for (const auto& f : route.frames) {
     if (!f.truth) continue;
@@ -223,8 +223,8 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       // The frame's own likelihood, placed by its crop into the window.
       frame_mass.assign(b.slice_cells(), 0.0);
       const auto& f = *in.frame;
-      const double cu = (in.crop.x - grid.min_x()) / kCellM - 0.5 - static_cast<double>(ou);
-      const double cv_ = (grid.max_y() - in.crop.y) / kCellM - 0.5 - static_cast<double>(ov);
+      const double cu = grid.region_u(in.crop.x) - static_cast<double>(ou);
+      const double cv_ = grid.region_v(in.crop.y) - static_cast<double>(ov);
       const double rot = in.crop.rotation_deg * M_PI / 180.0, scale = f.cell_m / kCellM;
       const std::size_t plane = static_cast<std::size_t>(f.height) * static_cast<std::size_t>(f.width);
       for (int v = 0; v < f.height; ++v) {

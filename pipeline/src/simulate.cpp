@@ -117,12 +117,6 @@ std::vector<GridPose> sample_poses(const RoadGraph& graph, const std::vector<int
   return poses;
 }
 
-struct PixelFrame {
-  double min_x, max_y;
-  [[nodiscard]] double u(double x) const { return (x - min_x) / kCellM - 0.5; }
-  [[nodiscard]] double v(double y) const { return (max_y - y) / kCellM - 0.5; }
-};
-
 int poisson(double mean, std::mt19937_64& rng) {
   if (mean <= 0) return 0;
   return std::poisson_distribution<int>(mean)(rng);
@@ -208,8 +202,7 @@ void SimulateOptions::validate() const {
 Observation render_observation(raster::CacheReader& cache, const GridPose& pose, const ObservationModel& camera) {
   const int t = camera.side();
   const double centre = (t - 1) / 2.0;
-  const PixelFrame px{cache.grid().min_x(), cache.grid().max_y()};
-  const double pu = px.u(pose.x), pv = px.v(pose.y);
+  const double pu = cache.grid().region_u(pose.x), pv = cache.grid().region_v(pose.y);
   const int window = t + 4;
   const std::int64_t u0 = std::llround(pu) - window / 2, v0 = std::llround(pv) - window / 2;
   std::vector<std::uint8_t> map;

@@ -49,6 +49,11 @@ struct RegionGrid {
   [[nodiscard]] double min_y() const { return static_cast<double>(ty0) * kTileM; }
   [[nodiscard]] double max_y() const { return static_cast<double>(ty1) * kTileM; }
 
+  /// Continuous region pixel coordinates of a point in the region CRS: integral at cell centres,
+  /// (0, 0) the north-west cell.
+  [[nodiscard]] double region_u(double x_m) const { return (x_m - min_x()) / kCellM - 0.5; }
+  [[nodiscard]] double region_v(double y_m) const { return (max_y() - y_m) / kCellM - 0.5; }
+
   /// Global pixel of the region pixel (0, 0) (its north-west cell).
   [[nodiscard]] Pixel origin() const { return {tx0 * kTilePx, -ty1 * kTilePx}; }
   /// Global pixel of the north-west cell of GeoPackage tile (col, row).
