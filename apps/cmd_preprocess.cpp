@@ -12,7 +12,6 @@
 #include "seqloc/pipeline/preprocess.hpp"
 
 namespace seqloc::app {
-namespace {
 
 osm::GeoBox parse_bbox(const std::string& text) {
   osm::GeoBox box;
@@ -23,6 +22,8 @@ osm::GeoBox parse_bbox(const std::string& text) {
   }
   return box;
 }
+
+namespace {
 
 class PreprocessCommand : public Command {
  public:

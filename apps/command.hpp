@@ -9,6 +9,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "seqloc/osm/features.hpp"
+
 namespace seqloc::app {
 
 /// Exit codes: 0 success, 1 failure (bad data, I/O), 2 usage.
@@ -67,6 +69,9 @@ class ProgressBar {
   std::chrono::steady_clock::time_point last_{};
 };
 
+/// "lon0,lat0,lon1,lat1" in decimal degrees; throws UsageError naming the option otherwise.
+osm::GeoBox parse_bbox(const std::string& text);
+
 /// --progress / --no-progress resolved against whether stderr is a terminal.
 bool progress_wanted(int flag);
 
@@ -77,5 +82,7 @@ std::unique_ptr<Command> make_localize_command();
 std::unique_ptr<Command> make_evaluate_command();
 std::unique_ptr<Command> make_simulate_command();
 std::unique_ptr<Command> make_render_command();
+std::unique_ptr<Command> make_serve_command();
+std::unique_ptr<Command> make_export_command();
 
 }  // namespace seqloc::app

@@ -66,6 +66,10 @@ int main(int argc, char** argv) {
   add(&app, "evaluate", "Recompute the recall table from localize outputs", app::make_evaluate_command());
   add(&app, "simulate", "Simulate routes with BEV observations along a cache's roads", app::make_simulate_command());
   add(&app, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time", app::make_render_command());
+  add(&app, "serve", "Serve region caches over HTTP: tiles, crops, points, WMTS, the viewer page",
+      app::make_serve_command());
+  add(&app, "export", "Export a layer of a region cache as a Cloud Optimized GeoTIFF, or the cache as a VRT",
+      app::make_export_command());
   CLI::App* cache = app.add_subcommand("cache", "Inspect and combine region caches");
   cache->require_subcommand(1);
   add(cache, "info", "Print a cache's metadata", app::make_cache_info_command());

@@ -43,3 +43,14 @@ add_library(seqloc_opencv INTERFACE)
 target_include_directories(seqloc_opencv SYSTEM INTERFACE ${OPENCV_INCLUDE_DIR})
 target_link_libraries(seqloc_opencv INTERFACE ${OPENCV_IMGPROC_LIBRARY} ${OPENCV_CORE_LIBRARY})
 add_library(seqloc::opencv ALIAS seqloc_opencv)
+
+# GDAL: GeoTIFF and COG output of the serve module (libgdal-dev ships a CMake config).
+find_package(GDAL CONFIG REQUIRED)
+
+# cpp-httplib: Debian builds it as a shared library; its pkg-config file carries the feature
+# macros the library was compiled with, which every user must define alike (they change its ABI).
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
+add_library(seqloc_httplib INTERFACE)
+target_link_libraries(seqloc_httplib INTERFACE PkgConfig::HTTPLIB Threads::Threads)
+add_library(seqloc::httplib ALIAS seqloc_httplib)

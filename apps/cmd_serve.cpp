@@ -1,0 +1,142 @@
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <pthread.h>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "command.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/serve/geotiff.hpp"
+#include "seqloc/serve/server.hpp"
+#include "seqloc/serve/service.hpp"
+
+namespace seqloc::app {
+namespace {
+
+class ServeCommand : public Command {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("caches", caches_, "Region caches (GeoPackage); each is a region named after its file")
+        ->required()
+        ->check(CLI::ExistingFile);
+    app.add_option("--bind", server_.bind, "Address to listen on (loopback unless told otherwise)")
+        ->capture_default_str();
+    app.add_option("--port", server_.port, "Port (0: any free port, printed at start)")->capture_default_str();
+    app.add_option("--threads", server_.threads, "Worker threads, one connection each")->capture_default_str();
+    app.add_option("--max-pending", server_.max_pending,
+                   "Connections that may wait for a worker; beyond that they get 503")
+        ->capture_default_str();
+    app.add_option("--timeout", server_.timeout_s, "Read/write timeout of a connection, seconds")->capture_default_str();
+    app.add_option("--max-crop-m", service_.max_crop_m, "Largest crop side served, metres")->capture_default_str();
+    app.add_option("--prior-sigma", service_.layers.prior_sigma_m, "Sigma of the road_prior layer, metres")
+        ->capture_default_str();
+    app.add_option("--web", web_, "Directory of the viewer page (default: the one built with seqloc, if any)");
+    app.add_flag("--access-log", server_.access_log, "One line per request on stderr");
+  }
+
+  int run() override {
+    if (service_.max_crop_m <= 0 || !(service_.layers.prior_sigma_m > 0)) {
+      throw pipeline::UsageError("--max-crop-m and --prior-sigma must be positive");
+    }
+    if (!web_.empty()) {
+      service_.web_root = web_;
+    } else if (std::error_code ec; std::filesystem::is_regular_file(std::filesystem::path(SEQLOC_WEB_DIR) / "index.html", ec)) {
+      service_.web_root = SEQLOC_WEB_DIR;
+    }
+    server_.validate();
+    // SIGINT and SIGTERM are taken by one thread with sigwait, which stops the server cleanly;
+    // every other thread inherits the blocked mask.
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGINT);
+    sigaddset(&signals, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+    serve::Service service(caches_, service_);
+    serve::HttpServer server(service, server_);
+    server.bind();
+    std::printf("seqloc serve: http://%s:%d/ (%zu region%s: ", server_.bind.c_str(), server.port(), caches_.size(),
+                caches_.size() == 1 ? "" : "s");
+    const auto ids = service.region_ids();
+    for (std::size_t i = 0; i < ids.size(); ++i) std::printf("%s%s", i ? ", " : "", ids[i].c_str());
+    std::printf(")%s\n", service_.web_root.empty() ? "; no viewer page" : "");
+    std::fflush(stdout);
+    std::thread waiter([&] {
+      int signal = 0;
+      sigwait(&signals, &signal);
+      server.stop();
+    });
+    server.listen();
+    // listen() also returns when the socket fails: wake the waiter either way.
+    pthread_kill(waiter.native_handle(), SIGTERM);
+    waiter.join();
+    std::fprintf(stderr, "seqloc serve: stopped after %llu requests (%llu turned away at the connection limit)\n",
+                 static_cast<unsigned long long>(service.stats().requests),
+                 static_cast<unsigned long long>(server.rejected()));
+    return kExitOk;
+  }
+
+ private:
+  std::vector<std::filesystem::path> caches_;
+  serve::ServerOptions server_;
+  serve::ServiceOptions service_;
+  std::filesystem::path web_;
+};
+
+class ExportCommand : public Command {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("cache", cache_, "Region cache (GeoPackage)")->required()->check(CLI::ExistingFile);
+    app.add_option("--layer", layer_, "classes, road_distance or road_prior")->capture_default_str();
+    app.add_option("--bbox", bbox_, "lon0,lat0,lon1,lat1 to export (default: the whole region)");
+    app.add_option("--prior-sigma", options_.layer_options.prior_sigma_m, "Sigma of road_prior, metres")
+        ->capture_default_str();
+    app.add_option("-o,--output", out_, "Output: .tif (Cloud Optimized GeoTIFF) or .vrt (the whole cache)")->required();
+    app.add_flag("--overwrite", overwrite_, "Replace an existing output");
+    app.add_flag("--progress,!--no-progress", progress_, "Show progress (default: when stderr is a terminal)");
+  }
+
+  int run() override {
+    std::error_code ec;
+    if (std::filesystem::exists(out_, ec) && !overwrite_) {
+      throw pipeline::UsageError(out_.string() + ": already exists; pass --overwrite to replace it");
+    }
+    raster::CacheReader cache(cache_, 256);
+    const std::string ext = out_.extension().string();
+    if (ext == ".vrt") {
+      if (!bbox_.empty()) throw pipeline::UsageError("--bbox: a VRT covers the whole cache; export a .tif for a box");
+      serve::write_region_vrt(cache, out_);
+      std::printf("wrote %s (classes: bands 1-3, road distance in metres: band 4)\n", out_.c_str());
+      return kExitOk;
+    }
+    if (ext != ".tif" && ext != ".tiff") throw pipeline::UsageError(out_.string() + ": the output must end in .tif or .vrt");
+    const auto layer = serve::parse_layer(layer_);
+    if (!layer) throw pipeline::UsageError("--layer '" + layer_ + "': classes, road_distance or road_prior");
+    options_.layer = *layer;
+    if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
+    if (!(options_.layer_options.prior_sigma_m > 0)) throw pipeline::UsageError("--prior-sigma must be positive");
+    ProgressBar bar(progress_wanted(progress_), "export");
+    options_.progress = [&](long long done, long long total) { bar.update(done, total); };
+    serve::export_cog(cache, options_, out_);
+    bar.done();
+    std::printf("wrote %s (%s, Cloud Optimized GeoTIFF)\n", out_.c_str(), layer_.c_str());
+    return kExitOk;
+  }
+
+ private:
+  std::filesystem::path cache_, out_;
+  std::string layer_ = "classes";
+  std::string bbox_;
+  serve::ExportOptions options_;
+  bool overwrite_ = false;
+  int progress_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Command> make_serve_command() { return std::make_unique<ServeCommand>(); }
+std::unique_ptr<Command> make_export_command() { return std::make_unique<ExportCommand>(); }
+
+}  // namespace seqloc::app

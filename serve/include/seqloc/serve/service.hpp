@@ -1,0 +1,102 @@
+#pragma once
+// The road-prior service (docs/serve.md): every endpoint of `seqloc serve` as a function from a
+// request to a response, with no sockets involved, so that routing, parameters, errors, ETags and
+// limits are tested (and fuzzed) directly. server.hpp puts it behind HTTP.
+
+#include <cstdint>
+#include <filesystem>
+#include <list>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "seqloc/raster/cache.hpp"
+#include "seqloc/serve/map_layers.hpp"
+
+namespace seqloc::serve {
+
+struct Request {
+  std::string method = "GET";
+  std::string path;                                  ///< decoded path, without the query
+  std::multimap<std::string, std::string> query;    ///< decoded parameters
+  std::string if_none_match;                         ///< the If-None-Match header, if any
+  std::string base_url;  ///< scheme and authority for absolute links ("http://127.0.0.1:8080"); empty: relative
+};
+
+struct Response {
+  int status = 200;
+  std::string content_type = "application/json";
+  std::shared_ptr<const std::string> body;           ///< shared with the response cache
+  std::vector<std::pair<std::string, std::string>> headers;
+
+  [[nodiscard]] const std::string& text() const;
+};
+
+struct ServiceOptions {
+  LayerOptions layers;
+  double max_crop_m = kDefaultMaxCropM;              ///< largest crop side
+  std::size_t response_cache_bytes = 256u << 20;     ///< encoded tiles kept in memory
+  std::size_t tile_lru = 256;                        ///< decoded tiles kept per region
+  /// Files of the viewer page, served at `/` and `/viewer/NAME`; none when empty.
+  std::filesystem::path web_root;
+  int tile_max_age_s = 3600;                         ///< Cache-Control max-age of tiles and crops
+};
+
+/// A configuration that cannot be served (a missing cache, two regions of one id); names the file.
+class ServiceError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+class Service {
+ public:
+  /// Opens every cache (region id = the file name without `.gpkg`); loads the viewer's files.
+  Service(const std::vector<std::filesystem::path>& caches, ServiceOptions options);
+  ~Service();
+  Service(const Service&) = delete;
+  Service& operator=(const Service&) = delete;
+
+  /// Answers one request; never throws for anything a client sends.
+  [[nodiscard]] Response handle(const Request& request);
+
+  [[nodiscard]] std::vector<std::string> region_ids() const;
+  [[nodiscard]] raster::CacheReader& region(const std::string& id);
+
+  struct Stats {
+    std::uint64_t requests = 0, cache_hits = 0;
+  };
+  [[nodiscard]] Stats stats() const;
+
+ private:
+  struct Region;
+  Response route(const Request& request);
+  Response tile(Region& region, std::string_view layer, std::string_view col, std::string_view file,
+                const Request& request);
+  Response crop(Region& region, const Request& request, bool sidecar_only);
+  Response point(Region& region, std::string_view where);
+  Response tilejson(const Region& region, const Request& request) const;
+  Response wmts(const Region& region, const Request& request) const;
+  Response catalog(const Request& request) const;
+  Response static_file(std::string_view name) const;
+
+  ServiceOptions options_;
+  std::map<std::string, std::unique_ptr<Region>> regions_;
+  std::map<std::string, std::pair<std::string, std::shared_ptr<const std::string>>> web_files_;  // name -> type, body
+
+  // Encoded tiles by request key, least recently used first out, bounded in bytes.
+  mutable std::mutex cache_mutex_;
+  std::list<std::pair<std::string, Response>> lru_;
+  std::unordered_map<std::string, std::list<std::pair<std::string, Response>>::iterator> lru_index_;
+  std::size_t lru_bytes_ = 0;
+  Stats stats_;
+};
+
+/// A JSON error body {"error": {"status": S, "message": M}} with that status.
+[[nodiscard]] Response error_response(int status, const std::string& message);
+
+}  // namespace seqloc::serve
