@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 #include "seqloc/pipeline/render.hpp"
@@ -135,8 +136,16 @@ MapBlock read_tile(raster::CacheReader& cache, MapLayer layer, std::int64_t col,
                     options);
 }
 
-MapBlock read_crop(raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
-                   const std::vector<MapLayer>& layers, const LayerOptions& options, double max_size_m) {
+namespace {
+std::string metres(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+}  // namespace
+
+CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
+                       double max_size_m) {
   using Kind = RequestError::Kind;
   if (!std::isfinite(lat_deg) || !std::isfinite(lon_deg) || std::abs(lat_deg) > 90 || std::abs(lon_deg) > 180) {
     throw RequestError(Kind::bad_request, "lat/lon: not a WGS84 coordinate");
@@ -145,25 +154,30 @@ MapBlock read_crop(raster::CacheReader& cache, double lat_deg, double lon_deg, d
     throw RequestError(Kind::bad_request, "size_m: must be at least one cell (0.5 m)");
   }
   if (size_m > max_size_m) {
-    throw RequestError(Kind::bad_request, "size_m: " + std::to_string(size_m) + " m is above the limit of " +
-                                              std::to_string(max_size_m) + " m");
+    throw RequestError(Kind::bad_request, "size_m: " + metres(size_m) + " m is above the limit of " +
+                                              metres(max_size_m) + " m");
   }
-  if (layers.empty()) throw RequestError(Kind::bad_request, "layers: no layer requested");
   const auto& grid = cache.grid();
   const osm::GridPoint p = cache.metadata().projection().forward({lat_deg, lon_deg});
   if (!(p.x_m >= grid.min_x() && p.x_m < grid.max_x() && p.y_m >= grid.min_y() && p.y_m < grid.max_y())) {
-    throw RequestError(Kind::not_found, "the point (" + std::to_string(lat_deg) + ", " + std::to_string(lon_deg) +
-                                            ") is outside the region");
+    throw RequestError(Kind::not_found, "the point (lat " + metres(lat_deg) + ", lon " + metres(lon_deg) +
+                                            ") is outside the region of " + cache.path().filename().string());
   }
   const int n = static_cast<int>(std::lround(size_m / raster::kCellM));
-  // Region pixel coordinates, integral at cell centres: an odd side centres on the cell holding
-  // the point, an even side on the cell corner nearest to it.
+  // Region pixel coordinates are integral at cell centres: an odd side centres on the cell
+  // holding the point, an even side on the cell corner nearest to it (corner c lies at c - 0.5).
   const double u = grid.region_u(p.x_m), v = grid.region_v(p.y_m);
-  const std::int64_t u0 = n % 2 ? static_cast<std::int64_t>(std::lround(u)) - n / 2
-                                : static_cast<std::int64_t>(std::floor(u + 0.5 + 0.5)) - n / 2;
-  const std::int64_t v0 = n % 2 ? static_cast<std::int64_t>(std::lround(v)) - n / 2
-                                : static_cast<std::int64_t>(std::floor(v + 0.5 + 0.5)) - n / 2;
-  return read_block(cache, u0, v0, n, n, layers, options, /*fill_outside=*/true);
+  const auto centre = [n](double t) {
+    return n % 2 ? static_cast<std::int64_t>(std::floor(t + 0.5)) : static_cast<std::int64_t>(std::floor(t + 1.0));
+  };
+  return {centre(u) - n / 2, centre(v) - n / 2, n};
+}
+
+MapBlock read_crop(raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
+                   const std::vector<MapLayer>& layers, const LayerOptions& options, double max_size_m) {
+  const CropWindow w = locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m);
+  if (layers.empty()) throw RequestError(RequestError::Kind::bad_request, "layers: no layer requested");
+  return read_block(cache, w.u0, w.v0, w.size, w.size, layers, options, /*fill_outside=*/true);
 }
 
 std::string encode_npy(const MapBlock& block) {

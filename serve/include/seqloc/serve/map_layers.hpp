@@ -78,6 +78,16 @@ struct LayerOptions {
 /// Largest crop side served unless configured otherwise: 1,024 m (2,048 cells).
 inline constexpr double kDefaultMaxCropM = 1024;
 
+/// Where a crop lies: its north-west region pixel and its side in cells.
+struct CropWindow {
+  std::int64_t u0 = 0, v0 = 0;
+  int size = 0;
+};
+
+/// The window of read_crop (below), validated the same way.
+[[nodiscard]] CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
+                                     double max_size_m = kDefaultMaxCropM);
+
 /// A square crop of side `size_m` (rounded to whole cells) around a WGS84 point, in region-grid
 /// coordinates: its centre (crop_x, crop_y of conventions.md section 4) is the centre of the
 /// cell holding the point (odd sides) or the cell corner nearest to it (even sides), so the crop's

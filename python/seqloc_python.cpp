@@ -1,0 +1,244 @@
+// The `seqloc` Python module (docs/python.md): region caches and the SeqLoc filter for Python
+// tools, e.g. a PyTorch loop that feeds a backbone the map crop around a GPS fix and runs SeqLoc
+// online on its output. Arrays come back as NumPy arrays that own the C++ buffers (no copies);
+// volumes go in as NumPy arrays read in place.
+
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/filter/types.hpp"
+#include "seqloc/raster/cache.hpp"
+#include "seqloc/serve/map_layers.hpp"
+
+namespace py = pybind11;
+using namespace seqloc;
+
+namespace {
+
+/// A NumPy array that takes ownership of a vector's buffer.
+template <class T>
+py::array_t<T> adopt(std::vector<T>&& values, std::vector<py::ssize_t> shape) {
+  auto* owner = new std::vector<T>(std::move(values));
+  py::capsule free_owner(owner, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+  return py::array_t<T>(shape, owner->data(), free_owner);
+}
+
+class PyCache {
+ public:
+  PyCache(const std::string& path, std::size_t lru_tiles) : cache_(std::make_unique<raster::CacheReader>(path, lru_tiles)) {}
+
+  /// {"classes": (H, W, 3) uint8, "road_distance": (H, W) float32 metres, "road_prior": (H, W)
+  /// float32, plus the crop's georeference}.
+  py::dict crop(double lat, double lon, double size_m, const std::vector<std::string>& layers, double prior_sigma_m,
+                double max_size_m) {
+    serve::CropWindow w;
+    {
+      py::gil_scoped_release release;
+      w = serve::locate_crop(*cache_, lat, lon, size_m, max_size_m);
+    }
+    const auto n = static_cast<py::ssize_t>(w.size);
+    py::dict out;
+    const auto& grid = cache_->grid();
+    const double west = grid.min_x() + static_cast<double>(w.u0) * raster::kCellM;
+    const double north = grid.max_y() - static_cast<double>(w.v0) * raster::kCellM;
+    out["crop_x"] = west + w.size * raster::kCellM / 2;
+    out["crop_y"] = north - w.size * raster::kCellM / 2;
+    out["cell_m"] = raster::kCellM;
+    out["geotransform"] = py::make_tuple(west, raster::kCellM, 0.0, north, 0.0, -raster::kCellM);
+    out["crs_wkt"] = cache_->metadata().projection().wkt();
+    std::vector<std::uint16_t> cm;
+    for (const auto& name : layers) {
+      const auto layer = serve::parse_layer(name);
+      if (!layer) throw py::value_error("unknown layer '" + name + "' (classes, road_distance, road_prior)");
+      if (*layer == serve::MapLayer::classes) {
+        std::vector<std::uint8_t> rgb;
+        {
+          py::gil_scoped_release release;
+          cache_->read_classes(w.u0, w.v0, w.size, w.size, rgb, true);
+        }
+        out["classes"] = adopt(std::move(rgb), {n, n, 3});
+        continue;
+      }
+      if (cm.empty()) {
+        py::gil_scoped_release release;
+        cache_->read_road_distance(w.u0, w.v0, w.size, w.size, cm, true);
+      }
+      std::vector<float> values(cm.size());
+      if (*layer == serve::MapLayer::road_distance) {
+        for (std::size_t i = 0; i < cm.size(); ++i) values[i] = static_cast<float>(cm[i]) * 0.01f;
+      } else {
+        const double k = -1.0 / (2.0 * prior_sigma_m * prior_sigma_m);
+        for (std::size_t i = 0; i < cm.size(); ++i) {
+          const double d = cm[i] * 0.01;
+          values[i] = static_cast<float>(std::exp(k * d * d));
+        }
+      }
+      out[py::str(name)] = adopt(std::move(values), {n, n});
+    }
+    return out;
+  }
+
+  py::dict info() const {
+    const auto& m = cache_->metadata();
+    py::dict d;
+    d["path"] = cache_->path().string();
+    d["source_file"] = m.source_file;
+    d["centre_lat"] = m.centre_lat;
+    d["centre_lon"] = m.centre_lon;
+    d["tiles"] = py::make_tuple(m.grid.tiles_wide(), m.grid.tiles_high());
+    d["extent"] = py::make_tuple(m.grid.min_x(), m.grid.min_y(), m.grid.max_x(), m.grid.max_y());
+    d["max_distance_m"] = m.max_distance_m;
+    d["crs_wkt"] = m.projection().wkt();
+    return d;
+  }
+
+  py::tuple to_grid(double lat, double lon) const {
+    const auto p = cache_->metadata().projection().forward({lat, lon});
+    return py::make_tuple(p.x_m, p.y_m);
+  }
+
+ private:
+  std::unique_ptr<raster::CacheReader> cache_;
+};
+
+filter::FilterConfig config_from(const py::dict& d) {
+  filter::FilterConfig c;
+  for (const auto& [key_obj, value] : d) {
+    const auto key = key_obj.cast<std::string>();
+    if (key == "width") c.width = value.cast<int>();
+    else if (key == "height") c.height = value.cast<int>();
+    else if (key == "headings") c.headings = value.cast<int>();
+    else if (key == "etu") c.etu = value.cast<bool>();
+    else if (key == "mgr") c.mgr = value.cast<bool>();
+    else if (key == "pas") c.pas = value.cast<bool>();
+    else if (key == "mgr_epsilon") c.mgr_epsilon = value.cast<double>();
+    else if (key == "mgr_sigma_m") c.mgr_sigma_m = value.cast<double>();
+    else if (key == "pas_radius") c.pas_radius = value.cast<int>();
+    else if (key == "relocalization_jump_m") c.relocalization_jump_m = value.cast<double>();
+    else if (key == "subbin_heading") c.subbin_heading = value.cast<bool>();
+    else if (key == "motion_noise") c.motion_noise = value.cast<bool>();
+    else if (key == "threads") c.threads = value.cast<int>();
+    else throw py::key_error("unknown filter setting '" + key + "'");
+  }
+  c.validate();
+  return c;
+}
+
+py::dict pose_dict(const filter::Pose& p) {
+  py::dict d;
+  d["u"] = p.u;
+  d["v"] = p.v;
+  d["heading_deg"] = p.heading_deg;
+  return d;
+}
+
+class PyFilter {
+ public:
+  explicit PyFilter(const py::dict& config) : filter_(config_from(config)) {}
+
+  void reset(py::object gps) {
+    if (gps.is_none()) {
+      filter_.reset_uniform();
+    } else {
+      const auto t = gps.cast<std::tuple<double, double, double>>();
+      filter_.reset_gaussian(std::get<0>(t), std::get<1>(t), std::get<2>(t));
+    }
+  }
+
+  py::dict step(const py::array& volume, std::tuple<double, double, double> odometry,
+                std::tuple<double, double, double> crop_pose, py::object road_distance, bool probabilities,
+                double cell_m) {
+    if (volume.ndim() != 3) throw py::value_error("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) + " dimensions");
+    filter::FrameVolume view;
+    py::array contiguous;
+    if (py::isinstance<py::array_t<float>>(volume)) {
+      contiguous = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(volume);
+      view.type = filter::VolumeType::float32;
+    } else if (volume.dtype().kind() == 'f' && volume.dtype().itemsize() == 2) {
+      contiguous = py::array::ensure(volume, py::array::c_style);
+      view.type = filter::VolumeType::float16;
+    } else {
+      throw py::value_error("log_volume: expected float32 or float16, got dtype " + std::string(py::str(volume.dtype())));
+    }
+    view.data = contiguous.data();
+    view.values = probabilities ? filter::VolumeValues::prob : filter::VolumeValues::log_prob;
+    view.height = static_cast<int>(volume.shape(0));
+    view.width = static_cast<int>(volume.shape(1));
+    view.bins = static_cast<int>(volume.shape(2));
+    view.cell_m = cell_m;
+    const filter::Odometry odo{std::get<0>(odometry), std::get<1>(odometry), std::get<2>(odometry)};
+    const filter::CropPose crop{std::get<0>(crop_pose), std::get<1>(crop_pose), std::get<2>(crop_pose)};
+
+    py::array_t<float, py::array::c_style | py::array::forcecast> distance;
+    const float* distance_data = nullptr;
+    const auto& c = filter_.config();
+    if (!road_distance.is_none()) {
+      distance = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(road_distance);
+      if (!distance || distance.ndim() != 2 || distance.shape(0) != c.height || distance.shape(1) != c.width) {
+        throw py::value_error("road_distance: expected a (" + std::to_string(c.height) + ", " + std::to_string(c.width) +
+                              ") float array, the window's size");
+      }
+      distance_data = distance.data();
+    } else if (c.mgr) {
+      throw py::value_error("road_distance: MGR is on and needs the window's road distance (or set mgr=False)");
+    }
+    filter::FrameResult r;
+    {
+      py::gil_scoped_release release;
+      const auto frame = filter::prepare_frame(view, c.headings, c.threads);
+      r = filter_.step(frame, crop, odo, distance_data);
+    }
+    py::dict d = pose_dict(r.pose);
+    d["argmax"] = pose_dict(r.argmax);
+    d["frame_entropy"] = r.frame_entropy;
+    d["etu_weight"] = r.etu_weight;
+    d["relocalized"] = r.relocalized;
+    d["peak_log_belief"] = r.peak_log_belief;
+    return d;
+  }
+
+  void recentre(int du, int dv) { filter_.recentre(du, dv); }
+
+ private:
+  filter::SeqLocFilter filter_;
+};
+
+}  // namespace
+
+PYBIND11_MODULE(seqloc, m) {
+  m.doc() = "seqloc: region caches (map crops, road distance and road prior) and the SeqLoc filter";
+  m.attr("__version__") = SEQLOC_VERSION;
+  py::register_exception<raster::CacheError>(m, "CacheError", PyExc_OSError);
+  py::register_exception<filter::FilterError>(m, "FilterError", PyExc_ValueError);
+  py::register_exception<serve::RequestError>(m, "RequestError", PyExc_ValueError);
+
+  py::class_<PyCache>(m, "Cache", "A region cache (GeoPackage) opened read-only")
+      .def(py::init<const std::string&, std::size_t>(), py::arg("path"), py::arg("lru_tiles") = 64)
+      .def("crop", &PyCache::crop, py::arg("lat"), py::arg("lon"), py::arg("size_m") = 128.0,
+           py::arg("layers") = std::vector<std::string>{"classes", "road_distance", "road_prior"},
+           py::arg("prior_sigma_m") = 3.0, py::arg("max_size_m") = serve::kDefaultMaxCropM,
+           "North-up crop around a WGS84 point in region-grid cells (conventions.md section 4: crop_x, crop_y)")
+      .def("to_grid", &PyCache::to_grid, py::arg("lat"), py::arg("lon"), "(x, y) in the region CRS, metres")
+      .def_property_readonly("info", &PyCache::info);
+
+  py::class_<PyFilter>(m, "Filter", "The SeqLoc filter over a window of cells (docs/filter.md)")
+      .def(py::init<const py::dict&>(), py::arg("config") = py::dict())
+      .def("reset", &PyFilter::reset, py::arg("gps") = py::none(),
+           "Start a sequence: uniform belief, or gps=(u, v, sigma_m) in window cells")
+      .def("step", &PyFilter::step, py::arg("log_volume"), py::arg("odometry") = std::make_tuple(0.0, 0.0, 0.0),
+           py::arg("crop_pose") = std::make_tuple(0.0, 0.0, 0.0), py::arg("road_distance") = py::none(),
+           py::arg("probabilities") = false, py::arg("cell_m") = 0.5,
+           "One frame: log_volume (H, W, N) float32/float16, odometry (forward_m, left_m, yaw_deg), "
+           "crop_pose (centre_u, centre_v, rotation_deg) in window cells, road_distance (height, width) "
+           "metres for MGR. Returns the pose and diagnostics.")
+      .def("recentre", &PyFilter::recentre, py::arg("du"), py::arg("dv"), "Move the window by whole cells");
+}
