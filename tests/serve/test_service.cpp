@@ -1,0 +1,353 @@
+// The road-prior service, endpoint by endpoint, on the Monaco extract: tiles against the cache's
+// own tiles, crops against the cell-centre formula of conventions.md, errors and limits, ETags, and
+// the HTTP layer's connection limit.
+
+#include <gtest/gtest.h>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <thread>
+
+#include <cpl_vsi.h>
+#include <gdal.h>
+#include <httplib.h>
+
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/serve/geotiff.hpp"
+#include "seqloc/serve/server.hpp"
+#include "seqloc/serve/service.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc::serve {
+namespace {
+
+std::filesystem::path monaco_cache() {
+  static test::ScratchDir dir;
+  static std::filesystem::path built;
+  if (built.empty()) {
+    pipeline::PreprocessOptions options;
+    options.input = test::shared_osm("monaco.osm.pbf");
+    options.output = dir / "monaco.gpkg";
+    options.threads = 2;
+    pipeline::preprocess_region(options);
+    built = options.output;
+  }
+  return built;
+}
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (test::shared_osm("monaco.osm.pbf").empty()) GTEST_SKIP() << "shared data not found";
+    service_ = std::make_unique<Service>(std::vector<std::filesystem::path>{monaco_cache()}, ServiceOptions{});
+    cache_ = std::make_unique<raster::CacheReader>(monaco_cache());
+  }
+  Response get(const std::string& path, std::multimap<std::string, std::string> query = {}) {
+    Request r;
+    r.path = path;
+    r.query = std::move(query);
+    return service_->handle(r);
+  }
+  static std::string header(const Response& r, const std::string& name) {
+    for (const auto& [k, v] : r.headers) {
+      if (k == name) return v;
+    }
+    return {};
+  }
+  /// The array part of an .npy body whose header the test checks: descr and shape.
+  template <class T>
+  static std::vector<T> npy_values(const std::string& body, const std::string& descr, const std::string& shape) {
+    const std::size_t header_len = static_cast<unsigned char>(body[8]) | (static_cast<unsigned char>(body[9]) << 8);
+    const std::string header = body.substr(10, header_len);
+    EXPECT_NE(header.find("'descr': '" + descr + "'"), std::string::npos) << header;
+    EXPECT_NE(header.find("'shape': " + shape), std::string::npos) << header;
+    EXPECT_EQ((10 + header_len) % 64, 0u);
+    std::vector<T> values((body.size() - 10 - header_len) / sizeof(T));
+    std::memcpy(values.data(), body.data() + 10 + header_len, values.size() * sizeof(T));
+    return values;
+  }
+  std::unique_ptr<Service> service_;
+  std::unique_ptr<raster::CacheReader> cache_;
+};
+
+TEST_F(ServiceTest, HealthAndCatalogDescribeTheRegion) {
+  const Response health = get("/health");
+  EXPECT_EQ(health.status, 200);
+  EXPECT_NE(health.text().find("\"ok\""), std::string::npos);
+  const Response catalog = get("/catalog");
+  ASSERT_EQ(catalog.status, 200);
+  EXPECT_NE(catalog.text().find("\"id\": \"monaco\""), std::string::npos);
+  EXPECT_NE(catalog.text().find("\"columns\": " + std::to_string(cache_->grid().tiles_wide())), std::string::npos);
+  const Response tj = get("/regions/monaco/tilejson.json");
+  ASSERT_EQ(tj.status, 200);
+  EXPECT_NE(tj.text().find("\"tilejson\": \"3.0.0\""), std::string::npos);
+  const Response wmts = get("/regions/monaco/wmts.xml");
+  ASSERT_EQ(wmts.status, 200);
+  EXPECT_NE(wmts.text().find("<MatrixWidth>" + std::to_string(cache_->grid().tiles_wide()) + "</MatrixWidth>"),
+            std::string::npos);
+}
+
+TEST_F(ServiceTest, PngTilesAreTheStoredTiles) {
+  for (auto [col, row] : {std::pair{0, 0}, std::pair{6, 7}, std::pair{13, 13}}) {
+    for (auto [layer, name] : {std::pair{raster::Layer::classes, "classes"}, std::pair{raster::Layer::road_distance, "road_distance"}}) {
+      const Response r = get("/regions/monaco/" + std::string(name) + "/" + std::to_string(col) + "/" + std::to_string(row) + ".png");
+      ASSERT_EQ(r.status, 200) << r.text();
+      EXPECT_EQ(r.content_type, "image/png");
+      const auto blob = cache_->tile_blob(layer, col, row);
+      EXPECT_EQ(r.text(), std::string(blob.begin(), blob.end()));
+    }
+  }
+}
+
+TEST_F(ServiceTest, NpyTilesHoldMetresAndTheRoadPrior) {
+  const int col = 6, row = 7;
+  const auto cm = cache_->distance_tile(col, row);
+  const auto distance = npy_values<float>(get("/regions/monaco/road_distance/6/7.npy").text(), "<f4", "(512, 512)");
+  const auto prior = npy_values<float>(get("/regions/monaco/road_prior/6/7.npy").text(), "<f4", "(512, 512)");
+  ASSERT_EQ(distance.size(), cm->size());
+  ASSERT_EQ(prior.size(), cm->size());
+  int near_road = 0;
+  for (std::size_t i = 0; i < cm->size(); ++i) {
+    const double d = (*cm)[i] / 100.0;
+    ASSERT_NEAR(distance[i], d, 1e-5);
+    // g = exp(-d^2 / (2 sigma^2)) with the default sigma of 3 m, computed here independently.
+    ASSERT_NEAR(prior[i], std::exp(-d * d / 18.0), 1e-6);
+    near_road += d < 3;
+  }
+  EXPECT_GT(near_road, 1000);  // the tile has roads, so the prior is not trivially flat
+  const auto rgb = cache_->classes_tile(col, row);
+  const auto classes = npy_values<std::uint8_t>(get("/regions/monaco/classes/6/7.npy").text(), "|u1", "(512, 512, 3)");
+  EXPECT_EQ(classes, *rgb);
+}
+
+TEST_F(ServiceTest, GeoTiffTilesCarryTheTilesGeoreference) {
+  const Response r = get("/regions/monaco/road_distance/3/9.tif");
+  ASSERT_EQ(r.status, 200) << r.text();
+  GDALAllRegister();
+  const std::string name = "/vsimem/test_tile.tif";
+  VSIFCloseL(VSIFileFromMemBuffer(name.c_str(), reinterpret_cast<GByte*>(const_cast<char*>(r.text().data())),
+                                  r.text().size(), FALSE));
+  GDALDatasetH ds = GDALOpen(name.c_str(), GA_ReadOnly);
+  ASSERT_NE(ds, nullptr);
+  double gt[6];
+  ASSERT_EQ(GDALGetGeoTransform(ds, gt), CE_None);
+  const auto& g = cache_->grid();
+  EXPECT_DOUBLE_EQ(gt[0], g.min_x() + 3 * 256.0);
+  EXPECT_DOUBLE_EQ(gt[3], g.max_y() - 9 * 256.0);
+  EXPECT_DOUBLE_EQ(gt[1], 0.5);
+  EXPECT_DOUBLE_EQ(gt[5], -0.5);
+  std::vector<float> values(512 * 512);
+  ASSERT_EQ(GDALRasterIO(GDALGetRasterBand(ds, 1), GF_Read, 0, 0, 512, 512, values.data(), 512, 512, GDT_Float32, 0, 0), CE_None);
+  const auto cm = cache_->distance_tile(3, 9);
+  for (std::size_t i = 0; i < values.size(); i += 97) ASSERT_NEAR(values[i], (*cm)[i] / 100.0, 1e-5);
+  GDALClose(ds);
+  VSIUnlink(name.c_str());
+}
+
+// conventions.md section 4: cell (v, u) of a crop lies at ((u - (W-1)/2) * 0.5, -(v - (H-1)/2) * 0.5)
+// from its centre (crop_x, crop_y). Every crop cell found that way must be the cache's cell there.
+TEST_F(ServiceTest, CropCellsSitWhereTheConventionPutsThem) {
+  const auto& g = cache_->grid();
+  const auto projection = cache_->metadata().projection();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> ux(g.min_x() + 300, g.max_x() - 300), uy(g.min_y() + 300, g.max_y() - 300);
+  for (int trial = 0; trial < 8; ++trial) {
+    const double size_m = trial % 2 ? 32.5 : 40.0;  // 65 cells (odd), 80 cells (even)
+    const osm::GeoPoint where = projection.reverse({ux(rng), uy(rng)});
+    const Response r = get("/regions/monaco/crop", {{"lat", std::to_string(where.lat_deg)},
+                                                   {"lon", std::to_string(where.lon_deg)},
+                                                   {"size_m", std::to_string(size_m)},
+                                                   {"layers", "classes,road_distance"}});
+    ASSERT_EQ(r.status, 200) << r.text();
+    const int n = static_cast<int>(size_m * 2);
+    const double cx = std::stod(header(r, "X-Seqloc-Crop-X")), cy = std::stod(header(r, "X-Seqloc-Crop-Y"));
+    // The crop's centre is within half a cell of the point, per axis (a cell centre or corner).
+    const auto p = projection.forward({std::stod(std::to_string(where.lat_deg)), std::stod(std::to_string(where.lon_deg))});
+    EXPECT_LE(std::abs(p.x_m - cx), 0.25 + 1e-6);
+    EXPECT_LE(std::abs(p.y_m - cy), 0.25 + 1e-6);
+    const auto values = npy_values<float>(r.text(), "<f4", "(" + std::to_string(n) + ", " + std::to_string(n) + ", 4)");
+    for (int v = 0; v < n; v += 7) {
+      for (int u = 0; u < n; u += 5) {
+        const double x = cx + (u - (n - 1) / 2.0) * 0.5, y = cy - (v - (n - 1) / 2.0) * 0.5;
+        const double ru = g.region_u(x), rv = g.region_v(y);
+        ASSERT_NEAR(ru, std::round(ru), 1e-9);
+        ASSERT_NEAR(rv, std::round(rv), 1e-9);
+        std::vector<std::uint8_t> rgb;
+        std::vector<std::uint16_t> cm;
+        cache_->read_classes(std::llround(ru), std::llround(rv), 1, 1, rgb);
+        cache_->read_road_distance(std::llround(ru), std::llround(rv), 1, 1, cm);
+        const std::size_t i = (static_cast<std::size_t>(v) * n + static_cast<std::size_t>(u)) * 4;
+        ASSERT_EQ(values[i + 0], rgb[0]);
+        ASSERT_EQ(values[i + 1], rgb[1]);
+        ASSERT_EQ(values[i + 2], rgb[2]);
+        ASSERT_NEAR(values[i + 3], cm[0] / 100.0, 1e-5);
+      }
+    }
+  }
+}
+
+TEST_F(ServiceTest, CropSidecarAgreesWithTheHeaders) {
+  const std::multimap<std::string, std::string> q{{"lat", "43.7384"}, {"lon", "7.4246"}, {"size_m", "64"}};
+  const Response crop = get("/regions/monaco/crop", q);
+  const Response sidecar = get("/regions/monaco/crop.json", q);
+  ASSERT_EQ(crop.status, 200);
+  ASSERT_EQ(sidecar.status, 200);
+  EXPECT_EQ(header(crop, "X-Seqloc-Shape"), "128,128,5");
+  const double cx = std::stod(header(crop, "X-Seqloc-Crop-X"));
+  EXPECT_NE(sidecar.text().find("\"crop_x\": " + std::to_string(static_cast<int>(cx))), std::string::npos) << sidecar.text();
+  EXPECT_NE(sidecar.text().find("\"road_prior\""), std::string::npos);
+}
+
+TEST_F(ServiceTest, PointOnARoadHasNoDistance) {
+  const auto roads = cache_->roads();
+  ASSERT_FALSE(roads.empty());
+  const auto projection = cache_->metadata().projection();
+  int checked = 0;
+  for (std::size_t i = 0; i < roads.size() && checked < 20; i += roads.size() / 20 + 1) {
+    const auto& vertex = roads[i].points[roads[i].points.size() / 2];
+    const auto where = projection.reverse({vertex.x_m, vertex.y_m});
+    char path[128];
+    std::snprintf(path, sizeof path, "/regions/monaco/point/%.9f,%.9f", where.lon_deg, where.lat_deg);
+    const Response r = get(path);
+    ASSERT_EQ(r.status, 200) << r.text();
+    // A vertex's own cell is drawn as a road cell: distance 0, prior 1, and some way there (the
+    // ways channel may show another group that takes precedence, e.g. a path crossing).
+    EXPECT_NE(r.text().find("\"road_distance_m\": 0.0"), std::string::npos) << r.text();
+    EXPECT_NE(r.text().find("\"road_prior\": 1.0"), std::string::npos) << r.text();
+    EXPECT_EQ(r.text().find("\"ways\": {\n      \"code\": 0,"), std::string::npos) << r.text();
+    ++checked;
+  }
+  EXPECT_GE(checked, 10);
+}
+
+struct BadRequest {
+  std::string path;
+  std::multimap<std::string, std::string> query;
+  int status;
+  std::string message;  ///< a part of the error message
+};
+
+TEST_F(ServiceTest, BadRequestsGetOneClearError) {
+  const std::vector<BadRequest> cases = {
+      {"/regions/monaco/classes/14/0.png", {}, 404, "outside"},
+      {"/regions/monaco/classes/0/99999.png", {}, 404, "outside"},
+      {"/regions/monaco/classes/-1/0.png", {}, 400, "non-negative integers"},
+      {"/regions/monaco/classes/1e3/0.png", {}, 400, "non-negative integers"},
+      {"/regions/monaco/classes/0/0.jpg", {}, 404, "tile format"},
+      {"/regions/monaco/buildings/0/0.png", {}, 404, "no layer"},
+      {"/regions/atlantis/classes/0/0.png", {}, 404, "no region"},
+      {"/regions/monaco/classes/0/0.npy", {{"style", "color"}}, 400, "PNG style"},
+      {"/regions/monaco/crop", {{"lon", "7.42"}}, 400, "lat: missing"},
+      {"/regions/monaco/crop", {{"lat", "abc"}, {"lon", "7.42"}}, 400, "not a number"},
+      {"/regions/monaco/crop", {{"lat", "nan"}, {"lon", "7.42"}}, 400, "not a number"},
+      {"/regions/monaco/crop", {{"lat", "43.7"}, {"lat", "43.8"}, {"lon", "7.42"}}, 400, "more than once"},
+      {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"size_m", "100000"}}, 400, "above the limit"},
+      {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"size_m", "0"}}, 400, "at least one cell"},
+      {"/regions/monaco/crop", {{"lat", "48.0"}, {"lon", "11.0"}}, 404, "outside the region"},
+      {"/regions/monaco/crop", {{"lat", "95"}, {"lon", "7.4"}}, 400, "not a WGS84"},
+      {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"layers", "classes,roads"}}, 400, "unknown layer"},
+      {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"format", "png"}}, 400, "one layer"},
+      {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"format", "jpeg"}}, 400, "format"},
+      {"/regions/monaco/point/7.4246", {}, 400, "LON,LAT"},
+      {"/regions/monaco/point/11.0,48.0", {}, 404, "outside region"},
+      {"/static/../../etc/passwd", {}, 404, "no such"},
+      {"/regions/../etc/passwd", {}, 404, "no such"},
+      {"/", {}, 404, "no viewer page"},
+      {"/nothing", {}, 404, "no such resource"},
+  };
+  for (const auto& c : cases) {
+    const Response r = get(c.path, c.query);
+    EXPECT_EQ(r.status, c.status) << c.path << " " << r.text();
+    EXPECT_EQ(r.content_type, "application/json") << c.path;
+    EXPECT_NE(r.text().find(c.message), std::string::npos) << c.path << ": " << r.text();
+  }
+  Request post;
+  post.method = "POST";
+  post.path = "/health";
+  EXPECT_EQ(service_->handle(post).status, 405);
+}
+
+TEST_F(ServiceTest, TilesHaveETagsAndComeFromMemoryTheSecondTime) {
+  const Response first = get("/regions/monaco/road_prior/4/4.png");
+  ASSERT_EQ(first.status, 200);
+  const std::string etag = header(first, "ETag");
+  EXPECT_FALSE(etag.empty());
+  EXPECT_NE(header(first, "Cache-Control").find("max-age"), std::string::npos);
+  const auto hits = service_->stats().cache_hits;
+  const Response second = get("/regions/monaco/road_prior/4/4.png");
+  EXPECT_EQ(service_->stats().cache_hits, hits + 1);
+  EXPECT_EQ(second.body, first.body);  // the same buffer
+  Request conditional;
+  conditional.path = "/regions/monaco/road_prior/4/4.png";
+  conditional.if_none_match = etag;
+  const Response not_modified = service_->handle(conditional);
+  EXPECT_EQ(not_modified.status, 304);
+  EXPECT_TRUE(not_modified.text().empty());
+  conditional.if_none_match = "\"something-else\"";
+  EXPECT_EQ(service_->handle(conditional).status, 200);
+  EXPECT_NE(header(get("/regions/monaco/road_prior/4/5.png"), "ETag"), etag);
+}
+
+TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
+  ServerOptions options;
+  options.port = 0;
+  options.threads = 1;
+  options.max_pending = 0;
+  HttpServer server(*service_, options);
+  server.bind();
+  std::thread listener([&] { server.listen(); });
+  {
+    httplib::Client client("127.0.0.1", server.port());
+    const auto health = client.Get("/health");
+    ASSERT_TRUE(health);
+    EXPECT_EQ(health->status, 200);
+    const auto tile = client.Get("/regions/monaco/classes/2/2.png");
+    ASSERT_TRUE(tile);
+    EXPECT_EQ(tile->status, 200);
+    EXPECT_EQ(tile->get_header_value("Content-Type"), "image/png");
+  }
+  // A connection that sends nothing holds the only worker (until its read times out) ...
+  const int holder = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<std::uint16_t>(server.port()));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::connect(holder, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  // ... so the next one is turned away at once with a 503, not queued.
+  httplib::Client second("127.0.0.1", server.port());
+  second.set_connection_timeout(2);
+  const auto turned_away = second.Get("/health");
+  ASSERT_TRUE(turned_away);
+  EXPECT_EQ(turned_away->status, 503);
+  EXPECT_EQ(server.rejected(), 1u);
+  ::close(holder);
+  server.stop();
+  listener.join();
+}
+
+TEST_F(ServiceTest, ServerOptionsAreValidated) {
+  ServerOptions options;
+  options.threads = 0;
+  EXPECT_THROW(options.validate(), ServiceError);
+  options.threads = 4;
+  options.port = 70000;
+  EXPECT_THROW(options.validate(), ServiceError);
+}
+
+TEST(ServiceSetup, RefusesMissingCachesAndDuplicateIds) {
+  EXPECT_THROW(Service({}, ServiceOptions{}), ServiceError);
+  EXPECT_THROW(Service({"/nonexistent/region.gpkg"}, ServiceOptions{}), raster::CacheError);
+  if (test::shared_osm("monaco.osm.pbf").empty()) GTEST_SKIP() << "shared data not found";
+  EXPECT_THROW(Service({monaco_cache(), monaco_cache()}, ServiceOptions{}), ServiceError);
+}
+
+}  // namespace
+}  // namespace seqloc::serve
