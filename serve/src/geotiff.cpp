@@ -252,7 +252,10 @@ void write_region_vrt(const raster::CacheReader& cache, const std::filesystem::p
     }
   } cleanup{partial};
   {
-    Dataset src(GDALOpen(classes.c_str(), GA_ReadOnly));
+    // GDAL's GeoPackage driver adds an alpha band to RGB tiles unless told the band count.
+    Options open;
+    open.set("BAND_COUNT", "3");
+    Dataset src(GDALOpenEx(classes.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY, nullptr, open.get(), nullptr));
     if (!src) throw ExportError(cache.path().string() + ": GDAL cannot open the classes table: " + gdal_message());
     Dataset vrt(GDALCreateCopy(GDALGetDriverByName("VRT"), partial.c_str(), src.get(), FALSE, nullptr, nullptr, nullptr));
     if (!vrt) throw ExportError(out.string() + ": " + gdal_message());
@@ -262,14 +265,12 @@ void write_region_vrt(const raster::CacheReader& cache, const std::filesystem::p
       GDALSetDescription(band, kNames[b]);
       GDALSetRasterColorInterpretation(band, GCI_Undefined);
     }
-    // Band 4: the coverage's stored centimetres, read through the coverage's own scale.
-    if (GDALAddBand(vrt.get(), GDT_UInt16, nullptr) != CE_None) throw ExportError(out.string() + ": " + gdal_message());
+    // Band 4: GDAL reads the coverage's stored centimetres through its scale, as Float32 metres.
+    if (GDALAddBand(vrt.get(), GDT_Float32, nullptr) != CE_None) throw ExportError(out.string() + ": " + gdal_message());
     GDALRasterBandH band = GDALGetRasterBand(vrt.get(), GDALGetRasterCount(vrt.get()));
     const std::string xml = "<SimpleSource><SourceFilename relativeToVRT=\"0\">" + distance +
                             "</SourceFilename><SourceBand>1</SourceBand></SimpleSource>";
     GDALSetMetadataItem(band, "source_0", xml.c_str(), "new_vrt_sources");
-    GDALSetRasterScale(band, 0.01);
-    GDALSetRasterOffset(band, 0);
     GDALSetRasterUnitType(band, "m");
     GDALSetDescription(band, "road_distance");
     if (!vrt.close()) throw ExportError(out.string() + ": " + gdal_message());

@@ -39,7 +39,7 @@ struct ExportOptions {
 void export_cog(raster::CacheReader& cache, const ExportOptions& options, const std::filesystem::path& out);
 
 /// Writes a VRT at `out` over the whole cache: bands 1-3 the classes (areas, ways, nodes), band 4
-/// the road distance in metres (the cache's centimetres with scale 0.01). It refers to the cache
+/// the road distance in metres (Float32, as GDAL reads the coverage through its scale). It refers to the cache
 /// by absolute path.
 void write_region_vrt(const raster::CacheReader& cache, const std::filesystem::path& out);
 

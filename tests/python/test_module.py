@@ -1,0 +1,129 @@
+"""The seqloc Python module, checked against GDAL reading the same cache and against the filter's
+own analytic behaviour. Run by ctest with PYTHONPATH set to the built module and SEQLOC_TEST_CACHE
+to a region cache."""
+
+import math
+import os
+import unittest
+
+import numpy as np
+from osgeo import gdal
+
+import seqloc
+
+CACHE = os.environ["SEQLOC_TEST_CACHE"]
+gdal.UseExceptions()
+
+
+def gdal_window(table, geotransform, size):
+    """The cache's raster read by GDAL's GeoPackage driver at a crop's geotransform."""
+    ds = gdal.Open(f"GPKG:{CACHE}:{table}")
+    gt = ds.GetGeoTransform()
+    x0 = round((geotransform[0] - gt[0]) / gt[1])
+    y0 = round((geotransform[3] - gt[3]) / gt[5])
+    # GDAL's GeoPackage driver reads the road distance through the coverage's scale, in metres.
+    return [ds.GetRasterBand(b + 1).ReadAsArray(x0, y0, size, size) for b in range(ds.RasterCount)]
+
+
+class CacheCrop(unittest.TestCase):
+    def setUp(self):
+        self.cache = seqloc.Cache(CACHE)
+        info = self.cache.info
+        self.centre = (info["centre_lat"], info["centre_lon"])
+
+    def test_crop_equals_gdal_reading_the_geopackage(self):
+        for size_m, lat_off in ((64.0, 0.0), (50.5, 0.001), (128.0, -0.002)):
+            lat, lon = self.centre[0] + lat_off, self.centre[1] + lat_off
+            crop = self.cache.crop(lat, lon, size_m)
+            n = round(size_m * 2)
+            self.assertEqual(crop["classes"].shape, (n, n, 3))
+            self.assertEqual(crop["classes"].dtype, np.uint8)
+            self.assertEqual(crop["road_distance"].dtype, np.float32)
+            classes = gdal_window("classes", crop["geotransform"], n)
+            for c in range(3):
+                np.testing.assert_array_equal(crop["classes"][:, :, c], classes[c])
+            (metres,) = gdal_window("road_distance", crop["geotransform"], n)
+            np.testing.assert_allclose(crop["road_distance"], metres, atol=1e-4)
+            d = crop["road_distance"].astype(np.float64)
+            np.testing.assert_allclose(crop["road_prior"], np.exp(-d * d / (2 * 3.0**2)), atol=1e-6)
+            # The crop's centre is within half a cell of the point (a cell centre or corner).
+            x, y = self.cache.to_grid(lat, lon)
+            self.assertLessEqual(abs(x - crop["crop_x"]), 0.25 + 1e-9)
+            self.assertLessEqual(abs(y - crop["crop_y"]), 0.25 + 1e-9)
+
+    def test_arrays_are_not_copies(self):
+        crop = self.cache.crop(*self.centre, 32.0)
+        for name in ("classes", "road_distance", "road_prior"):
+            self.assertFalse(crop[name].flags["OWNDATA"], name)  # owned by the C++ buffer's capsule
+            self.assertTrue(crop[name].flags["C_CONTIGUOUS"], name)
+
+    def test_bad_requests_raise(self):
+        with self.assertRaises(ValueError):
+            self.cache.crop(*self.centre, 100000.0)
+        with self.assertRaises(ValueError):
+            self.cache.crop(0.0, 0.0, 64.0)
+        with self.assertRaises(ValueError):
+            self.cache.crop(*self.centre, 64.0, layers=["roads"])
+        with self.assertRaises(OSError):
+            seqloc.Cache("/nonexistent.gpkg")
+
+
+class FilterOnline(unittest.TestCase):
+    def test_a_peaked_volume_is_found_where_it_peaks(self):
+        f = seqloc.Filter({"width": 64, "height": 64, "headings": 32, "mgr": False})
+        vol = np.full((31, 31, 32), -20.0, np.float32)
+        vol[10, 20, 8] = 0.0  # 8 * 360 / 32 = 90 degrees
+        r = f.step(vol, (0.0, 0.0, 0.0), (32.0, 32.0, 0.0))
+        # Volume cell (v, u) = (10, 20) lies (20 - 15, 10 - 15) cells from the crop centre.
+        self.assertAlmostEqual(r["argmax"]["u"], 37.0)
+        self.assertAlmostEqual(r["argmax"]["v"], 27.0)
+        self.assertAlmostEqual(r["heading_deg"], 90.0)
+        self.assertLess(r["frame_entropy"], 0.2)
+
+    def test_odometry_carries_the_belief(self):
+        f = seqloc.Filter({"width": 64, "height": 64, "headings": 32, "mgr": False})
+        vol = np.full((15, 15, 32), -30.0, np.float32)
+        vol[7, 7, 0] = 0.0  # heading 0: grid north, up the window
+        f.step(vol, (0, 0, 0), (32.0, 32.0, 0.0))
+        flat = np.zeros((15, 15, 32), np.float32)  # no information: the prediction decides
+        r = f.step(flat, (5.0, 0.0, 0.0), (32.0, 32.0, 0.0))
+        self.assertAlmostEqual(r["argmax"]["u"], 32.0, delta=0.5)
+        self.assertAlmostEqual(r["argmax"]["v"], 22.0, delta=0.5)  # 5 m = 10 cells north
+
+    def test_mgr_needs_the_road_distance(self):
+        f = seqloc.Filter({"width": 32, "height": 32, "headings": 8})
+        vol = np.zeros((9, 9, 8), np.float32)
+        with self.assertRaises(ValueError):
+            f.step(vol)
+        r = f.step(vol, road_distance=np.zeros((32, 32), np.float32))
+        self.assertIn("u", r)
+        with self.assertRaises(ValueError):
+            f.step(vol, road_distance=np.zeros((16, 32), np.float32))
+
+    def test_bad_volumes_and_settings_raise(self):
+        f = seqloc.Filter({"width": 32, "height": 32, "headings": 8, "mgr": False})
+        with self.assertRaises(ValueError):
+            f.step(np.zeros((9, 9), np.float32))
+        bad = np.zeros((9, 9, 8), np.float32)
+        bad[1, 2, 3] = np.nan
+        with self.assertRaises(ValueError):
+            f.step(bad)
+        with self.assertRaises(ValueError):
+            f.step(np.zeros((9, 9, 8), np.int32))
+        with self.assertRaises(KeyError):
+            seqloc.Filter({"widht": 32})
+        with self.assertRaises(ValueError):
+            seqloc.Filter({"width": -1})
+
+    def test_float16_volumes_are_read_in_place(self):
+        f = seqloc.Filter({"width": 32, "height": 32, "headings": 8, "mgr": False})
+        vol = np.full((9, 9, 8), -20.0, np.float16)
+        vol[4, 6, 2] = 0.0
+        r = f.step(vol, crop_pose=(16.0, 16.0, 0.0))
+        self.assertAlmostEqual(r["argmax"]["u"], 18.0)
+        self.assertAlmostEqual(r["argmax"]["v"], 16.0)
+        self.assertAlmostEqual(r["argmax"]["heading_deg"], 90.0)
+
+
+if __name__ == "__main__":
+    unittest.main()

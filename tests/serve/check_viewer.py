@@ -1,0 +1,82 @@
+"""The viewer page in headless Chromium: `seqloc serve` with the built page, a track from
+`seqloc localize` on the sample region; the page must load the region's tiles without errors and
+draw every frame of the track, and the screenshot must show the map and the track's colours."""
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+
+from osgeo import gdal
+
+
+def run(*cmd):
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    if r.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed ({r.returncode}): {r.stderr}")
+    return r.stdout
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--seqloc", required=True)
+    p.add_argument("--sample", required=True, help="the sample region's .osm.pbf")
+    p.add_argument("--web", required=True, help="the built viewer page")
+    p.add_argument("--chromium", default="chromium")
+    a = p.parse_args()
+    if not os.path.isfile(os.path.join(a.web, "app.js")):
+        sys.exit(f"{a.web}: the viewer page was not built (run scripts/deps build, then build again)")
+    with tempfile.TemporaryDirectory() as d:
+        cache = os.path.join(d, "sample.gpkg")
+        run(a.seqloc, "preprocess", a.sample, "-o", cache, "--no-progress")
+        run(a.seqloc, "simulate", cache, "-o", os.path.join(d, "routes"), "--routes", "1", "--frames", "12", "--seed", "5")
+        run(a.seqloc, "localize", cache, os.path.join(d, "routes", "route_000"), "-o", os.path.join(d, "out"),
+            "--window", "128")
+        web = os.path.join(d, "web")
+        shutil.copytree(a.web, web)
+        shutil.copy(os.path.join(d, "out", "route_000", "seqloc", "track.geojson"), web)
+        server = subprocess.Popen([a.seqloc, "serve", cache, "--port", "0", "--web", web],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            base = server.stdout.readline().split()[2]
+            url = f"{base}?track=static/track.geojson&distance=1"
+            chromium = [a.chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                        "--window-size=1200,800", "--virtual-time-budget=15000"]
+            dom = subprocess.run(chromium + ["--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
+            shot = os.path.join(d, "viewer.png")
+            subprocess.run(chromium + [f"--screenshot={shot}", url], capture_output=True, timeout=120)
+        finally:
+            server.terminate()
+            server.wait(timeout=20)
+        m = re.search(r'<div id="status"[^>]*data-tiles="(\d+)" data-tile-errors="(\d+)" data-track-points="(\d+)"', dom)
+        if not m:
+            sys.exit("the page reported no status; its DOM:\n" + dom[:3000])
+        tiles, errors, points = map(int, m.groups())
+        failures = []
+        if tiles < 4:
+            failures.append(f"only {tiles} tiles loaded")
+        if errors:
+            failures.append(f"{errors} tiles failed to load")
+        if points != 12:
+            failures.append(f"{points} track points drawn, expected 12")
+        # The screenshot: the map part (left of the 320 px panel) is not blank, and track points
+        # (viridis colours: green-blue-yellow with little red) are drawn on it.
+        ds = gdal.Open(shot)
+        r, g, b = (ds.GetRasterBand(i + 1).ReadAsArray()[:, : ds.RasterXSize - 330].astype(int) for i in range(3))
+        distinct = len(set(zip(r[::7, ::7].ravel(), g[::7, ::7].ravel(), b[::7, ::7].ravel())))
+        if distinct < 20:
+            failures.append(f"the map looks blank ({distinct} colours)")
+        outline = ((r < 30) & (g < 30) & (b < 30)).sum()
+        if outline < 50:
+            failures.append("no track outline (black) pixels on the map")
+        print(f"viewer: {tiles} tiles, {errors} errors, {points} track points, {distinct} colours, {outline} dark px")
+        if failures:
+            sys.exit("; ".join(failures))
+        print("1 passed, 0 failed")
+
+
+if __name__ == "__main__":
+    main()

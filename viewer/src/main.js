@@ -1,0 +1,177 @@
+// The seqloc viewer: a region's tiles in the region's own Transverse Mercator projection (no Web
+// Mercator reprojection: cells stay square and north stays grid north), with a localize track on
+// top coloured by its per-frame entropy. Everything comes from `seqloc serve`: /catalog, a region's
+// tilejson.json (its CRS and tile matrix) and its tiles.
+
+import Map from 'ol/Map.js';
+import View from 'ol/View.js';
+import TileLayer from 'ol/layer/Tile.js';
+import VectorLayer from 'ol/layer/Vector.js';
+import TileImage from 'ol/source/TileImage.js';
+import VectorSource from 'ol/source/Vector.js';
+import TileGrid from 'ol/tilegrid/TileGrid.js';
+import GeoJSON from 'ol/format/GeoJSON.js';
+import DragAndDrop from 'ol/interaction/DragAndDrop.js';
+import { defaults as defaultInteractions } from 'ol/interaction/defaults.js';
+import { Circle, Fill, Stroke, Style } from 'ol/style.js';
+import { register } from 'ol/proj/proj4.js';
+import { get as getProjection } from 'ol/proj.js';
+import proj4 from 'proj4';
+import 'ol/ol.css';
+import './app.css';
+
+const status = { tilesLoaded: 0, tileErrors: 0, trackPoints: 0, region: null, error: null };
+window.seqlocViewer = status;
+
+function showStatus() {
+  const s = document.getElementById('status');
+  s.textContent = status.error
+    ? `error: ${status.error}`
+    : `region ${status.region}: ${status.tilesLoaded} tiles loaded, ${status.tileErrors} failed; ` +
+      `track: ${status.trackPoints} points`;
+  s.dataset.tiles = status.tilesLoaded;
+  s.dataset.tileErrors = status.tileErrors;
+  s.dataset.trackPoints = status.trackPoints;
+}
+
+async function fetchJson(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`${url}: HTTP ${r.status}`);
+  return r.json();
+}
+
+// Viridis stops, entropy 0 (confident) to 1 (flat).
+const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
+function viridis(t) {
+  t = Math.min(1, Math.max(0, t)) * (VIRIDIS.length - 1);
+  const i = Math.min(Math.floor(t), VIRIDIS.length - 2), f = t - i;
+  const c = VIRIDIS[i].map((a, k) => Math.round(a + (VIRIDIS[i + 1][k] - a) * f));
+  return `rgb(${c[0]},${c[1]},${c[2]})`;
+}
+
+const lineStyle = new Style({ stroke: new Stroke({ color: 'rgba(0,0,0,0.7)', width: 2 }) });
+const pointStyles = new globalThis.Map();
+function trackStyle(feature) {
+  if (feature.getGeometry().getType() !== 'Point') return lineStyle;
+  const e = Number(feature.get('entropy'));
+  const key = Number.isFinite(e) ? Math.round(e * 50) : -1;
+  if (!pointStyles.has(key)) {
+    const colour = key < 0 ? '#888' : viridis(key / 50);
+    pointStyles.set(key, new Style({ image: new Circle({ radius: 5, fill: new Fill({ color: colour }),
+                                                         stroke: new Stroke({ color: '#000', width: 1 }) }) }));
+  }
+  return pointStyles.get(key);
+}
+
+function tileLayer(region, tj, layer, visible, opacity) {
+  const m = tj.tile_matrix;
+  const grid = new TileGrid({ origin: m.top_left, extent: m.extent, resolutions: [m.cell_m], tileSize: m.tile_size });
+  const source = new TileImage({
+    projection: `seqloc:${region}`,
+    tileGrid: grid,
+    // OpenLayers counts tile rows down from a top-left origin, as the cache does.
+    tileUrlFunction: ([, x, y]) => `regions/${region}/${layer}/${x}/${y}.png?style=color`,
+    crossOrigin: 'anonymous',
+  });
+  source.on('tileloadend', () => { status.tilesLoaded++; showStatus(); });
+  source.on('tileloaderror', () => { status.tileErrors++; showStatus(); });
+  return new TileLayer({ source, visible, opacity });
+}
+
+const trackSource = new VectorSource();
+let map = null;
+
+function addTrack(text, name) {
+  const format = new GeoJSON();
+  const features = format.readFeatures(text, { dataProjection: 'EPSG:4326',
+                                                featureProjection: map.getView().getProjection() });
+  trackSource.clear();
+  trackSource.addFeatures(features);
+  status.trackPoints = features.filter((f) => f.getGeometry().getType() === 'Point').length;
+  showStatus();
+  if (features.length) map.getView().fit(trackSource.getExtent(), { padding: [40, 40, 40, 40], maxZoom: 4 });
+  document.getElementById('info').textContent = `track ${name}: ${status.trackPoints} frames`;
+}
+
+async function loadTrack(url) {
+  try {
+    const r = await fetch(url);
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    addTrack(await r.text(), url.startsWith('data:') ? '(inline)' : url);
+  } catch (e) {
+    status.error = `track ${url.slice(0, 80)}: ${e.message}`;
+    showStatus();
+  }
+}
+
+async function showRegion(region) {
+  const tj = await fetchJson(`regions/${region}/tilejson.json`);
+  const code = `seqloc:${region}`;
+  proj4.defs(code, tj.crs.proj);
+  register(proj4);
+  const projection = getProjection(code);
+  projection.setExtent(tj.tile_matrix.extent);
+  status.region = region;
+  status.tilesLoaded = 0;
+  status.tileErrors = 0;
+  const classes = tileLayer(region, tj, 'classes', document.getElementById('show-classes').checked, 1);
+  const distance = tileLayer(region, tj, 'road_distance', document.getElementById('show-distance').checked,
+                             Number(document.getElementById('distance-opacity').value));
+  const view = new View({ projection, resolutions: [4, 2, 1, 0.5, 0.25, 0.125], constrainResolution: true,
+                          extent: tj.tile_matrix.extent });
+  const layers = [classes, distance, new VectorLayer({ source: trackSource, style: trackStyle })];
+  if (!map) {
+    const dragAndDrop = new DragAndDrop({ formatConstructors: [GeoJSON] });
+    map = new Map({ target: 'map', layers, view, interactions: defaultInteractions().extend([dragAndDrop]) });
+    dragAndDrop.on('addfeatures', (event) => {
+      const text = new GeoJSON().writeFeatures(event.features, { featureProjection: map.getView().getProjection() });
+      addTrack(text, event.file.name);
+    });
+    map.on('singleclick', (event) => {
+      const hit = map.forEachFeatureAtPixel(event.pixel, (f) => (f.getGeometry().getType() === 'Point' ? f : null));
+      const p = hit ? hit.getProperties() : null;
+      document.getElementById('info').textContent = p
+        ? ['frame', 'entropy', 'etu_weight', 'heading_deg', 'position_error_m', 'relocalized']
+          .filter((k) => p[k] !== undefined)
+          .map((k) => `${k}: ${typeof p[k] === 'number' ? p[k].toFixed(3) : p[k]}`).join('\n')
+        : '';
+    });
+  } else {
+    map.setLayers(layers);
+    map.setView(view);
+  }
+  view.fit(tj.tile_matrix.extent);
+  view.setResolution(2);
+  view.setCenter([0, 0]);
+  document.getElementById('show-classes').onchange = (e) => classes.setVisible(e.target.checked);
+  document.getElementById('show-distance').onchange = (e) => distance.setVisible(e.target.checked);
+  document.getElementById('distance-opacity').oninput = (e) => distance.setOpacity(Number(e.target.value));
+  showStatus();
+}
+
+async function main() {
+  const params = new URLSearchParams(window.location.search);
+  try {
+    const catalog = await fetchJson('catalog');
+    const select = document.getElementById('region');
+    for (const r of catalog.regions) select.add(new Option(r.id, r.id));
+    const wanted = params.get('region');
+    if (wanted) select.value = wanted;
+    select.onchange = () => showRegion(select.value);
+    await showRegion(select.value);
+    if (params.get('distance') === '1') {
+      document.getElementById('show-distance').checked = true;
+      document.getElementById('show-distance').dispatchEvent(new Event('change'));
+    }
+    if (params.get('track')) await loadTrack(params.get('track'));
+  } catch (e) {
+    status.error = e.message;
+    showStatus();
+  }
+  document.getElementById('track-form').onsubmit = (e) => {
+    e.preventDefault();
+    loadTrack(document.getElementById('track-url').value);
+  };
+}
+
+main();
