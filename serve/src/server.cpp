@@ -146,10 +146,17 @@ HttpServer::HttpServer(Service& service, ServerOptions options) : impl_(std::mak
     res.status = response.status;
     for (const auto& [key, value] : response.headers) res.set_header(key, value);
     res.set_header("Access-Control-Allow-Origin", "*");
-    if (response.status != 304) res.set_content(response.text(), response.content_type);
+    if (response.status != 304 && response.body) {
+      // Sent straight from the (shared, immutable) body: no copy per request.
+      std::shared_ptr<const std::string> body = response.body;
+      res.set_content_provider(body->size(), response.content_type,
+                               [body](std::size_t offset, std::size_t length, httplib::DataSink& sink) {
+                                 return sink.write(body->data() + offset, length);
+                               });
+    }
     if (options.access_log) {
       std::lock_guard lock(impl->log_mutex);
-      std::fprintf(stderr, "%s %s %d %zu\n", req.method.c_str(), req.target.c_str(), res.status, res.body.size());
+      std::fprintf(stderr, "%s %s %d %zu\n", req.method.c_str(), req.target.c_str(), res.status, response.text().size());
     }
     return httplib::Server::HandlerResponse::Handled;
   });
