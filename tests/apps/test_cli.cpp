@@ -2,6 +2,8 @@
 // errors on stderr, and the files each command writes.
 
 #include <gtest/gtest.h>
+
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "seqloc/osm/reader.hpp"
@@ -29,7 +31,7 @@ TEST(Cli, HelpOnEverySubcommand) {
   for (const std::vector<std::string>& args :
        {std::vector<std::string>{"--help"}, {"preprocess", "--help"}, {"cache", "--help"}, {"cache", "info", "--help"},
         {"cache", "merge", "--help"}, {"localize", "--help"}, {"evaluate", "--help"}, {"simulate", "--help"},
-        {"render", "--help"}}) {
+        {"render", "--help"}, {"serve", "--help"}, {"export", "--help"}}) {
     const auto r = run_seqloc(args);
     EXPECT_EQ(r.exit_code, 0) << args[0];
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
@@ -45,7 +47,26 @@ TEST(Cli, HelpOnEverySubcommand) {
   const auto render = run_seqloc({"render", "--help"}).out;
   for (const char* option : {"--localized", "--frame", "-o"}) EXPECT_NE(render.find(option), std::string::npos) << option;
   EXPECT_NE(run_seqloc({"localize", "--help"}).out.find("--matcher-temperature"), std::string::npos);
+  const auto serve = run_seqloc({"serve", "--help"}).out;
+  for (const char* option : {"--bind", "--port", "--threads", "--max-pending", "--timeout", "--max-crop-m", "--web"}) {
+    EXPECT_NE(serve.find(option), std::string::npos) << option;
+  }
+  const auto exporter = run_seqloc({"export", "--help"}).out;
+  for (const char* option : {"--layer", "--bbox", "-o", "--overwrite"}) EXPECT_NE(exporter.find(option), std::string::npos) << option;
   EXPECT_NE(run_seqloc({"--version"}).out.find("seqloc "), std::string::npos);
+}
+
+TEST(Cli, ServeRefusesWhatItCannotServe) {
+  const auto missing = run_seqloc({"serve", "/nonexistent/region.gpkg"});
+  EXPECT_EQ(missing.exit_code, 2);  // CLI11 checks that the file exists
+  test::ScratchDir dir;
+  { std::ofstream(dir / "junk.gpkg") << "not a GeoPackage"; }
+  const auto junk = run_seqloc({"serve", (dir / "junk.gpkg").string(), "--port", "0"});
+  EXPECT_EQ(junk.exit_code, 1);
+  EXPECT_NE(junk.err.find("junk.gpkg"), std::string::npos) << junk.err;
+  EXPECT_EQ(count_lines(junk.err), 1) << junk.err;
+  const auto bad_threads = run_seqloc({"serve", (dir / "junk.gpkg").string(), "--threads", "0"});
+  EXPECT_NE(bad_threads.exit_code, 0);
 }
 
 TEST(Cli, UsageErrorsExitTwo) {
