@@ -72,16 +72,8 @@ class PyCache {
         py::gil_scoped_release release;
         cache_->read_road_distance(w.u0, w.v0, w.size, w.size, cm, true);
       }
-      std::vector<float> values(cm.size());
-      if (*layer == serve::MapLayer::road_distance) {
-        for (std::size_t i = 0; i < cm.size(); ++i) values[i] = static_cast<float>(cm[i]) * 0.01f;
-      } else {
-        const double k = -1.0 / (2.0 * prior_sigma_m * prior_sigma_m);
-        for (std::size_t i = 0; i < cm.size(); ++i) {
-          const double d = cm[i] * 0.01;
-          values[i] = static_cast<float>(std::exp(k * d * d));
-        }
-      }
+      std::vector<float> values = *layer == serve::MapLayer::road_distance ? serve::road_distance_m(cm)
+                                                                           : serve::road_prior(cm, prior_sigma_m);
       out[py::str(name)] = adopt(std::move(values), {n, n});
     }
     return out;

@@ -66,6 +66,30 @@ std::int64_t count_outside(const raster::RegionGrid& grid, std::int64_t u0, std:
 
 }  // namespace
 
+std::vector<float> road_distance_m(std::span<const std::uint16_t> cm) {
+  std::vector<float> metres(cm.size());
+  for (std::size_t i = 0; i < cm.size(); ++i) metres[i] = static_cast<float>(cm[i]) * 0.01f;
+  return metres;
+}
+
+std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m) {
+  // g(x) = exp(-d^2 / (2 sigma^2)); runs of equal distances (far from roads, the clamp) reuse
+  // the last value instead of another exp.
+  const double k = -1.0 / (2.0 * sigma_m * sigma_m);
+  std::vector<float> g(cm.size());
+  std::uint16_t last = 0;
+  float last_value = 1.0f;
+  for (std::size_t i = 0; i < cm.size(); ++i) {
+    if (i == 0 || cm[i] != last) {
+      const double d = cm[i] * 0.01;
+      last = cm[i];
+      last_value = static_cast<float>(std::exp(k * d * d));
+    }
+    g[i] = last_value;
+  }
+  return g;
+}
+
 MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
                     const std::vector<MapLayer>& layers, const LayerOptions& options, bool fill_outside) {
   const auto& grid = cache.grid();
@@ -95,30 +119,12 @@ MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0
         }
         break;
       }
-      case MapLayer::road_distance: {
-        Band band{"road_distance", false, {}, std::vector<float>(n)};
-        for (std::size_t i = 0; i < n; ++i) band.f32[i] = static_cast<float>(cm[i]) * 0.01f;
-        block.bands.push_back(std::move(band));
+      case MapLayer::road_distance:
+        block.bands.push_back(Band{"road_distance", false, {}, road_distance_m(cm)});
         break;
-      }
-      case MapLayer::road_prior: {
-        // g(x) = exp(-d^2 / (2 sigma^2)) over the 65,536 possible stored distances: a table is
-        // exact and spares an exp per cell.
-        const double k = -1.0 / (2.0 * options.prior_sigma_m * options.prior_sigma_m);
-        Band band{"road_prior", false, {}, std::vector<float>(n)};
-        std::uint16_t last = 0;
-        float last_value = 1.0f;
-        for (std::size_t i = 0; i < n; ++i) {
-          if (cm[i] != last || i == 0) {
-            const double d = cm[i] * 0.01;
-            last = cm[i];
-            last_value = static_cast<float>(std::exp(k * d * d));
-          }
-          band.f32[i] = last_value;
-        }
-        block.bands.push_back(std::move(band));
+      case MapLayer::road_prior:
+        block.bands.push_back(Band{"road_prior", false, {}, road_prior(cm, options.prior_sigma_m)});
         break;
-      }
     }
   }
   return block;

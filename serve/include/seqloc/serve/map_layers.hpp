@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -38,6 +39,10 @@ inline constexpr MapLayer kAllLayers[] = {MapLayer::classes, MapLayer::road_dist
 /// A comma-separated list of layer names, each at most once, in the order given.
 /// Throws RequestError naming the unknown or repeated name.
 [[nodiscard]] std::vector<MapLayer> parse_layer_list(std::string_view names);
+
+/// The cache's road distance (UInt16 centimetres) as metres, and as the road prior g.
+[[nodiscard]] std::vector<float> road_distance_m(std::span<const std::uint16_t> cm);
+[[nodiscard]] std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m);
 
 /// One band of a block: its name and its values, row-major.
 struct Band {
