@@ -45,7 +45,11 @@ class ServeCommand : public Command {
     } else if (std::error_code ec; std::filesystem::is_regular_file(std::filesystem::path(SEQLOC_WEB_DIR) / "index.html", ec)) {
       service_.web_root = SEQLOC_WEB_DIR;
     }
-    server_.validate();
+    try {
+      server_.validate();
+    } catch (const serve::ServiceError& e) {
+      throw pipeline::UsageError(e.what());
+    }
     // SIGINT and SIGTERM are taken by one thread with sigwait, which stops the server cleanly;
     // every other thread inherits the blocked mask.
     sigset_t signals;

@@ -66,7 +66,8 @@ TEST(Cli, ServeRefusesWhatItCannotServe) {
   EXPECT_NE(junk.err.find("junk.gpkg"), std::string::npos) << junk.err;
   EXPECT_EQ(count_lines(junk.err), 1) << junk.err;
   const auto bad_threads = run_seqloc({"serve", (dir / "junk.gpkg").string(), "--threads", "0"});
-  EXPECT_NE(bad_threads.exit_code, 0);
+  EXPECT_EQ(bad_threads.exit_code, 2);
+  EXPECT_NE(bad_threads.err.find("--threads"), std::string::npos) << bad_threads.err;
 }
 
 TEST(Cli, UsageErrorsExitTwo) {
