@@ -31,8 +31,10 @@ thread_local bool t_overloaded = false;
 /// and closes it (the connection's task owns the socket, so it must run somewhere).
 class BoundedPool : public httplib::TaskQueue {
  public:
-  BoundedPool(int threads, int max_pending, std::atomic<std::uint64_t>& rejected)
-      : limit_(static_cast<std::size_t>(threads) + static_cast<std::size_t>(max_pending)), rejected_(rejected) {
+  BoundedPool(int threads, int max_pending, std::atomic<std::uint64_t>& rejected, std::atomic<int>& busy_gauge)
+      : limit_(static_cast<std::size_t>(threads) + static_cast<std::size_t>(max_pending)),
+        rejected_(rejected),
+        busy_gauge_(busy_gauge) {
     for (int i = 0; i < threads; ++i) workers_.emplace_back([this] { work(jobs_, false); });
     workers_.emplace_back([this] { work(rejects_, true); });
   }
@@ -73,18 +75,19 @@ class BoundedPool : public httplib::TaskQueue {
         if (queue.empty()) return;  // stopping, nothing left
         fn = std::move(queue.front());
         queue.pop_front();
-        if (!rejecting) ++busy_;
+        if (!rejecting) ++busy_, ++busy_gauge_;
       }
       fn();
       if (!rejecting) {
         std::lock_guard lock(mutex_);
-        --busy_;
+        --busy_, --busy_gauge_;
       }
     }
   }
 
   const std::size_t limit_;
   std::atomic<std::uint64_t>& rejected_;
+  std::atomic<int>& busy_gauge_;
   std::mutex mutex_;
   std::condition_variable ready_;
   std::deque<std::function<void()>> jobs_, rejects_;
@@ -111,6 +114,7 @@ class HttpServer::Impl {
  public:
   httplib::Server server;
   std::atomic<std::uint64_t> rejected{0};
+  std::atomic<int> busy{0};
   std::mutex log_mutex;
 };
 
@@ -118,7 +122,8 @@ HttpServer::HttpServer(Service& service, ServerOptions options) : impl_(std::mak
   options.validate();
   auto& svr = impl_->server;
   Impl* impl = impl_.get();
-  svr.new_task_queue = [options, impl] { return new BoundedPool(options.threads, options.max_pending, impl->rejected); };
+  svr.new_task_queue = [options, impl] { return new BoundedPool(options.threads, options.max_pending, impl->rejected, impl->busy);
+  };
   svr.set_read_timeout(options.timeout_s, 0);
   svr.set_write_timeout(options.timeout_s, 0);
   svr.set_keep_alive_timeout(options.keep_alive_s);
@@ -187,5 +192,7 @@ void HttpServer::stop() {
 }
 
 std::uint64_t HttpServer::rejected() const { return impl_->rejected.load(); }
+
+int HttpServer::busy_workers() const { return impl_->busy.load(); }
 
 }  // namespace seqloc::serve

@@ -313,6 +313,13 @@ TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
     EXPECT_EQ(tile->status, 200);
     EXPECT_EQ(tile->get_header_value("Content-Type"), "image/png");
   }
+  // Wait for the worker to let go of the client's closed connection (no fixed sleeps: the
+  // sanitizer build on a loaded machine is slow).
+  auto wait_for_busy = [&](int n) {
+    for (int i = 0; i < 1000 && server.busy_workers() != n; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return server.busy_workers();
+  };
+  ASSERT_EQ(wait_for_busy(0), 0);
   // A connection that sends nothing holds the only worker (until its read times out) ...
   const int holder = ::socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in address{};
@@ -320,7 +327,7 @@ TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
   address.sin_port = htons(static_cast<std::uint16_t>(server.port()));
   address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   ASSERT_EQ(::connect(holder, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ASSERT_EQ(wait_for_busy(1), 1);
   // ... so the next one is turned away at once with a 503, not queued.
   httplib::Client second("127.0.0.1", server.port());
   second.set_connection_timeout(2);

@@ -40,7 +40,10 @@ class HttpServer {
   void listen();
   void stop();
 
+  /// Connections turned away at the limit so far.
   [[nodiscard]] std::uint64_t rejected() const;
+  /// Workers serving a connection now.
+  [[nodiscard]] int busy_workers() const;
 
  private:
   class Impl;
