@@ -90,8 +90,8 @@ std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m)
   return g;
 }
 
-MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
-                    const std::vector<MapLayer>& layers, const LayerOptions& options, bool fill_outside) {
+MapBlock describe_block(const raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
+                        const std::vector<MapLayer>& layers) {
   const auto& grid = cache.grid();
   MapBlock block;
   block.width = width;
@@ -100,44 +100,61 @@ MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0
   block.north_m = grid.max_y() - static_cast<double>(v0) * raster::kCellM;
   block.layers = layers;
   block.outside_cells = count_outside(grid, u0, v0, width, height);
+  for (MapLayer layer : layers) {
+    if (layer == MapLayer::classes) {
+      for (const char* channel : {"classes.areas", "classes.ways", "classes.nodes"}) block.bands.push_back({channel, true, {}, {}});
+    } else {
+      block.bands.push_back({layer_name(layer), false, {}, {}});
+    }
+  }
+  return block;
+}
+
+MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
+                    const std::vector<MapLayer>& layers, const LayerOptions& options, bool fill_outside) {
+  MapBlock block = describe_block(cache, u0, v0, width, height, layers);
   const std::size_t n = cells(width, height);
 
   std::vector<std::uint16_t> cm;
   const bool wants_distance = std::any_of(layers.begin(), layers.end(), [](MapLayer l) { return l != MapLayer::classes; });
   if (wants_distance) cache.read_road_distance(u0, v0, width, height, cm, fill_outside);
 
+  auto band = block.bands.begin();  // in the order describe_block named them
   for (MapLayer layer : layers) {
     switch (layer) {
       case MapLayer::classes: {
         std::vector<std::uint8_t> rgb;
         cache.read_classes(u0, v0, width, height, rgb, fill_outside);
-        static const char* kChannels[] = {"classes.areas", "classes.ways", "classes.nodes"};
-        for (int c = 0; c < 3; ++c) {
-          Band band{kChannels[c], true, std::vector<std::uint8_t>(n), {}};
-          for (std::size_t i = 0; i < n; ++i) band.u8[i] = rgb[3 * i + static_cast<std::size_t>(c)];
-          block.bands.push_back(std::move(band));
+        for (std::size_t c = 0; c < 3; ++c, ++band) {
+          band->u8.resize(n);
+          for (std::size_t i = 0; i < n; ++i) band->u8[i] = rgb[3 * i + c];
         }
         break;
       }
       case MapLayer::road_distance:
-        block.bands.push_back(Band{"road_distance", false, {}, road_distance_m(cm)});
+        (band++)->f32 = road_distance_m(cm);
         break;
       case MapLayer::road_prior:
-        block.bands.push_back(Band{"road_prior", false, {}, road_prior(cm, options.prior_sigma_m)});
+        (band++)->f32 = road_prior(cm, options.prior_sigma_m);
         break;
     }
   }
   return block;
 }
 
-MapBlock read_tile(raster::CacheReader& cache, MapLayer layer, std::int64_t col, std::int64_t row,
-                   const LayerOptions& options) {
+void require_tile(const raster::CacheReader& cache, std::int64_t col, std::int64_t row) {
   const auto& grid = cache.grid();
   if (!grid.contains_tile(col, row)) {
     throw RequestError(RequestError::Kind::not_found,
-                       "tile (" + std::to_string(col) + ", " + std::to_string(row) + ") is outside the region (columns 0.." +
-                           std::to_string(grid.tiles_wide() - 1) + ", rows 0.." + std::to_string(grid.tiles_high() - 1) + ")");
+                       "tile (" + std::to_string(col) + ", " + std::to_string(row) + ") is outside the region of " +
+                           cache.path().filename().string() + " (columns 0.." + std::to_string(grid.tiles_wide() - 1) +
+                           ", rows 0.." + std::to_string(grid.tiles_high() - 1) + ")");
   }
+}
+
+MapBlock read_tile(raster::CacheReader& cache, MapLayer layer, std::int64_t col, std::int64_t row,
+                   const LayerOptions& options) {
+  require_tile(cache, col, row);
   return read_block(cache, col * raster::kTilePx, row * raster::kTilePx, raster::kTilePx, raster::kTilePx, {layer},
                     options);
 }

@@ -191,16 +191,10 @@ std::vector<std::string> Service::region_ids() const {
 
 raster::CacheReader& Service::region(const std::string& id) { return *regions_.at(id)->cache; }
 
-Service::Stats Service::stats() const {
-  std::lock_guard lock(cache_mutex_);
-  return stats_;
-}
+Service::Stats Service::stats() const { return {requests_.load(), cache_hits_.load()}; }
 
 Response Service::handle(const Request& request) {
-  {
-    std::lock_guard lock(cache_mutex_);
-    ++stats_.requests;
-  }
+  ++requests_;
   if (request.method != "GET" && request.method != "HEAD") {
     Response r = error_response(405, "only GET and HEAD are served");
     r.headers.emplace_back("Allow", "GET, HEAD");
@@ -302,16 +296,11 @@ Response Service::tile(Region& region, std::string_view layer_name_, std::string
     std::lock_guard lock(cache_mutex_);
     if (auto it = lru_index_.find(key); it != lru_index_.end()) {
       lru_.splice(lru_.begin(), lru_, it->second);
-      ++stats_.cache_hits;
+      ++cache_hits_;
       return it->second->second;
     }
   }
-  if (!region.cache->grid().contains_tile(col, row)) {
-    const auto& g = region.cache->grid();
-    return error_response(404, "tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of region '" + region.id +
-                                   "' is outside it (columns 0.." + std::to_string(g.tiles_wide() - 1) + ", rows 0.." +
-                                   std::to_string(g.tiles_high() - 1) + ")");
-  }
+  require_tile(*region.cache, col, row);
 
   Response r;
   r.content_type = content_type_of(ext);
@@ -362,48 +351,50 @@ Response Service::crop(Region& region, const Request& request, bool sidecar_only
   if (format == "png" && layers.size() != 1) {
     throw RequestError(RequestError::Kind::bad_request, "format=png holds one layer; ask for one, or use npy or tif");
   }
-  const MapBlock block = read_crop(*region.cache, lat, lon, size_m, layers, options_.layers, options_.max_crop_m);
-
+  // A sidecar describes the crop without reading it.
+  const MapBlock block = [&] {
+    if (!sidecar_only) return read_crop(*region.cache, lat, lon, size_m, layers, options_.layers, options_.max_crop_m);
+    const CropWindow w = locate_crop(*region.cache, lat, lon, size_m, options_.max_crop_m);
+    return describe_block(*region.cache, w.u0, w.v0, w.size, w.size, layers);
+  }();
   const auto& m = region.cache->metadata();
-  double gamma = 0;
-  const osm::GeoPoint centre = m.projection().reverse({block.centre_x_m(), block.centre_y_m()}, gamma);
-  std::string band_names;
-  ordered_json bands = ordered_json::array();
-  for (const auto& b : block.bands) {
-    band_names += (band_names.empty() ? "" : ",") + b.name;
-    bands.push_back(b.name);
-  }
-  const bool u8 = block.all_uint8();
-  const std::string dtype = format == "png" ? (block.layers[0] == MapLayer::classes ? "uint8" : "uint16") : (u8 ? "uint8" : "float32");
-  ordered_json sidecar = {
-      {"region", region.id},
-      {"crs", "region"},
-      {"crs_wkt", m.projection().wkt()},
-      {"crs_proj", m.projection().proj_string()},
-      {"crop_x", block.centre_x_m()},
-      {"crop_y", block.centre_y_m()},
-      {"crop_lat", centre.lat_deg},
-      {"crop_lon", centre.lon_deg},
-      {"meridian_convergence_deg", gamma},
-      {"cell_m", raster::kCellM},
-      {"width", block.width},
-      {"height", block.height},
-      {"west_m", block.west_m},
-      {"north_m", block.north_m},
-      {"geotransform", {block.west_m, raster::kCellM, 0, block.north_m, 0, -raster::kCellM}},
-      {"bands", bands},
-      {"dtype", dtype},
-      {"outside_cells", block.outside_cells},
-      {"road_distance_max_m", m.max_distance_m},
-      {"road_prior_sigma_m", options_.layers.prior_sigma_m},
-  };
   std::string canonical;
   for (const auto& [k, v] : request.query) canonical += k + "=" + v + "&";
   const std::string etag = "\"" + region.build_tag + "-" + hex(fnv1a(canonical + (sidecar_only ? "json" : ""))) + "\"";
   Response r;
   if (sidecar_only) {
-    r = json_response(sidecar);
+    double gamma = 0;
+    const osm::GeoPoint centre = m.projection().reverse({block.centre_x_m(), block.centre_y_m()}, gamma);
+    ordered_json bands = ordered_json::array();
+    for (const auto& b : block.bands) bands.push_back(b.name);
+    const bool u8 = block.all_uint8();
+    const std::string dtype = format == "png" ? (block.layers[0] == MapLayer::classes ? "uint8" : "uint16")
+                                              : (u8 ? "uint8" : "float32");
+    r = json_response({
+        {"region", region.id},
+        {"crs", "region"},
+        {"crs_wkt", m.projection().wkt()},
+        {"crs_proj", m.projection().proj_string()},
+        {"crop_x", block.centre_x_m()},
+        {"crop_y", block.centre_y_m()},
+        {"crop_lat", centre.lat_deg},
+        {"crop_lon", centre.lon_deg},
+        {"meridian_convergence_deg", gamma},
+        {"cell_m", raster::kCellM},
+        {"width", block.width},
+        {"height", block.height},
+        {"west_m", block.west_m},
+        {"north_m", block.north_m},
+        {"geotransform", {block.west_m, raster::kCellM, 0, block.north_m, 0, -raster::kCellM}},
+        {"bands", bands},
+        {"dtype", dtype},
+        {"outside_cells", block.outside_cells},
+        {"road_distance_max_m", m.max_distance_m},
+        {"road_prior_sigma_m", options_.layers.prior_sigma_m},
+    });
   } else {
+    std::string band_names;
+    for (const auto& b : block.bands) band_names += (band_names.empty() ? "" : ",") + b.name;
     r.content_type = content_type_of(format);
     if (format == "npy") {
       r.body = std::make_shared<const std::string>(encode_npy(block));

@@ -70,11 +70,19 @@ struct LayerOptions {
   double prior_sigma_m = 3.0;  ///< sigma of road_prior (the filter's default mgr_sigma_m)
 };
 
+/// A block's geometry and band names, without its values (what a sidecar describes).
+[[nodiscard]] MapBlock describe_block(const raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width,
+                                      int height, const std::vector<MapLayer>& layers);
+
 /// The block of region pixels [u0, u0 + width) x [v0, v0 + height) (region pixels, conventions.md
 /// section 2). Cells outside the region are filled when `fill_outside`, else CacheRangeError.
 [[nodiscard]] MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
                                   const std::vector<MapLayer>& layers, const LayerOptions& options,
                                   bool fill_outside = false);
+
+/// Throws RequestError (not found) naming the tile and the region's range when (col, row) is
+/// not a tile of the region.
+void require_tile(const raster::CacheReader& cache, std::int64_t col, std::int64_t row);
 
 /// One whole tile (GeoPackage column, row) of a layer.
 [[nodiscard]] MapBlock read_tile(raster::CacheReader& cache, MapLayer layer, std::int64_t col, std::int64_t row,

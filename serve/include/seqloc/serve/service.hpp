@@ -3,6 +3,7 @@
 // request to a response, with no sockets involved, so that routing, parameters, errors, ETags and
 // limits are tested (and fuzzed) directly. server.hpp puts it behind HTTP.
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <list>
@@ -93,7 +94,7 @@ class Service {
   std::list<std::pair<std::string, Response>> lru_;
   std::unordered_map<std::string, std::list<std::pair<std::string, Response>>::iterator> lru_index_;
   std::size_t lru_bytes_ = 0;
-  Stats stats_;
+  std::atomic<std::uint64_t> requests_{0}, cache_hits_{0};  // counted without the cache's lock
 };
 
 /// A JSON error body {"error": {"status": S, "message": M}} with that status.
