@@ -25,22 +25,9 @@ Observation read_observation(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw DataError(name + ": cannot open the observation");
   const std::vector<std::uint8_t> blob{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  // The side is in the IHDR chunk (bytes 16..23); refuse huge images before decoding them.
-  if (blob.size() >= 24) {
-    auto be32 = [&](std::size_t at) {
-      return (std::uint32_t{blob[at]} << 24) | (std::uint32_t{blob[at + 1]} << 16) | (std::uint32_t{blob[at + 2]} << 8) |
-             std::uint32_t{blob[at + 3]};
-    };
-    if (be32(16) > kMaxObservationSize || be32(20) > kMaxObservationSize) {
-      std::ostringstream s;
-      s << name << ": observation of " << be32(16) << " x " << be32(20) << " cells; the largest accepted is "
-        << kMaxObservationSize;
-      throw DataError(s.str());
-    }
-  }
   raster::PngImage image;
   try {
-    image = raster::decode_png(blob, name);
+    image = raster::decode_png(blob, name, kMaxObservationSize);  // huge sides refused from the header
   } catch (const raster::PngError& e) {
     throw DataError(e.what());
   }

@@ -623,7 +623,7 @@ CacheReader::Decoded CacheReader::load(Layer layer, std::int64_t col, std::int64
                            layer_table(layer) + "'";
   PngImage image;
   try {
-    image = decode_png(blob, what);
+    image = decode_png(blob, what, kTilePx);
   } catch (const PngError& e) {
     throw CacheFormatError(e.what());
   }

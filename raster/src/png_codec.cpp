@@ -157,7 +157,7 @@ bool unfilter(std::uint8_t* data, std::size_t stride, int height, int bpp) {
 }
 
 // Decodes the PNGs the fast path handles; nullopt for anything else (libpng decides then).
-std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const std::string& what) {
+std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const std::string& what, int max_side) {
   if (blob.size() < 8 + 25 || std::memcmp(blob.data(), kSignature, 8) != 0) return std::nullopt;
   std::size_t offset = 8;
   PngImage image;
@@ -177,7 +177,7 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
                      " chunk");
     }
     if (std::memcmp(type, "IHDR", 4) == 0) {
-      if (size != 13) throw PngError(what + ": corrupt PNG: bad IHDR");
+      if (size != 13 || have_header) throw PngError(what + ": corrupt PNG: bad IHDR");
       image.width = static_cast<int>(get_u32(data));
       image.height = static_cast<int>(get_u32(data + 4));
       image.bit_depth = data[8];
@@ -190,10 +190,14 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
       } else {
         return std::nullopt;
       }
-      if (image.width <= 0 || image.height <= 0 || image.width > 8192 || image.height > 8192) {
-        throw PngError(what + ": implausible image size");
+      // Before anything is allocated: a corrupt or hostile header cannot ask for gigabytes.
+      if (image.width <= 0 || image.height <= 0 || image.width > max_side || image.height > max_side) {
+        throw PngError(what + ": image of " + std::to_string(get_u32(data)) + " x " + std::to_string(get_u32(data + 4)) +
+                       " pixels; the largest accepted side is " + std::to_string(max_side));
       }
       have_header = true;
+    } else if (!have_header) {
+      throw PngError(what + ": corrupt PNG: the first chunk is not IHDR");
     } else if (std::memcmp(type, "IDAT", 4) == 0) {
       if (++idat_chunks == 1) {
         zdata = {data, size};
@@ -308,9 +312,9 @@ std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> value
   return assemble(filtered, width, height, 16, 0x0, 1);
 }
 
-PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what) {
+PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what, int max_side) {
   if (blob.size() < 8 || png_sig_cmp(blob.data(), 0, 8) != 0) throw PngError(what + ": not a PNG image");
-  if (auto image = decode_fast(blob, what)) return std::move(*image);
+  if (auto image = decode_fast(blob, what, max_side)) return std::move(*image);
   std::string error;
   png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &error, error_to_longjmp, ignore_warning);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
@@ -331,7 +335,10 @@ PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what)
   const auto height = png_get_image_height(png, info);
   const int color_type = png_get_color_type(png, info);
   const int depth = png_get_bit_depth(png, info);
-  if (width == 0 || height == 0 || width > 8192 || height > 8192) png_error(png, "implausible image size");
+  if (width == 0 || height == 0 || width > static_cast<png_uint_32>(max_side) ||
+      height > static_cast<png_uint_32>(max_side)) {
+    png_error(png, "image larger than the largest accepted side");
+  }
   if (color_type == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
   if (depth < 8) png_set_expand(png);
   if (depth == 16) png_set_swap(png);

@@ -3,6 +3,7 @@
 #include <cstring>
 
 #include <png.h>
+#include <zlib.h>
 
 #include <gtest/gtest.h>
 
@@ -80,6 +81,39 @@ std::vector<std::uint8_t> libpng_encode(const void* pixels, int w, int h, int de
   png_write_png(png, info, depth == 16 ? PNG_TRANSFORM_SWAP_ENDIAN : PNG_TRANSFORM_IDENTITY, nullptr);
   png_destroy_write_struct(&png, &info);
   return out;
+}
+
+// The IHDR of `png` rewritten to claim another size (and interlacing), with a valid CRC.
+std::vector<std::uint8_t> with_header(std::vector<std::uint8_t> png, std::uint32_t width, std::uint32_t height,
+                                      bool interlaced) {
+  auto put = [&](std::size_t at, std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) png[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(v >> (24 - 8 * i));
+  };
+  put(16, width);
+  put(20, height);
+  png[28] = interlaced ? 1 : 0;
+  put(29, static_cast<std::uint32_t>(crc32(0, png.data() + 12, 17)));
+  return png;
+}
+
+TEST(Png, AbsurdSidesAreRefusedFromTheHeader) {
+  const std::vector<std::uint8_t> rgb(5 * 3 * 3, 7);
+  const auto png = encode_png_rgb8(rgb, 5, 3);
+  EXPECT_EQ(decode_png(png, "ok", 5).width, 5);
+  for (const bool interlaced : {false, true}) {  // our fast path, then libpng's
+    SCOPED_TRACE(interlaced ? "libpng" : "fast path");
+    try {
+      // 100,000 x 100,000: within libpng's own limits, 30 GB of RGB.
+      (void)decode_png(with_header(png, 100000, 100000, interlaced), "huge.png");
+      FAIL() << "a 100,000 x 100,000 image was not refused";
+    } catch (const PngError& e) {
+      EXPECT_NE(std::string(e.what()).find("huge.png"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("largest accepted side"), std::string::npos) << e.what();
+    }
+    // The caller's own limit: a 600-pixel-wide "tile" where 512 are expected.
+    EXPECT_THROW((void)decode_png(with_header(png, 600, 3, interlaced), "tile", 512), PngError);
+  }
+  EXPECT_THROW((void)decode_png(png, "small limit", 4), PngError);
 }
 
 TEST(Png, DecodesPngsFromOtherWriters) {

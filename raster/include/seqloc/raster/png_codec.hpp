@@ -29,7 +29,12 @@ struct PngImage {
 [[nodiscard]] std::vector<std::uint8_t> encode_png_rgb8(std::span<const std::uint8_t> rgb, int width, int height);
 [[nodiscard]] std::vector<std::uint8_t> encode_png_rgba8(std::span<const std::uint8_t> rgba, int width, int height);
 [[nodiscard]] std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> values, int width, int height);
-/// Throws PngError (with `what` naming the blob's origin) on corrupt data.
-[[nodiscard]] PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what);
+/// Largest side decode_png accepts unless told otherwise.
+inline constexpr int kMaxPngSide = 8192;
+
+/// Throws PngError (with `what` naming the blob's origin) on corrupt data, and on an image wider
+/// or taller than `max_side`, refused from its header before any pixel buffer is allocated.
+[[nodiscard]] PngImage decode_png(std::span<const std::uint8_t> blob, const std::string& what,
+                                  int max_side = kMaxPngSide);
 
 }  // namespace seqloc::raster
