@@ -131,8 +131,8 @@ void check_readable(const std::filesystem::path& input) {
   if (std::filesystem::file_size(input, ec) == 0) throw OsmInputError(input.string() + ": empty file, no OSM data");
 }
 
-[[noreturn]] void rethrow_as_input_error(const std::filesystem::path& input, const std::exception& e) {
-  throw OsmInputError(input.string() + ": cannot read OSM data: " + e.what() +
+[[noreturn]] void rethrow_as_input_error(const std::string& input, const std::exception& e) {
+  throw OsmInputError(input + ": cannot read OSM data: " + e.what() +
                       " (is the file complete and in a format libosmium reads: .osm.pbf, .osm, .osm.gz, .osm.bz2?)");
 }
 
@@ -159,16 +159,18 @@ OsmHeaderInfo read_osm_header(const std::filesystem::path& input) {
   } catch (const OsmError&) {
     throw;
   } catch (const std::exception& e) {
-    rethrow_as_input_error(input, e);
+    rethrow_as_input_error(input.string(), e);
   }
 }
 
-FeatureSet read_osm(const std::filesystem::path& input, const ReadOptions& options) {
-  check_readable(input);
+namespace {
+
+// Both passes (multipolygon relations, then everything) over one input, file or buffer. `name`
+// names the input in errors.
+FeatureSet read_features(const osmium::io::File& file, std::uintmax_t input_bytes, const std::string& name,
+                         const ReadOptions& options) {
   FeatureSet out;
   try {
-    const osmium::io::File file{input.string()};
-
     osmium::area::Assembler::config_type assembler_config;
     assembler_config.create_way_polygons = false;  // OrienterNet's is_area decides for closed ways
     assembler_config.create_old_style_polygons = false;
@@ -177,7 +179,7 @@ FeatureSet read_osm(const std::filesystem::path& input, const ReadOptions& optio
     osmium::area::MultipolygonManager<osmium::area::Assembler> mp_manager{assembler_config, multipolygons};
     osmium::relations::read_relations(file, mp_manager);
 
-    const auto index = make_location_index(std::filesystem::file_size(input));
+    const auto index = make_location_index(input_bytes);
     LocationHandler locations{*index};
     locations.ignore_errors();  // a way with missing nodes keeps the nodes that exist
     FeatureCollector collector{out, options};
@@ -193,9 +195,31 @@ FeatureSet read_osm(const std::filesystem::path& input, const ReadOptions& optio
   } catch (const OsmError&) {
     throw;
   } catch (const std::exception& e) {
-    rethrow_as_input_error(input, e);
+    rethrow_as_input_error(name, e);
   }
   return out;
+}
+
+}  // namespace
+
+FeatureSet read_osm(const std::filesystem::path& input, const ReadOptions& options) {
+  check_readable(input);
+  std::uintmax_t bytes = 0;
+  try {
+    bytes = std::filesystem::file_size(input);
+  } catch (const std::filesystem::filesystem_error& e) {
+    throw OsmInputError(input.string() + ": " + e.code().message());
+  }
+  return read_features(osmium::io::File{input.string()}, bytes, input.string(), options);
+}
+
+FeatureSet read_osm_buffer(std::span<const char> data, std::string_view format, const std::string& name,
+                           const ReadOptions& options) {
+  if (data.empty()) throw OsmInputError(name + ": empty buffer, no OSM data");
+  if (format != "pbf" && format != "xml" && format != "opl") {
+    throw OsmInputError(name + ": format '" + std::string(format) + "' is not one of pbf, xml, opl");
+  }
+  return read_features(osmium::io::File{data.data(), data.size(), std::string(format)}, data.size(), name, options);
 }
 
 }  // namespace seqloc::osm

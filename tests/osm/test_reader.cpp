@@ -110,6 +110,61 @@ TEST(Reader, TruncatedRealPbfFails) {
   }
 }
 
+TEST(Reader, ReadsBuffersInMemoryAsItReadsFiles) {
+  test::ScratchDir dir;
+  for (const auto& [name, format] : {std::pair{"map.osm.pbf", "pbf"}, std::pair{"map.osm", "xml"}}) {
+    small_map().write(dir / name, 10);
+    const std::string bytes = test::read_file(dir / name);
+    const auto from_file = read_osm(dir / name);
+    const auto from_buffer = read_osm_buffer(bytes, format, "buffer");
+    SCOPED_TRACE(name);
+    EXPECT_EQ(from_buffer.lines.size(), from_file.lines.size());
+    EXPECT_EQ(from_buffer.areas.size(), from_file.areas.size());
+    EXPECT_EQ(from_buffer.points.size(), from_file.points.size());
+    ASSERT_EQ(from_buffer.lines.size(), 1u);
+    EXPECT_EQ(from_buffer.lines[0].points.size(), from_file.lines[0].points.size());
+  }
+  EXPECT_THROW((void)read_osm_buffer(std::string_view(), "pbf", "empty"), OsmInputError);
+  EXPECT_THROW((void)read_osm_buffer(std::string_view("x"), "shp", "odd"), OsmInputError);
+}
+
+// A PBF is a sequence of (4-byte big-endian length, BlobHeader, Blob). Sizes declared in those
+// headers are checked against libosmium's limits (64 KiB header, 32 MiB blob) before anything
+// of that size is allocated: a hostile or corrupt file cannot ask for gigabytes.
+std::string varint(std::uint64_t v) {
+  std::string out;
+  while (v >= 0x80) {
+    out.push_back(static_cast<char>((v & 0x7f) | 0x80));
+    v >>= 7;
+  }
+  out.push_back(static_cast<char>(v));
+  return out;
+}
+
+std::string be32(std::uint32_t v) {
+  return {static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8), static_cast<char>(v)};
+}
+
+std::string blob_header(const std::string& type, std::uint64_t datasize) {
+  std::string h = "\x0a" + varint(type.size()) + type + "\x18" + varint(datasize);
+  return be32(static_cast<std::uint32_t>(h.size())) + h;
+}
+
+TEST(Reader, AbsurdPbfSizesAreRefusedBeforeAllocation) {
+  test::ScratchDir dir;
+  auto expect_refused = [&](const std::string& name, const std::string& bytes, const std::string& fragment) {
+    std::ofstream(dir / name, std::ios::binary) << bytes;
+    expect_input_error(dir / name, fragment);
+  };
+  // A BlobHeader claiming 2 GiB.
+  expect_refused("header.osm.pbf", be32(0x7fffffffu) + std::string(64, 'x'), "max_blob_header_size");
+  // A Blob claiming 2 GiB (the header's datasize).
+  expect_refused("datasize.osm.pbf", blob_header("OSMHeader", 0x7fffffffu) + std::string(64, 'x'), "invalid blob size");
+  // A Blob whose declared uncompressed size is 2 GiB.
+  const std::string blob = "\x10" + varint(0x7fffffffu) + "\x1a" + varint(4) + "abcd";
+  expect_refused("rawsize.osm.pbf", blob_header("OSMHeader", blob.size()) + blob, "size");
+}
+
 TEST(Reader, HashesFiles) {
   test::ScratchDir dir;
   std::ofstream(dir / "abc.txt") << "abc";

@@ -4,7 +4,9 @@
 
 #include <filesystem>
 #include <optional>
+#include <span>
 #include <string>
+#include <string_view>
 
 #include "seqloc/osm/errors.hpp"
 #include "seqloc/osm/features.hpp"
@@ -19,6 +21,11 @@ struct ReadOptions {
 
 /// Throws OsmInputError naming the file when it is missing, empty, truncated or corrupt.
 [[nodiscard]] FeatureSet read_osm(const std::filesystem::path& input, const ReadOptions& options = {});
+
+/// The same from bytes in memory: `format` is "pbf", "xml" or "opl"; `name` names the buffer in
+/// errors. Throws OsmInputError for empty, truncated or corrupt data.
+[[nodiscard]] FeatureSet read_osm_buffer(std::span<const char> data, std::string_view format, const std::string& name,
+                                         const ReadOptions& options = {});
 
 /// The header of the file only (cheap): its declared bbox, if any, and replication timestamp.
 struct OsmHeaderInfo {
