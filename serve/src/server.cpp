@@ -141,10 +141,15 @@ HttpServer::HttpServer(Service& service, ServerOptions options) : impl_(std::mak
                       "application/json");
       return httplib::Server::HandlerResponse::Handled;
     }
+    // Our own strict decoding of the raw target (fuzzed in fuzz/request.cpp), not httplib's.
     Request request;
-    request.method = req.method;
-    request.path = req.path;
-    for (const auto& [key, value] : req.params) request.query.emplace(key, value);
+    try {
+      request = parse_request(req.method, req.target);
+    } catch (const RequestError& e) {
+      res.status = 400;
+      res.set_content(error_response(400, e.what()).text(), "application/json");
+      return httplib::Server::HandlerResponse::Handled;
+    }
     request.if_none_match = req.get_header_value("If-None-Match");
     request.base_url = base_url(req, fallback + ":" + std::to_string(port_));
     const Response response = service.handle(request);

@@ -274,6 +274,41 @@ TEST_F(ServiceTest, BadRequestsGetOneClearError) {
   EXPECT_EQ(service_->handle(post).status, 405);
 }
 
+TEST(ParseRequest, DecodesTheTargetLikeABrowserEncodesIt) {
+  const Request r = parse_request("GET", "/regions/mon%61co/crop?lat=43.7&lon=%2D7.4&layers=classes%2Croad_prior&q=a+b&&=x&flag");
+  EXPECT_EQ(r.method, "GET");
+  EXPECT_EQ(r.path, "/regions/monaco/crop");
+  const std::multimap<std::string, std::string> expected{
+      {"lat", "43.7"}, {"lon", "-7.4"}, {"layers", "classes,road_prior"}, {"q", "a b"}, {"flag", ""}};
+  EXPECT_EQ(r.query, expected);
+  EXPECT_EQ(parse_request("GET", "/a+b").path, "/a+b") << "'+' is a space only in the query";
+  EXPECT_TRUE(parse_request("GET", "/health?").query.empty());
+  EXPECT_EQ(parse_request("GET", "/x?a=1#frag").query.size(), 1u);
+}
+
+TEST(ParseRequest, RefusesMalformedTargets) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"", "starting with '/'"},
+      {"regions", "starting with '/'"},
+      {"http://example.com/health", "starting with '/'"},
+      {"/bad%2", "malformed"},
+      {"/bad%zz", "malformed"},
+      {"/x?a=%", "malformed"},
+      {"/nul%00byte", "control character"},
+      {"/x?a=line%0Abreak", "control character"},
+      {"/" + std::string(kMaxTargetBytes, 'a'), "at most"},
+  };
+  for (const auto& [target, fragment] : cases) {
+    try {
+      (void)parse_request("GET", target);
+      ADD_FAILURE() << "accepted: " << target.substr(0, 40);
+    } catch (const RequestError& e) {
+      EXPECT_EQ(e.kind(), RequestError::Kind::bad_request);
+      EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << target.substr(0, 40) << ": " << e.what();
+    }
+  }
+}
+
 TEST_F(ServiceTest, TilesHaveETagsAndComeFromMemoryTheSecondTime) {
   const Response first = get("/regions/monaco/road_prior/4/4.png");
   ASSERT_EQ(first.status, 200);
@@ -308,6 +343,13 @@ TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
     const auto health = client.Get("/health");
     ASSERT_TRUE(health);
     EXPECT_EQ(health->status, 200);
+    const auto escaped = client.Get("/regions/mon%61co/classes/2/2.png");  // decoded by parse_request
+    ASSERT_TRUE(escaped);
+    EXPECT_EQ(escaped->status, 200);
+    const auto malformed = client.Get("/regions/monaco/classes/2/2.png?x=%zz");
+    ASSERT_TRUE(malformed);
+    EXPECT_EQ(malformed->status, 400);
+    EXPECT_NE(malformed->body.find("malformed"), std::string::npos) << malformed->body;
     const auto tile = client.Get("/regions/monaco/classes/2/2.png");
     ASSERT_TRUE(tile);
     EXPECT_EQ(tile->status, 200);

@@ -29,6 +29,14 @@ struct Request {
   std::string base_url;  ///< scheme and authority for absolute links ("http://127.0.0.1:8080"); empty: relative
 };
 
+/// Decodes a request target in origin form ("/regions/x/crop?lat=1&lon=2") into the path and the
+/// query parameters: %XX escapes decoded, '+' in the query is a space, an empty parameter name
+/// ignored. Throws RequestError (bad request) for a target that does not start with '/', longer
+/// than kMaxTargetBytes, with a malformed escape, or with a control byte after decoding.
+[[nodiscard]] Request parse_request(std::string_view method, std::string_view target);
+
+inline constexpr std::size_t kMaxTargetBytes = 8192;
+
 struct Response {
   int status = 200;
   std::string content_type = "application/json";
