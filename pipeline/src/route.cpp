@@ -85,13 +85,22 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
     throw DataError(json_path.string() + ": not valid JSON: " + e.what());
   }
   auto meta_fail = [&](const std::string& what) { throw DataError(json_path.string() + ": " + what); };
-  if (!meta.is_object() || meta.value("format", "") != "seqloc-route") meta_fail("\"format\" must be \"seqloc-route\"");
-  if (!meta.contains("version") || !meta["version"].is_number_integer() || meta["version"].get<int>() != 1) {
+  if (!meta.is_object()) meta_fail("not a JSON object");
+  // A member of the expected type, or the fallback when it is absent; any other type is an error
+  // naming the member (json::value would throw a type_error that names nothing).
+  auto string_member = [&](const char* key, const char* fallback) -> std::string {
+    const auto it = meta.find(key);
+    if (it == meta.end()) return fallback;
+    if (!it->is_string()) meta_fail(std::string("\"") + key + "\" must be a string");
+    return it->get<std::string>();
+  };
+  if (string_member("format", "") != "seqloc-route") meta_fail("\"format\" must be \"seqloc-route\"");
+  // Compared as a JSON number: 4294967297 is not 1, as a cast to int would make it.
+  if (!meta.contains("version") || !meta["version"].is_number_integer() || meta["version"] != 1) {
     meta_fail("\"version\" must be 1 (this seqloc reads route format 1)");
   }
-  route.name = meta.contains("name") && meta["name"].is_string() ? meta["name"].get<std::string>()
-                                                                 : dir.filename().string();
-  const std::string kind = meta.value("volume_kind", "log_prob");
+  route.name = string_member("name", dir.filename().string().c_str());
+  const std::string kind = string_member("volume_kind", "log_prob");
   if (kind == "log_prob") {
     route.volume_kind = filter::VolumeValues::log_prob;
   } else if (kind == "prob") {

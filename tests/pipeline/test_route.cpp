@@ -101,6 +101,13 @@ TEST(Route, BadRouteJson) {
   expect_error(R"({"format": "seqloc-route", "version": 1, "volume_kind": "logits"})", csv,
                "\"volume_kind\" must be \"log_prob\" or \"prob\"");
   expect_error(R"({"format": "seqloc-route", "version": 1, "cell_m": 0})", csv, "\"cell_m\" must be > 0");
+  // Members of the wrong JSON type (found by fuzz/route.cpp: json::value threw a type_error that
+  // escaped as an unexplained exception).
+  expect_error(R"({"format": 0.5, "version": 1})", csv, "route.json: \"format\" must be a string");
+  expect_error(R"({"format": "seqloc-route", "version": 1, "volume_kind": 3})", csv, "\"volume_kind\" must be a string");
+  expect_error(R"({"format": "seqloc-route", "version": 1, "name": []})", csv, "\"name\" must be a string");
+  expect_error(R"([1, 2])", csv, "route.json: not a JSON object");
+  expect_error(R"({"format": "seqloc-route", "version": 4294967297})", csv, "\"version\" must be 1");
 }
 
 TEST(Route, BadFramesCsvRowsNameTheLine) {
