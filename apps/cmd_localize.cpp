@@ -120,8 +120,7 @@ class LocalizeCommand : public Command {
     }
     log("localize %zu routes, %lld frames in all", routes.size(), total_frames);
 
-    const fs::path temp = out_.string() + ".partial-" + std::to_string(getpid());
-    fs::remove_all(temp, ec);
+    const fs::path temp = pipeline::staging_directory(out_);
     fs::create_directories(temp);
     try {
       ProgressBar bar(progress_wanted(progress_), "frames");
@@ -186,14 +185,7 @@ class LocalizeCommand : public Command {
       }
       pipeline::write_summary(temp / "summary.json", metrics, route_names);
       // Into place: the old folder (if any) is replaced only once the new one is complete.
-      if (fs::exists(out_)) {
-        const fs::path old = out_.string() + ".old-" + std::to_string(getpid());
-        fs::rename(out_, old);
-        fs::rename(temp, out_);
-        fs::remove_all(old, ec);
-      } else {
-        fs::rename(temp, out_);
-      }
+      pipeline::commit_directory(temp, out_);
       std::fputs(pipeline::format_table(metrics).c_str(), stdout);
       std::printf("wrote %s (%zu routes)\n", out_.c_str(), routes.size());
     } catch (...) {

@@ -1,7 +1,14 @@
 #include "seqloc/pipeline/outputs.hpp"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -46,6 +53,50 @@ void write_file(const std::filesystem::path& path, const std::string& bytes) {
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
   if (ec) throw DataError(path.string() + ": cannot write: " + ec.message());
+}
+
+void commit_directory(const std::filesystem::path& staged, const std::filesystem::path& target) {
+  std::error_code ec;
+  if (::renameat2(AT_FDCWD, staged.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
+    std::filesystem::remove_all(staged, ec);  // the previous folder; a leftover is removed next run
+    return;
+  }
+  const int exchange_error = errno;
+  if (exchange_error == ENOENT && std::filesystem::exists(staged, ec)) {
+    // No target yet: a plain rename, atomic too.
+    std::filesystem::rename(staged, target, ec);
+    if (ec) throw DataError(target.string() + ": cannot move the finished output into place: " + ec.message());
+    return;
+  }
+  if (exchange_error != EINVAL && exchange_error != ENOSYS) {
+    throw DataError(target.string() + ": cannot move the finished output into place: " + std::strerror(exchange_error));
+  }
+  // A file system without RENAME_EXCHANGE: two renames, with a short window in which `target`
+  // is missing and the previous folder sits beside it as TARGET.old.
+  const std::filesystem::path old = target.string() + ".old";
+  std::filesystem::remove_all(old, ec);
+  std::filesystem::rename(target, old, ec);
+  if (!ec) std::filesystem::rename(staged, target, ec);
+  if (ec) throw DataError(target.string() + ": cannot move the finished output into place: " + ec.message());
+  std::filesystem::remove_all(old, ec);
+}
+
+std::filesystem::path staging_directory(const std::filesystem::path& target) {
+  const std::string prefix = target.filename().string() + ".partial-";
+  std::filesystem::path parent = target.parent_path();
+  if (parent.empty()) parent = ".";
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(parent, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos || digits.size() > 9) continue;
+    const auto pid = static_cast<pid_t>(std::stol(digits));
+    if (pid != ::getpid() && ::kill(pid, 0) != 0 && errno == ESRCH) std::filesystem::remove_all(entry.path(), ec);
+  }
+  const std::filesystem::path staged = target.string() + ".partial-" + std::to_string(::getpid());
+  std::filesystem::remove_all(staged, ec);
+  return staged;
 }
 
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r) {

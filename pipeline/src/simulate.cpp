@@ -13,6 +13,7 @@
 
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/outputs.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -258,8 +259,7 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
            p.y < grid.max_y() - kEdgeMarginM;
   };
   std::error_code ec;
-  const std::filesystem::path partial = out.string() + ".partial";
-  std::filesystem::remove_all(partial, ec);
+  const std::filesystem::path partial = staging_directory(out);
   std::filesystem::create_directories(partial);
 
   std::mt19937_64 rng(options.seed);
@@ -364,15 +364,7 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
     if (progress) progress(r + 1, options.routes);
   }
   // Into place: an old folder is replaced only once the new one is complete.
-  if (std::filesystem::exists(out, ec)) {
-    const std::filesystem::path old = out.string() + ".old";
-    std::filesystem::remove_all(old, ec);
-    std::filesystem::rename(out, old);
-    std::filesystem::rename(partial, out);
-    std::filesystem::remove_all(old, ec);
-  } else {
-    std::filesystem::rename(partial, out);
-  }
+  commit_directory(partial, out);
 }
 
 }  // namespace seqloc::pipeline

@@ -1,6 +1,6 @@
-// kill -9 in the middle of preprocess, many times: the previous cache stays as it was, nothing
-// half-written appears under the final name, and a rerun completes (resuming) to the same cache
-// as an uninterrupted build.
+// kill -9 in the middle of preprocess and of localize, many times: the previous cache or output
+// folder stays as it was, nothing half-written appears under the final name, and a rerun
+// completes (preprocess resuming) to the same result as an uninterrupted run.
 
 #include <signal.h>
 #include <sys/wait.h>
@@ -10,6 +10,7 @@
 #include <thread>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "seqloc/raster/cache.hpp"
 #include "support/test_support.hpp"
@@ -77,6 +78,81 @@ TEST(CrashSafety, KillNineNeverDamagesTheCacheAndARerunCompletes) {
     }
   }
   EXPECT_EQ(a.roads().size(), b.roads().size());
+}
+
+// Every route folder of a localize output holds the four files of the one mode its summary.json
+// names.
+bool complete_output(const std::filesystem::path& out, int routes) {
+  const auto summary = nlohmann::json::parse(test::read_file(out / "summary.json"));
+  if (!summary.contains("modes") || summary["modes"].size() != 1) return false;
+  const std::string mode = summary["modes"].begin().key();
+  int found = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(out)) {
+    if (!entry.is_directory()) continue;
+    for (const char* file : {"poses.csv", "track.geojson", "trajectory.tum", "metrics.json"}) {
+      if (!std::filesystem::is_regular_file(entry.path() / mode / file)) return false;
+    }
+    ++found;
+  }
+  return found == routes;
+}
+
+TEST(CrashSafety, KillNineDuringLocalizeLeavesThePreviousOutputOrTheNewOne) {
+  test::ScratchDir dir;
+  const auto sample = std::filesystem::path(SEQLOC_SOURCE_DIR) / "samples" / "rural-valley.osm.pbf";
+  const auto cache = dir / "valley.gpkg";
+  ASSERT_EQ(test::run_seqloc({"preprocess", sample.string(), "-o", cache.string(), "--no-progress"}).exit_code, 0);
+  const int routes = 2;
+  ASSERT_EQ(test::run_seqloc({"simulate", cache.string(), "-o", (dir / "routes").string(), "--routes",
+                              std::to_string(routes), "--frames", "12", "--no-progress"})
+                .exit_code,
+            0);
+  std::vector<std::string> route_dirs;
+  for (int r = 0; r < routes; ++r) route_dirs.push_back((dir / "routes" / ("route_00" + std::to_string(r))).string());
+  auto localize = [&](const std::string& mode) {
+    std::vector<std::string> args{"localize", cache.string()};
+    args.insert(args.end(), route_dirs.begin(), route_dirs.end());
+    args.insert(args.end(), {"-o", (dir / "out").string(), "--mode", mode, "--overwrite", "--window", "128",
+                             "--headings", "64", "--matcher-size", "64", "--threads", "2", "--no-progress"});
+    return args;
+  };
+
+  // The previous good output (mode single), timed, so that kills land all over the next run.
+  const auto started = std::chrono::steady_clock::now();
+  ASSERT_EQ(test::run_seqloc(localize("single")).exit_code, 0);
+  const auto took_ms =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - started).count();
+  const std::string previous = test::read_file(dir / "out" / "summary.json");
+
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<long long> delay_ms(0, std::max<long long>(50, took_ms * 3 / 2));
+  int killed = 0, replaced = 0;
+  for (int attempt = 0; attempt < 10; ++attempt) {
+    const pid_t pid = test::start_seqloc(localize(attempt % 2 ? "single" : "seqloc"));
+    ASSERT_GT(pid, 0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms(rng)));
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    if (WIFSIGNALED(status)) ++killed;
+    // Always a complete folder under the final name: the previous one or the new one.
+    ASSERT_TRUE(std::filesystem::exists(dir / "out" / "summary.json")) << "attempt " << attempt;
+    const bool is_previous = test::read_file(dir / "out" / "summary.json") == previous;
+    EXPECT_TRUE(complete_output(dir / "out", routes)) << "attempt " << attempt;
+    replaced += is_previous ? 0 : 1;
+  }
+  EXPECT_GT(killed, 3) << "too few runs were interrupted: the test proved little";
+
+  // A rerun completes and clears what the killed runs left beside the output.
+  const auto rerun = test::run_seqloc(localize("seqloc"));
+  ASSERT_EQ(rerun.exit_code, 0) << rerun.err;
+  EXPECT_TRUE(complete_output(dir / "out", routes));
+  EXPECT_TRUE(nlohmann::json::parse(test::read_file(dir / "out" / "summary.json"))["modes"].contains("seqloc"));
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    EXPECT_EQ(entry.path().filename().string().find("out."), std::string::npos) << "left behind: " << entry.path();
+  }
+  RecordProperty("killed", killed);
+  RecordProperty("completed_between_kills", replaced);
 }
 
 }  // namespace

@@ -16,6 +16,16 @@ namespace seqloc::pipeline {
 /// DataError naming the file.
 void write_file(const std::filesystem::path& path, const std::string& bytes);
 
+/// Puts the complete folder `staged` in place of `target`. An existing target is exchanged with it
+/// in one atomic step (renameat2 RENAME_EXCHANGE), so that at every instant, even across a kill -9,
+/// `target` is either the previous complete folder or the new one; the previous one (now under
+/// the staged name) is then removed. Throws DataError naming the folder.
+void commit_directory(const std::filesystem::path& staged, const std::filesystem::path& target);
+
+/// The staging folder of this process for `target` ("TARGET.partial-PID"), after removing those
+/// that killed runs left behind (the PID in their name no longer runs).
+[[nodiscard]] std::filesystem::path staging_directory(const std::filesystem::path& target);
+
 /// Writes the four files of one route and mode into `dir` (which must exist).
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& result);
 
