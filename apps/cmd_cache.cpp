@@ -34,7 +34,7 @@ class CacheInfoCommand : public Command {
       }
       out["tiles_wide"] = metadata.grid.tiles_wide();
       out["tiles_high"] = metadata.grid.tiles_high();
-      std::printf("%s\n", out.dump(2).c_str());
+      std::printf("%s\n", out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
       return kExitOk;
     }
     std::printf("%-26s %s\n", "path", path_.c_str());

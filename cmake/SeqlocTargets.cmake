@@ -38,6 +38,11 @@ if(SEQLOC_SANITIZE)
                                                           -fno-sanitize-recover=undefined)
   target_link_options(seqloc_compile_options INTERFACE -fsanitize=address,undefined)
 endif()
+if(SEQLOC_FUZZ)
+  # Recoverable, so that fuzz/ubsan-suppressions.txt can name the one upstream defect (libosmium's
+  # coordinate parser) that would otherwise stop every OSM fuzz run; unsuppressed ones still halt.
+  target_compile_options(seqloc_compile_options INTERFACE -fsanitize-recover=signed-integer-overflow)
+endif()
 
 # seqloc_module(NAME SOURCES... [PUBLIC deps...] [PRIVATE deps...])
 # Declares library seqloc_NAME with alias seqloc::NAME and public headers in NAME/include.

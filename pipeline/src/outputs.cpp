@@ -17,6 +17,10 @@
 #include "seqloc/pipeline/npy.hpp"
 
 namespace seqloc::pipeline {
+
+// Strings from outside (request paths, frame ids) need not be UTF-8: replaced (U+FFFD) in JSON
+// output, never a type_error thrown halfway through an answer or a run.
+constexpr auto kReplaceInvalidUtf8 = nlohmann::json::error_handler_t::replace;
 namespace {
 
 std::string optional_number(const std::optional<double>& v, int precision) {
@@ -143,13 +147,13 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
                         {"properties", props}});
   }
   const nlohmann::ordered_json track = {{"type", "FeatureCollection"}, {"features", features}};
-  write_file(dir / "track.geojson", track.dump() + "\n");
+  write_file(dir / "track.geojson", track.dump(-1, ' ', false, kReplaceInvalidUtf8) + "\n");
 
   std::vector<const FramePose*> all;
   for (const auto& p : r.poses) all.push_back(&p);
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   metrics.update(metrics_json(compute_metrics(all)));
-  write_file(dir / "metrics.json", metrics.dump(2) + "\n");
+  write_file(dir / "metrics.json", metrics.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
 }
 
 std::string format_table(const MetricsByMode& metrics) {
@@ -172,7 +176,7 @@ void write_summary(const std::filesystem::path& path, const MetricsByMode& metri
   nlohmann::ordered_json j;
   j["routes"] = routes;
   for (const auto& [mode, m] : metrics) j["modes"][mode] = metrics_json(m);
-  write_file(path, j.dump(2) + "\n");
+  write_file(path, j.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
 }
 
 std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {

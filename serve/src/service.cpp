@@ -14,6 +14,10 @@
 
 namespace seqloc::serve {
 
+// Strings from outside (request paths, frame ids) need not be UTF-8: replaced (U+FFFD) in JSON
+// output, never a type_error thrown halfway through an answer or a run.
+constexpr auto kReplaceInvalidUtf8 = nlohmann::json::error_handler_t::replace;
+
 using nlohmann::ordered_json;
 
 const std::string& Response::text() const {
@@ -25,7 +29,8 @@ Response error_response(int status, const std::string& message) {
   Response r;
   r.status = status;
   r.body = std::make_shared<const std::string>(
-      ordered_json{{"error", {{"status", status}, {"message", message}}}}.dump() + "\n");
+      ordered_json{{"error", {{"status", status}, {"message", message}}}}.dump(-1, ' ', false, kReplaceInvalidUtf8) +
+      "\n");
   r.headers.emplace_back("Cache-Control", "no-store");
   return r;
 }
@@ -34,7 +39,7 @@ namespace {
 
 Response json_response(const ordered_json& j) {
   Response r;
-  r.body = std::make_shared<const std::string>(j.dump(2) + "\n");
+  r.body = std::make_shared<const std::string>(j.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
   r.headers.emplace_back("Cache-Control", "no-cache");
   return r;
 }

@@ -8,9 +8,11 @@
 #include <random>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "support/test_support.hpp"
 
@@ -149,6 +151,20 @@ TEST(Localize, HeadingsAreCompassHeadingsFarFromTheCentre) {
   EXPECT_NEAR(r.poses[0].x_m, 11200.25 + 3.5 * std::sin(g), 1e-5);
   EXPECT_NEAR(r.poses[0].y_m, 0.25 + 3.5 * std::cos(g), 1e-5);
   EXPECT_GT(std::abs(3.5 * std::sin(g)), 6e-3) << "the rotation is what this checks";
+}
+
+TEST(Outputs, FrameIdsThatAreNotUtf8StillGiveValidJson) {
+  // frames.csv is bytes: a frame id in Latin-1 once made nlohmann's dump throw at the very end of
+  // a run (found by fuzz/request through the same dump in the server's error answers).
+  test::ScratchDir dir;
+  RouteResult result;
+  result.route = "caf\xe9";
+  FramePose pose;
+  pose.frame = "f\xff\xfe" "1";
+  result.poses.push_back(pose);
+  write_route_outputs(dir.path(), result);
+  const auto track = nlohmann::json::parse(test::read_file(dir / "track.geojson"));
+  EXPECT_NE(track.dump().find("f\xef\xbf\xbd"), std::string::npos) << "the bad bytes become U+FFFD";
 }
 
 TEST(Metrics, RecallsMeansMediansAndBodyFrameErrors) {

@@ -3,6 +3,7 @@
 // the HTTP layer's connection limit.
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -307,6 +308,17 @@ TEST(ParseRequest, RefusesMalformedTargets) {
       EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << target.substr(0, 40) << ": " << e.what();
     }
   }
+}
+
+TEST_F(ServiceTest, ErrorsEchoingBytesThatAreNotUtf8AreValidJson) {
+  // Found by fuzz/request: the message quoted the parameter, and the JSON dump threw on it.
+  const Response r = get("/regions/monaco/crop", {{"lat", "43.7\xfe"}, {"lon", "7.42"}});
+  EXPECT_EQ(r.status, 400);
+  const auto body = nlohmann::json::parse(r.text());
+  EXPECT_NE(body["error"]["message"].get<std::string>().find("\xef\xbf\xbd"), std::string::npos) << r.text();
+  const Response missing = get("/regions/\xc3\x28/classes/0/0.png");
+  EXPECT_EQ(missing.status, 404);
+  EXPECT_TRUE(nlohmann::json::accept(missing.text())) << missing.text();
 }
 
 TEST_F(ServiceTest, TilesHaveETagsAndComeFromMemoryTheSecondTime) {
