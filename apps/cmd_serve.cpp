@@ -29,6 +29,9 @@ class ServeCommand : public Command {
                    "Connections that may wait for a worker; beyond that they get 503")
         ->capture_default_str();
     app.add_option("--timeout", server_.timeout_s, "Read/write timeout of a connection, seconds")->capture_default_str();
+    app.add_option("--reload-check", service_.reload_check_s,
+                   "Seconds between checks for a replaced cache file (0: every request, -1: never)")
+        ->capture_default_str();
     app.add_option("--max-crop-m", service_.max_crop_m, "Largest crop side served, metres")->capture_default_str();
     app.add_option("--prior-sigma", service_.layers.prior_sigma_m, "Sigma of the road_prior layer, metres")
         ->capture_default_str();
@@ -58,6 +61,14 @@ class ServeCommand : public Command {
     sigaddset(&signals, SIGTERM);
     pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
+    service_.on_reload = [](const std::string& id, const std::string& error) {
+      if (error.empty()) {
+        std::fprintf(stderr, "seqloc serve: region '%s' reloaded (its cache file was replaced)\n", id.c_str());
+      } else {
+        std::fprintf(stderr, "seqloc serve: region '%s': the replaced cache file is not served (%s); the previous one "
+                     "stays\n", id.c_str(), error.c_str());
+      }
+    };
     serve::Service service(caches_, service_);
     serve::HttpServer server(service, server_);
     server.bind();

@@ -1,10 +1,14 @@
 #include "seqloc/serve/service.hpp"
 
+#include <sys/stat.h>
+
 #include <algorithm>
+#include <chrono>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -157,13 +161,40 @@ std::string region_id(const std::filesystem::path& path) {
   return id;
 }
 
+// What identifies one version of a file: a new build renamed over the old gets another inode.
+struct FileIdentity {
+  dev_t device = 0;
+  ino_t inode = 0;
+  std::int64_t mtime_ns = 0;
+  std::int64_t size = -1;
+  bool operator==(const FileIdentity&) const = default;
+};
+
+std::optional<FileIdentity> identity_of(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
+  return FileIdentity{st.st_dev, st.st_ino,
+                      static_cast<std::int64_t>(st.st_mtim.tv_sec) * 1'000'000'000 + st.st_mtim.tv_nsec,
+                      static_cast<std::int64_t>(st.st_size)};
+}
+
 }  // namespace
 
+// One opened version of a region's cache; immutable once made, shared by the requests using it.
 struct Service::Region {
   std::string id;
-  std::unique_ptr<raster::CacheReader> cache;
-  std::string build_tag;  ///< changes whenever the cache's content can differ (ETags)
+  std::shared_ptr<raster::CacheReader> cache;
+  FileIdentity file;
+  std::string build_tag;  ///< changes whenever the cache's content can differ (ETags, response keys)
   osm::GeoBox bounds;     ///< lon/lat bounds of the region raster
+};
+
+struct Service::RegionSlot {
+  std::filesystem::path path;
+  std::mutex mutex;
+  std::shared_ptr<Region> region;
+  std::chrono::steady_clock::time_point checked;
+  std::optional<FileIdentity> refused;  ///< a replacement that could not be opened: not retried
 };
 
 Request parse_request(std::string_view method, std::string_view target) {
@@ -195,36 +226,70 @@ Request parse_request(std::string_view method, std::string_view target) {
   return request;
 }
 
+std::shared_ptr<Service::Region> Service::open_region(const std::string& id, const std::filesystem::path& path) const {
+  auto region = std::make_shared<Region>();
+  region->id = id;
+  // The identity first: should the file be replaced while it is being opened, the next check
+  // sees a difference and opens the new one.
+  region->file = identity_of(path).value_or(FileIdentity{});
+  region->cache = std::make_shared<raster::CacheReader>(path, options_.tile_lru);
+  const auto& m = region->cache->metadata();
+  region->build_tag = hex(fnv1a(m.source_sha256 + "|" + m.created_utc + "|" + m.software_version + "|" +
+                                std::to_string(m.format_version) + "|" + SEQLOC_VERSION + "|" +
+                                fixed(options_.layers.prior_sigma_m, 6) + "|" + std::to_string(region->file.inode) +
+                                "|" + std::to_string(region->file.mtime_ns)));
+  const auto projection = m.projection();
+  const auto& g = m.grid;
+  // The lon/lat extent of the raster's outline (its edges are not meridians or parallels).
+  region->bounds = {180, 90, -180, -90};
+  constexpr int kSamples = 16;
+  for (int i = 0; i <= kSamples; ++i) {
+    const double f = static_cast<double>(i) / kSamples;
+    const double x = g.min_x() + f * (g.max_x() - g.min_x()), y = g.min_y() + f * (g.max_y() - g.min_y());
+    for (const osm::GridPoint p : {osm::GridPoint{x, g.min_y()}, osm::GridPoint{x, g.max_y()},
+                                   osm::GridPoint{g.min_x(), y}, osm::GridPoint{g.max_x(), y}}) {
+      const auto q = projection.reverse(p);
+      auto& b = region->bounds;
+      b.min_lon = std::min(b.min_lon, q.lon_deg), b.max_lon = std::max(b.max_lon, q.lon_deg);
+      b.min_lat = std::min(b.min_lat, q.lat_deg), b.max_lat = std::max(b.max_lat, q.lat_deg);
+    }
+  }
+  return region;
+}
+
+std::shared_ptr<Service::Region> Service::current(RegionSlot& slot) {
+  std::lock_guard lock(slot.mutex);
+  if (options_.reload_check_s < 0) return slot.region;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - slot.checked < std::chrono::duration<double>(options_.reload_check_s)) return slot.region;
+  slot.checked = now;
+  const auto file = identity_of(slot.path);
+  // Unchanged, gone, or a replacement already refused: keep serving what is open.
+  if (!file || *file == slot.region->file || file == slot.refused) return slot.region;
+  try {
+    slot.region = open_region(slot.region->id, slot.path);
+    slot.refused.reset();
+    if (options_.on_reload) options_.on_reload(slot.region->id, "");
+  } catch (const std::exception& e) {
+    // Not a cache: the previous one stays in service until the file changes again.
+    slot.refused = file;
+    if (options_.on_reload) options_.on_reload(slot.region->id, e.what());
+  }
+  return slot.region;
+}
+
 Service::Service(const std::vector<std::filesystem::path>& caches, ServiceOptions options) : options_(std::move(options)) {
   if (caches.empty()) throw ServiceError("no region cache given");
   for (const auto& path : caches) {
-    auto region = std::make_unique<Region>();
-    region->id = region_id(path);
-    if (regions_.count(region->id)) {
-      throw ServiceError(path.string() + ": a second region with the id '" + region->id + "'; rename one of the files");
+    const std::string id = region_id(path);
+    if (regions_.count(id)) {
+      throw ServiceError(path.string() + ": a second region with the id '" + id + "'; rename one of the files");
     }
-    region->cache = std::make_unique<raster::CacheReader>(path, options_.tile_lru);
-    const auto& m = region->cache->metadata();
-    region->build_tag = hex(fnv1a(m.source_sha256 + "|" + m.created_utc + "|" + m.software_version + "|" +
-                                  std::to_string(m.format_version) + "|" + SEQLOC_VERSION + "|" +
-                                  fixed(options_.layers.prior_sigma_m, 6)));
-    const auto projection = m.projection();
-    const auto& g = m.grid;
-    // The lon/lat extent of the raster's outline (its edges are not meridians or parallels).
-    region->bounds = {180, 90, -180, -90};
-    constexpr int kSamples = 16;
-    for (int i = 0; i <= kSamples; ++i) {
-      const double f = static_cast<double>(i) / kSamples;
-      const double x = g.min_x() + f * (g.max_x() - g.min_x()), y = g.min_y() + f * (g.max_y() - g.min_y());
-      for (const osm::GridPoint p : {osm::GridPoint{x, g.min_y()}, osm::GridPoint{x, g.max_y()},
-                                     osm::GridPoint{g.min_x(), y}, osm::GridPoint{g.max_x(), y}}) {
-        const auto q = projection.reverse(p);
-        auto& b = region->bounds;
-        b.min_lon = std::min(b.min_lon, q.lon_deg), b.max_lon = std::max(b.max_lon, q.lon_deg);
-        b.min_lat = std::min(b.min_lat, q.lat_deg), b.max_lat = std::max(b.max_lat, q.lat_deg);
-      }
-    }
-    regions_.emplace(region->id, std::move(region));
+    auto slot = std::make_unique<RegionSlot>();
+    slot->path = path;
+    slot->region = open_region(id, path);
+    slot->checked = std::chrono::steady_clock::now();
+    regions_.emplace(id, std::move(slot));
   }
   if (!options_.web_root.empty()) {
     std::error_code ec;
@@ -253,7 +318,7 @@ std::vector<std::string> Service::region_ids() const {
   return ids;
 }
 
-raster::CacheReader& Service::region(const std::string& id) { return *regions_.at(id)->cache; }
+std::shared_ptr<raster::CacheReader> Service::region(const std::string& id) { return current(*regions_.at(id))->cache; }
 
 Service::Stats Service::stats() const { return {requests_.load(), cache_hits_.load()}; }
 
@@ -309,7 +374,8 @@ Response Service::route(const Request& request) {
   if (it == regions_.end()) {
     return error_response(404, "no region '" + std::string(parts[1]).substr(0, 100) + "' (see /catalog)");
   }
-  Region& region = *it->second;
+  const std::shared_ptr<Region> snapshot = current(*it->second);  // kept for the whole request
+  Region& region = *snapshot;
   if (parts.size() == 2 || (parts.size() == 3 && parts[2] == "tilejson.json")) return tilejson(region, request);
   if (parts.size() == 3 && parts[2] == "wmts.xml") return wmts(region, request);
   if (parts.size() == 3 && parts[2] == "crop") return crop(region, request, false);
@@ -354,7 +420,7 @@ Response Service::tile(Region& region, std::string_view layer_name_, std::string
   if (style != "data" && style != "color") return error_response(400, "style: 'data' or 'color'");
   if (style == "color" && ext != "png") return error_response(400, "style=color is a PNG style");
 
-  const std::string key = region.id + "/" + layer_name(*layer) + "/" + std::to_string(col) + "/" + std::to_string(row) +
+  const std::string key = region.build_tag + "/" + region.id + "/" + layer_name(*layer) + "/" + std::to_string(col) + "/" + std::to_string(row) +
                           "." + std::string(ext) + "/" + style;
   {
     std::lock_guard lock(cache_mutex_);
@@ -522,9 +588,10 @@ Response Service::point(Region& region, std::string_view where) {
                         {"road_prior_sigma_m", options_.layers.prior_sigma_m}});
 }
 
-Response Service::catalog(const Request& request) const {
+Response Service::catalog(const Request& request) {
   ordered_json regions = ordered_json::array();
-  for (const auto& [id, region] : regions_) {
+  for (const auto& [id, slot] : regions_) {
+    const auto region = current(*slot);
     const auto& m = region->cache->metadata();
     regions.push_back({{"id", id},
                        {"source_file", m.source_file},

@@ -355,13 +355,6 @@ TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
     const auto health = client.Get("/health");
     ASSERT_TRUE(health);
     EXPECT_EQ(health->status, 200);
-    const auto escaped = client.Get("/regions/mon%61co/classes/2/2.png");  // decoded by parse_request
-    ASSERT_TRUE(escaped);
-    EXPECT_EQ(escaped->status, 200);
-    const auto malformed = client.Get("/regions/monaco/classes/2/2.png?x=%zz");
-    ASSERT_TRUE(malformed);
-    EXPECT_EQ(malformed->status, 400);
-    EXPECT_NE(malformed->body.find("malformed"), std::string::npos) << malformed->body;
     const auto tile = client.Get("/regions/monaco/classes/2/2.png");
     ASSERT_TRUE(tile);
     EXPECT_EQ(tile->status, 200);
@@ -394,6 +387,25 @@ TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
   listener.join();
 }
 
+TEST_F(ServiceTest, HttpServerDecodesTheRawTargetItself) {
+  ServerOptions options;
+  options.port = 0;
+  options.threads = 2;
+  HttpServer server(*service_, options);
+  server.bind();
+  std::thread listener([&] { server.listen(); });
+  httplib::Client client("127.0.0.1", server.port());
+  const auto escaped = client.Get("/regions/mon%61co/classes/2/2.png");  // decoded by parse_request
+  ASSERT_TRUE(escaped);
+  EXPECT_EQ(escaped->status, 200) << escaped->body;
+  const auto malformed = client.Get("/regions/monaco/classes/2/2.png?x=%zz");
+  ASSERT_TRUE(malformed);
+  EXPECT_EQ(malformed->status, 400);
+  EXPECT_NE(malformed->body.find("malformed"), std::string::npos) << malformed->body;
+  server.stop();
+  listener.join();
+}
+
 TEST_F(ServiceTest, ServerOptionsAreValidated) {
   ServerOptions options;
   options.threads = 0;
@@ -401,6 +413,71 @@ TEST_F(ServiceTest, ServerOptionsAreValidated) {
   options.threads = 4;
   options.port = 70000;
   EXPECT_THROW(options.validate(), ServiceError);
+}
+
+// Two builds of the sample region that differ in every road-distance tile (another clamp).
+struct TwoBuilds {
+  test::ScratchDir dir;
+  std::filesystem::path a = dir / "a.gpkg", b = dir / "b.gpkg";
+  TwoBuilds() {
+    for (const auto& [out, clamp] : {std::pair{a, 40.0}, std::pair{b, 90.0}}) {
+      pipeline::PreprocessOptions options;
+      options.input = std::filesystem::path(SEQLOC_SOURCE_DIR) / "samples" / "rural-valley.osm.pbf";
+      options.output = out;
+      options.max_distance_m = clamp;
+      options.threads = 2;
+      (void)pipeline::preprocess_region(options);
+    }
+  }
+  static std::string blob(const std::filesystem::path& cache, std::int64_t col, std::int64_t row) {
+    const auto bytes = raster::CacheReader(cache).tile_blob(raster::Layer::road_distance, col, row);
+    return {bytes.begin(), bytes.end()};
+  }
+};
+
+TEST(ServiceReload, AReplacedCacheIsServedFromTheNextRequestOn) {
+  TwoBuilds builds;
+  const auto served = builds.dir / "valley.gpkg";
+  std::filesystem::copy_file(builds.a, served);
+  std::vector<std::string> reloads;
+  ServiceOptions options;
+  options.reload_check_s = 0;
+  options.on_reload = [&](const std::string& id, const std::string& error) { reloads.push_back(id + ":" + error); };
+  Service service({served}, options);
+  Request request;
+  request.path = "/regions/valley/road_distance/1/1.png";
+  const Response before = service.handle(request);
+  ASSERT_EQ(before.status, 200) << before.text();
+  ASSERT_EQ(before.text(), TwoBuilds::blob(builds.a, 1, 1));
+  ASSERT_NE(TwoBuilds::blob(builds.a, 1, 1), TwoBuilds::blob(builds.b, 1, 1)) << "the fixture must differ";
+  const auto held = service.region("valley");  // as a request under way holds it
+
+  // A new build renamed over the file, as preprocess --overwrite does.
+  std::filesystem::copy_file(builds.b, builds.dir / "incoming.gpkg");
+  std::filesystem::rename(builds.dir / "incoming.gpkg", served);
+  const Response after = service.handle(request);
+  ASSERT_EQ(after.status, 200) << after.text();
+  EXPECT_EQ(after.text(), TwoBuilds::blob(builds.b, 1, 1)) << "not the response cached for the old file";
+  auto etag = [](const Response& r) {
+    for (const auto& [k, v] : r.headers) {
+      if (k == "ETag") return v;
+    }
+    return std::string();
+  };
+  EXPECT_NE(etag(after), etag(before));
+  EXPECT_EQ(reloads, std::vector<std::string>{"valley:"});
+  // The old reader still reads the old file (its inode), whole.
+  const auto old_blob = held->tile_blob(raster::Layer::road_distance, 1, 1);
+  EXPECT_EQ(std::string(old_blob.begin(), old_blob.end()), TwoBuilds::blob(builds.a, 1, 1));
+
+  // Something that is not a cache renamed over it: the last good one stays in service.
+  std::ofstream(builds.dir / "junk") << "not a GeoPackage";
+  std::filesystem::rename(builds.dir / "junk", served);
+  const Response kept = service.handle(request);
+  EXPECT_EQ(kept.status, 200);
+  EXPECT_EQ(kept.text(), TwoBuilds::blob(builds.b, 1, 1));
+  ASSERT_EQ(reloads.size(), 2u);
+  EXPECT_NE(reloads[1].find(served.string()), std::string::npos) << reloads[1];
 }
 
 TEST(ServiceSetup, RefusesMissingCachesAndDuplicateIds) {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <list>
 #include <map>
 #include <memory>
@@ -54,6 +55,12 @@ struct ServiceOptions {
   /// Files of the viewer page, served at `/` and `/viewer/NAME`; none when empty.
   std::filesystem::path web_root;
   int tile_max_age_s = 3600;                         ///< Cache-Control max-age of tiles and crops
+  /// How often (seconds) a request looks whether its region's file was replaced (a new build
+  /// renamed over it); a replaced cache is reopened and served from then on, requests under way
+  /// finish on the old one. 0: on every request; negative: never.
+  double reload_check_s = 1.0;
+  /// Told of each reload: the region id, and an empty string or why the new file was not taken.
+  std::function<void(const std::string& id, const std::string& error)> on_reload;
 };
 
 /// A configuration that cannot be served (a missing cache, two regions of one id); names the file.
@@ -65,6 +72,8 @@ class ServiceError : public std::runtime_error {
 class Service {
  public:
   /// Opens every cache (region id = the file name without `.gpkg`); loads the viewer's files.
+  /// A cache replaced on disk later (by rename, as `seqloc preprocess --overwrite` does) is picked
+  /// up by the requests that follow; one that cannot be opened keeps the previous one in service.
   Service(const std::vector<std::filesystem::path>& caches, ServiceOptions options);
   ~Service();
   Service(const Service&) = delete;
@@ -74,7 +83,8 @@ class Service {
   [[nodiscard]] Response handle(const Request& request);
 
   [[nodiscard]] std::vector<std::string> region_ids() const;
-  [[nodiscard]] raster::CacheReader& region(const std::string& id);
+  /// The cache currently served for `id` (shared: it stays valid after a reload).
+  [[nodiscard]] std::shared_ptr<raster::CacheReader> region(const std::string& id);
 
   struct Stats {
     std::uint64_t requests = 0, cache_hits = 0;
@@ -83,6 +93,10 @@ class Service {
 
  private:
   struct Region;
+  struct RegionSlot;
+  /// The region's current snapshot, reopened first when its file was replaced.
+  std::shared_ptr<Region> current(RegionSlot& slot);
+  [[nodiscard]] std::shared_ptr<Region> open_region(const std::string& id, const std::filesystem::path& path) const;
   Response route(const Request& request);
   Response tile(Region& region, std::string_view layer, std::string_view col, std::string_view file,
                 const Request& request);
@@ -90,11 +104,11 @@ class Service {
   Response point(Region& region, std::string_view where);
   Response tilejson(const Region& region, const Request& request) const;
   Response wmts(const Region& region, const Request& request) const;
-  Response catalog(const Request& request) const;
+  Response catalog(const Request& request);
   Response static_file(std::string_view name) const;
 
   ServiceOptions options_;
-  std::map<std::string, std::unique_ptr<Region>> regions_;
+  std::map<std::string, std::unique_ptr<RegionSlot>> regions_;
   std::map<std::string, std::pair<std::string, std::shared_ptr<const std::string>>> web_files_;  // name -> type, body
 
   // Encoded tiles by request key, least recently used first out, bounded in bytes.
