@@ -195,6 +195,7 @@ struct Service::RegionSlot {
   std::shared_ptr<Region> region;
   std::chrono::steady_clock::time_point checked;
   std::optional<FileIdentity> refused;  ///< a replacement that could not be opened: not retried
+  bool opening = false;                 ///< a request is opening a replacement
 };
 
 Request parse_request(std::string_view method, std::string_view target) {
@@ -258,24 +259,43 @@ std::shared_ptr<Service::Region> Service::open_region(const std::string& id, con
 }
 
 std::shared_ptr<Service::Region> Service::current(RegionSlot& slot) {
-  std::lock_guard lock(slot.mutex);
-  if (options_.reload_check_s < 0) return slot.region;
-  const auto now = std::chrono::steady_clock::now();
-  if (now - slot.checked < std::chrono::duration<double>(options_.reload_check_s)) return slot.region;
-  slot.checked = now;
-  const auto file = identity_of(slot.path);
-  // Unchanged, gone, or a replacement already refused: keep serving what is open.
-  if (!file || *file == slot.region->file || file == slot.refused) return slot.region;
-  try {
-    slot.region = open_region(slot.region->id, slot.path);
-    slot.refused.reset();
-    if (options_.on_reload) options_.on_reload(slot.region->id, "");
-  } catch (const std::exception& e) {
-    // Not a cache: the previous one stays in service until the file changes again.
-    slot.refused = file;
-    if (options_.on_reload) options_.on_reload(slot.region->id, e.what());
+  std::optional<FileIdentity> file;
+  std::string id;
+  {
+    std::lock_guard lock(slot.mutex);
+    if (options_.reload_check_s < 0) return slot.region;
+    const auto now = std::chrono::steady_clock::now();
+    if (now - slot.checked < std::chrono::duration<double>(options_.reload_check_s)) return slot.region;
+    slot.checked = now;
+    file = identity_of(slot.path);
+    // Unchanged, gone, a replacement already refused, or another request is opening it: keep
+    // serving what is open.
+    if (!file || *file == slot.region->file || file == slot.refused || slot.opening) return slot.region;
+    slot.opening = true;
+    id = slot.region->id;
   }
-  return slot.region;
+  // Opened outside the lock: the other requests go on with the previous version meanwhile.
+  std::shared_ptr<Region> fresh;
+  std::string error;
+  try {
+    fresh = open_region(id, slot.path);
+  } catch (const std::exception& e) {
+    error = e.what();  // not a cache: the previous one stays until the file changes again
+  }
+  std::shared_ptr<Region> now_served;
+  {
+    std::lock_guard lock(slot.mutex);
+    slot.opening = false;
+    if (fresh) {
+      slot.region = fresh;
+      slot.refused.reset();
+    } else {
+      slot.refused = file;
+    }
+    now_served = slot.region;
+  }
+  if (options_.on_reload) options_.on_reload(id, error);
+  return now_served;
 }
 
 Service::Service(const std::vector<std::filesystem::path>& caches, ServiceOptions options) : options_(std::move(options)) {

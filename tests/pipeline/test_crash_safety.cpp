@@ -5,13 +5,16 @@
 #include <signal.h>
 #include <sys/wait.h>
 
+#include <atomic>
 #include <chrono>
+#include <map>
 #include <random>
 #include <thread>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "support/test_support.hpp"
 
@@ -153,6 +156,71 @@ TEST(CrashSafety, KillNineDuringLocalizeLeavesThePreviousOutputOrTheNewOne) {
   }
   RecordProperty("killed", killed);
   RecordProperty("completed_between_kills", replaced);
+}
+
+TEST(Concurrency, ReadersOfACacheBeingRebuiltSeeOneWholeBuild) {
+  // Two builds of the sample region that differ in every road-distance tile; then rebuilds
+  // alternate between them onto one path while readers open it and read every tile.
+  test::ScratchDir dir;
+  const auto sample = std::filesystem::path(SEQLOC_SOURCE_DIR) / "samples" / "rural-valley.osm.pbf";
+  auto build = [&](const std::filesystem::path& out, double clamp) {
+    PreprocessOptions options;
+    options.input = sample;
+    options.output = out;
+    options.max_distance_m = clamp;
+    options.threads = 1;
+    options.overwrite = true;
+    (void)preprocess_region(options);
+  };
+  using Tiles = std::map<std::pair<std::int64_t, std::int64_t>, std::vector<std::uint8_t>>;
+  auto tiles_of = [](raster::CacheReader& reader) {
+    Tiles tiles;
+    for (std::int64_t row = 0; row < reader.grid().tiles_high(); ++row) {
+      for (std::int64_t col = 0; col < reader.grid().tiles_wide(); ++col) {
+        tiles[{col, row}] = reader.tile_blob(raster::Layer::road_distance, col, row);
+      }
+    }
+    return tiles;
+  };
+  build(dir / "a.gpkg", 40);
+  build(dir / "b.gpkg", 90);
+  raster::CacheReader ra(dir / "a.gpkg"), rb(dir / "b.gpkg");
+  const Tiles a = tiles_of(ra), b = tiles_of(rb);
+  ASSERT_NE(a, b);
+  const auto path = dir / "region.gpkg";
+  build(path, 40);
+
+  std::atomic<bool> stop{false};
+  std::atomic<int> reads{0}, as_a{0}, as_b{0}, mixed{0}, errors{0};
+  std::vector<std::thread> readers;
+  for (int t = 0; t < 3; ++t) {
+    readers.emplace_back([&] {
+      while (!stop) {
+        try {
+          raster::CacheReader reader(path);
+          const Tiles seen = tiles_of(reader);
+          ++reads;
+          if (seen == a) {
+            ++as_a;
+          } else if (seen == b) {
+            ++as_b;
+          } else {
+            ++mixed;
+          }
+        } catch (const std::exception& e) {
+          ++errors;
+          ADD_FAILURE() << "a reader failed while the cache was rebuilt: " << e.what();
+        }
+      }
+    });
+  }
+  for (int rebuild = 0; rebuild < 6; ++rebuild) build(path, rebuild % 2 ? 40 : 90);
+  stop = true;
+  for (auto& t : readers) t.join();
+  EXPECT_EQ(mixed.load(), 0) << "a reader saw tiles of two builds";
+  EXPECT_EQ(errors.load(), 0);
+  EXPECT_GT(as_a.load(), 0) << "reads: " << reads;
+  EXPECT_GT(as_b.load(), 0) << "reads: " << reads;
 }
 
 }  // namespace
