@@ -9,7 +9,6 @@ namespace seqloc::osm {
 RegionProjection::RegionProjection(double lat0_deg, double lon0_deg)
     : lat0_(lat0_deg),
       lon0_(lon0_deg),
-      y0_(0),
       tm_(GeographicLib::Constants::WGS84_a(), GeographicLib::Constants::WGS84_f(), 1.0) {
   double x = 0;
   tm_.Forward(lon0_, lat0_, lon0_, x, y0_);

@@ -60,8 +60,14 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
     const RouteFrame& f = route.frames[i];
     if (f.observation.empty()) {
       const NpyVolume npy(f.volume);
-      return std::make_shared<const filter::PreparedFrame>(
-          filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), headings, threads));
+      try {
+        return std::make_shared<const filter::PreparedFrame>(
+            filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), headings, threads));
+      } catch (const filter::FilterError& e) {
+        // The filter checks the values (NaN, infinities, negative probabilities); the user needs
+        // to know which file holds them.
+        throw DataError(f.volume.string() + " (frames.csv line " + std::to_string(f.line) + "): " + e.what());
+      }
     }
     const Observation obs = read_observation(f.observation);
     const GridCrop crop = frame_crop(f, cache.grid(), cache.metadata().projection());

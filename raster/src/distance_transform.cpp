@@ -77,7 +77,7 @@ void squared_distance(std::span<const std::uint8_t> mask, int width, int height,
     std::uint32_t* o = out.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(out_w);
     int j = 0;
     for (int u = out_u0; u < out_u0 + out_w; ++u) {
-      while (j < k && hull_z[static_cast<std::size_t>(j + 1)] < u) ++j;
+      while (j < k && hull_z[static_cast<std::size_t>(j) + 1] < u) ++j;
       const int q = hull_q[static_cast<std::size_t>(j)];
       const auto du = static_cast<std::uint32_t>(u > q ? u - q : q - u);
       o[u - out_u0] = du * du + static_cast<std::uint32_t>(c[q]) * c[q];

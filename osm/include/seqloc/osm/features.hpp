@@ -34,8 +34,8 @@ struct GeoBox {
 };
 
 struct PointFeature {
-  Group group;
-  std::int64_t osm_id;
+  Group group{};
+  std::int64_t osm_id = 0;
   GeoPoint where;
 };
 

@@ -39,7 +39,7 @@ class RegionProjection {
  private:
   double lat0_;
   double lon0_;
-  double y0_;  ///< northing of the origin latitude from the equator
+  double y0_ = 0;  ///< northing of the origin latitude from the equator
   GeographicLib::TransverseMercator tm_;
 };
 

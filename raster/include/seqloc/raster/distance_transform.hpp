@@ -47,7 +47,8 @@ void squared_distance(std::span<const std::uint8_t> mask, int width, int height,
   if (squared_cells == kNoMark) return max_cm;
   const double cm = std::sqrt(static_cast<double>(squared_cells)) * cell_m * 100.0;
   if (cm >= max_cm) return max_cm;
-  return static_cast<std::uint16_t>(cm + 0.5);
+  // cm >= 0 here, where adding 0.5 and truncating rounds half up (no libm call per cell).
+  return static_cast<std::uint16_t>(cm + 0.5);  // NOLINT(bugprone-incorrect-roundings)
 }
 
 /// quantize_distance_cm() as a table over the squared distances below the clamp (the same values,

@@ -34,7 +34,7 @@ struct PixelBox {
 };
 
 struct PixelNode {
-  osm::Group group;
+  osm::Group group{};
   Pixel at;
 };
 struct PixelLine {
