@@ -87,8 +87,9 @@ class LocalizeCommand : public Command {
     }
     double noise_t = 0, noise_r = 0;
     if (!noise_.empty()) {
-      char extra = 0;
-      if (std::sscanf(noise_.c_str(), "%lf,%lf%c", &noise_t, &noise_r, &extra) != 2 || noise_t < 0 || noise_r < 0) {
+      const auto v = parse_numbers<double>(noise_, ',', 2);
+      if (v) noise_t = (*v)[0], noise_r = (*v)[1];
+      if (!v || noise_t < 0 || noise_r < 0) {
         throw pipeline::UsageError("--odometry-noise '" + noise_ + "': expected SIGMA_T_PCT,SIGMA_R_DEG_PER_M >= 0");
       }
     }
@@ -168,6 +169,7 @@ class LocalizeCommand : public Command {
       bar.done();
       std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
       std::vector<std::string> route_names;
+      route_names.reserve(routes.size());
       for (const auto& route : routes) route_names.push_back(route.name);
       for (std::size_t j = 0; j < jobs.size(); ++j) {
         const auto& result = results[j];

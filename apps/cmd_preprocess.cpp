@@ -14,13 +14,9 @@
 namespace seqloc::app {
 
 osm::GeoBox parse_bbox(const std::string& text) {
-  osm::GeoBox box;
-  char extra = 0;
-  if (std::sscanf(text.c_str(), "%lf,%lf,%lf,%lf%c", &box.min_lon, &box.min_lat, &box.max_lon, &box.max_lat,
-                  &extra) != 4) {
-    throw pipeline::UsageError("--bbox '" + text + "': expected lon0,lat0,lon1,lat1 (decimal degrees)");
-  }
-  return box;
+  const auto v = parse_numbers<double>(text, ',', 4);
+  if (!v) throw pipeline::UsageError("--bbox '" + text + "': expected lon0,lat0,lon1,lat1 (decimal degrees)");
+  return {(*v)[0], (*v)[1], (*v)[2], (*v)[3]};
 }
 
 namespace {
@@ -51,10 +47,10 @@ class PreprocessCommand : public Command {
   int run() override {
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
     if (!shard_.empty()) {
-      char extra = 0;
-      if (std::sscanf(shard_.c_str(), "%d/%d%c", &options_.shard_index, &options_.shard_count, &extra) != 2) {
-        throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N, e.g. 0/4");
-      }
+      const auto v = parse_numbers<int>(shard_, '/', 2);
+      if (!v) throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N, e.g. 0/4");
+      options_.shard_index = (*v)[0];
+      options_.shard_count = (*v)[1];
     }
     options_.validate();
     log("preprocess %s -> %s", options_.input.c_str(), options_.output.c_str());

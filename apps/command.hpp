@@ -2,10 +2,15 @@
 // One class per subcommand (osmium-tool's Command): setup() declares and validates options only,
 // run() does the work. main() turns exceptions into one line on stderr and an exit code.
 
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -71,6 +76,28 @@ class ProgressBar {
 
 /// "lon0,lat0,lon1,lat1" in decimal degrees; throws UsageError naming the option otherwise.
 osm::GeoBox parse_bbox(const std::string& text);
+
+/// `text` as exactly `count` numbers separated by `separator`, each read whole by std::from_chars
+/// (no locale, no partial match, no silent overflow; floating point must be finite); nullopt
+/// otherwise. Option values like "0/4" or "2,0.1" go through here, not sscanf.
+template <class T>
+std::optional<std::vector<T>> parse_numbers(std::string_view text, char separator, std::size_t count) {
+  std::vector<T> out;
+  while (true) {
+    const std::size_t end = std::min(text.find(separator), text.size());
+    T value{};
+    const auto [last, ec] = std::from_chars(text.data(), text.data() + end, value);
+    if (end == 0 || ec != std::errc() || last != text.data() + end) return std::nullopt;
+    if constexpr (std::is_floating_point_v<T>) {
+      if (!std::isfinite(value)) return std::nullopt;
+    }
+    out.push_back(value);
+    if (end == text.size()) break;
+    text.remove_prefix(end + 1);
+  }
+  if (out.size() != count) return std::nullopt;
+  return out;
+}
 
 /// --progress / --no-progress resolved against whether stderr is a terminal.
 bool progress_wanted(int flag);

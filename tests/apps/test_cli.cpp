@@ -82,6 +82,14 @@ TEST(Cli, UsageErrorsExitTwo) {
   const auto bad_shard = run_seqloc({"preprocess", map.string(), "-o", (dir / "r.gpkg").string(), "--shard", "5/2"});
   EXPECT_EQ(bad_shard.exit_code, 2);
   EXPECT_NE(bad_shard.err.find("5/2"), std::string::npos) << bad_shard.err;
+  // Values sscanf took (a NaN, an int overflow, trailing garbage in a field) are usage errors.
+  for (const auto& [option, value] : {std::pair{"--bbox", "1,2,3,nan"}, std::pair{"--bbox", "1,2,3,4x"},
+                                      std::pair{"--bbox", "1,,2,3,4"}, std::pair{"--shard", "99999999999/4"},
+                                      std::pair{"--shard", "1/4/2"}}) {
+    const auto r = run_seqloc({"preprocess", map.string(), "-o", (dir / "r.gpkg").string(), option, value});
+    EXPECT_EQ(r.exit_code, 2) << option << " " << value;
+    EXPECT_NE(r.err.find(value), std::string::npos) << r.err;
+  }
   EXPECT_FALSE(std::filesystem::exists(dir / "r.gpkg"));
 }
 
