@@ -23,6 +23,21 @@ namespace {
 
 const char* kBbox = "11.520,49.995,11.566,50.024";  // ~3.3 x 3.2 km of north-bayreuth: ~1 s of work
 
+// Starts seqloc with `args`, sends it SIGKILL after `delay_ms`; true when the kill (not the end
+// of the run) stopped it.
+bool killed_after(const std::vector<std::string>& args, long long delay_ms) {
+  const pid_t pid = test::start_seqloc(args);
+  if (pid <= 0) {
+    ADD_FAILURE() << "cannot start seqloc";
+    return false;
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFSIGNALED(status);
+}
+
 TEST(CrashSafety, KillNineNeverDamagesTheCacheAndARerunCompletes) {
   const auto osm = test::shared_osm("north-bayreuth.osm.pbf");
   if (osm.empty()) GTEST_SKIP() << "../shared/data/osm is not available";
@@ -42,13 +57,7 @@ TEST(CrashSafety, KillNineNeverDamagesTheCacheAndARerunCompletes) {
   std::uniform_int_distribution<int> delay_ms(30, 900);
   int killed_mid_build = 0;
   for (int attempt = 0; attempt < 8; ++attempt) {
-    const pid_t pid = test::start_seqloc(args);
-    ASSERT_GT(pid, 0);
-    std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms(rng)));
-    kill(pid, SIGKILL);
-    int status = 0;
-    waitpid(pid, &status, 0);
-    if (WIFSIGNALED(status)) ++killed_mid_build;
+    if (killed_after(args, delay_ms(rng))) ++killed_mid_build;
     // Either the previous cache, untouched, or (if the build had finished) a complete new one.
     const std::string now = test::read_file(out);
     if (now != previous) {
@@ -131,13 +140,7 @@ TEST(CrashSafety, KillNineDuringLocalizeLeavesThePreviousOutputOrTheNewOne) {
   std::uniform_int_distribution<long long> delay_ms(0, std::max<long long>(50, took_ms * 3 / 2));
   int killed = 0, replaced = 0;
   for (int attempt = 0; attempt < 10; ++attempt) {
-    const pid_t pid = test::start_seqloc(localize(attempt % 2 ? "single" : "seqloc"));
-    ASSERT_GT(pid, 0);
-    std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms(rng)));
-    kill(pid, SIGKILL);
-    int status = 0;
-    waitpid(pid, &status, 0);
-    if (WIFSIGNALED(status)) ++killed;
+    if (killed_after(localize(attempt % 2 ? "single" : "seqloc"), delay_ms(rng))) ++killed;
     // Always a complete folder under the final name: the previous one or the new one.
     ASSERT_TRUE(std::filesystem::exists(dir / "out" / "summary.json")) << "attempt " << attempt;
     const bool is_previous = test::read_file(dir / "out" / "summary.json") == previous;
