@@ -118,7 +118,7 @@ class HttpServer::Impl {
   std::mutex log_mutex;
 };
 
-HttpServer::HttpServer(Service& service, ServerOptions options) : impl_(std::make_unique<Impl>()) {
+HttpServer::HttpServer(Service& service, const ServerOptions& options) : impl_(std::make_unique<Impl>()) {
   options.validate();
   auto& svr = impl_->server;
   Impl* impl = impl_.get();
@@ -128,7 +128,7 @@ HttpServer::HttpServer(Service& service, ServerOptions options) : impl_(std::mak
   svr.set_write_timeout(options.timeout_s, 0);
   svr.set_keep_alive_timeout(options.keep_alive_s);
   svr.set_keep_alive_max_count(10000);
-  svr.set_payload_max_length(64 * 1024);
+  svr.set_payload_max_length(std::size_t{64} * 1024);
   svr.set_tcp_nodelay(true);
   const std::string fallback = "http://" + (options.bind.find(':') != std::string::npos ? "[" + options.bind + "]" : options.bind);
   svr.set_pre_routing_handler([&service, options, impl, fallback, this](const httplib::Request& req,

@@ -360,7 +360,7 @@ Response Service::handle(const Request& request) {
     // A damaged cache or a GDAL failure: the server's fault, not the client's.
     response = error_response(500, e.what());
   }
-  if (request.if_none_match.size() && response.status == 200) {
+  if (!request.if_none_match.empty() && response.status == 200) {
     for (const auto& [key, value] : response.headers) {
       if (key == "ETag" && (request.if_none_match == value || request.if_none_match == "*")) {
         Response not_modified;

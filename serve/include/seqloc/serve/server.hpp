@@ -27,7 +27,7 @@ struct ServerOptions {
 
 class HttpServer {
  public:
-  HttpServer(Service& service, ServerOptions options);
+  HttpServer(Service& service, const ServerOptions& options);
   ~HttpServer();
   HttpServer(const HttpServer&) = delete;
   HttpServer& operator=(const HttpServer&) = delete;
