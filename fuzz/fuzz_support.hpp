@@ -13,6 +13,8 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <system_error>
+#include <utility>
 
 namespace seqloc::fuzz {
 
@@ -42,6 +44,31 @@ class MemoryFile {
 
  private:
   int fd_;
+};
+
+/// A directory under /tmp for one fuzz process (mkdtemp), removed with everything in it when the
+/// object is destroyed.
+class ScratchDir {
+ public:
+  explicit ScratchDir(const char* name) {
+    std::string pattern = std::string("/tmp/seqloc-fuzz-") + name + "-XXXXXX";
+    if (!::mkdtemp(pattern.data())) {
+      std::perror("mkdtemp");
+      std::abort();
+    }
+    path_ = pattern;
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+
+  [[nodiscard]] const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
 };
 
 /// Splits an input at the first occurrence of `separator`: (before, after); after is empty when

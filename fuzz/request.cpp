@@ -13,28 +13,22 @@
 
 namespace {
 
+// Destroyed in reverse order at exit: the service (its open cache) before the directory.
+std::unique_ptr<seqloc::fuzz::ScratchDir> scratch;
 std::unique_ptr<seqloc::serve::Service> service;
-std::filesystem::path scratch;
 
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int* /*argc*/, char*** /*argv*/) {
-  char pattern[] = "/tmp/seqloc-fuzz-serve-XXXXXX";
-  const char* made = ::mkdtemp(pattern);
-  if (!made) std::abort();
-  scratch = made;
+  scratch = std::make_unique<seqloc::fuzz::ScratchDir>("serve");
   seqloc::pipeline::PreprocessOptions options;
   options.input = SEQLOC_SAMPLE_PBF;
-  options.output = scratch / "valley.gpkg";
+  options.output = scratch->path() / "valley.gpkg";
   options.threads = 1;
   (void)seqloc::pipeline::preprocess_region(options);
   seqloc::serve::ServiceOptions service_options;
   service_options.response_cache_bytes = 4u << 20;  // evictions happen during a run too
   service = std::make_unique<seqloc::serve::Service>(std::vector{options.output}, service_options);
-  std::atexit([] {
-    service.reset();
-    std::filesystem::remove_all(scratch);
-  });
   return 0;
 }
 

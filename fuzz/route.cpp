@@ -11,23 +11,14 @@
 namespace {
 
 // A directory with the files frames may name, removed when the process ends.
-struct Scratch {
-  std::filesystem::path dir;
-  Scratch() {
-    char pattern[] = "/tmp/seqloc-fuzz-route-XXXXXX";
-    const char* made = ::mkdtemp(pattern);
-    if (!made) std::abort();
-    dir = made;
-    for (const char* name : {"v0.npy", "v1.npy", "o0.png"}) std::ofstream(dir / name) << "x";
-  }
-  ~Scratch() { std::filesystem::remove_all(dir); }
-  Scratch(const Scratch&) = delete;
-  Scratch& operator=(const Scratch&) = delete;
-};
-
 const std::filesystem::path& scratch() {
-  static const Scratch scratch;
-  return scratch.dir;
+  static const seqloc::fuzz::ScratchDir dir("route");
+  static const bool filled = [] {
+    for (const char* name : {"v0.npy", "v1.npy", "o0.png"}) std::ofstream(dir.path() / name) << "x";
+    return true;
+  }();
+  (void)filled;
+  return dir.path();
 }
 
 void write(const std::filesystem::path& path, std::string_view text) {

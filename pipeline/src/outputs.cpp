@@ -60,6 +60,9 @@ void write_file(const std::filesystem::path& path, const std::string& bytes) {
 }
 
 void commit_directory(const std::filesystem::path& staged, const std::filesystem::path& target) {
+  auto fail = [&](const std::string& why) {
+    throw DataError(target.string() + ": cannot move the finished output into place: " + why);
+  };
   std::error_code ec;
   if (::renameat2(AT_FDCWD, staged.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
     std::filesystem::remove_all(staged, ec);  // the previous folder; a leftover is removed next run
@@ -69,19 +72,17 @@ void commit_directory(const std::filesystem::path& staged, const std::filesystem
   if (exchange_error == ENOENT && std::filesystem::exists(staged, ec)) {
     // No target yet: a plain rename, atomic too.
     std::filesystem::rename(staged, target, ec);
-    if (ec) throw DataError(target.string() + ": cannot move the finished output into place: " + ec.message());
+    if (ec) fail(ec.message());
     return;
   }
-  if (exchange_error != EINVAL && exchange_error != ENOSYS) {
-    throw DataError(target.string() + ": cannot move the finished output into place: " + std::strerror(exchange_error));
-  }
+  if (exchange_error != EINVAL && exchange_error != ENOSYS) fail(std::strerror(exchange_error));
   // A file system without RENAME_EXCHANGE: two renames, with a short window in which `target`
   // is missing and the previous folder sits beside it as TARGET.old.
   const std::filesystem::path old = target.string() + ".old";
   std::filesystem::remove_all(old, ec);
   std::filesystem::rename(target, old, ec);
   if (!ec) std::filesystem::rename(staged, target, ec);
-  if (ec) throw DataError(target.string() + ": cannot move the finished output into place: " + ec.message());
+  if (ec) fail(ec.message());
   std::filesystem::remove_all(old, ec);
 }
 

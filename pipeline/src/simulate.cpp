@@ -258,7 +258,6 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
     return p.x > grid.min_x() + kEdgeMarginM && p.x < grid.max_x() - kEdgeMarginM && p.y > grid.min_y() + kEdgeMarginM &&
            p.y < grid.max_y() - kEdgeMarginM;
   };
-  std::error_code ec;
   const std::filesystem::path partial = staging_directory(out);
   std::filesystem::create_directories(partial);
 
