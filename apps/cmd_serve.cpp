@@ -84,8 +84,9 @@ class ServeCommand : public Command {
       server.stop();
     });
     server.listen();
-    // listen() also returns when the socket fails: wake the waiter either way.
-    pthread_kill(waiter.native_handle(), SIGTERM);
+    // listen() also returns when the socket fails: wake the waiter either way. SIGTERM is blocked
+    // and taken by its sigwait, so this wakes the thread, it does not terminate it.
+    pthread_kill(waiter.native_handle(), SIGTERM);  // NOLINT(bugprone-bad-signal-to-kill-thread)
     waiter.join();
     std::fprintf(stderr, "seqloc serve: stopped after %llu requests (%llu turned away at the connection limit)\n",
                  static_cast<unsigned long long>(service.stats().requests),

@@ -45,14 +45,15 @@ void ProgressBar::done() {
 }  // namespace seqloc::app
 
 int main(int argc, char** argv) {
-  using namespace seqloc;
-  CLI::App app{"seqloc: localize vehicles against OpenStreetMap with sequences of pose likelihoods.\n"
+  namespace app = seqloc::app;
+  namespace pipeline = seqloc::pipeline;
+  CLI::App cli{"seqloc: localize vehicles against OpenStreetMap with sequences of pose likelihoods.\n"
                "Map data (c) OpenStreetMap contributors, ODbL 1.0."};
-  app.name("seqloc");
-  app.require_subcommand(1);
-  app.set_version_flag("--version", std::string("seqloc ") + SEQLOC_VERSION);
+  cli.name("seqloc");
+  cli.require_subcommand(1);
+  cli.set_version_flag("--version", std::string("seqloc ") + SEQLOC_VERSION);
   app::GlobalOptions global;
-  app.add_flag("-v,--verbose", global.verbose, "Timestamped log lines on stderr");
+  cli.add_flag("-v,--verbose", global.verbose, "Timestamped log lines on stderr");
 
   std::vector<std::pair<CLI::App*, std::unique_ptr<app::Command>>> commands;
   auto add = [&](CLI::App* parent, const char* name, const char* description, std::unique_ptr<app::Command> command) {
@@ -61,24 +62,24 @@ int main(int argc, char** argv) {
     command->setup(*sub);
     commands.emplace_back(sub, std::move(command));
   };
-  add(&app, "preprocess", "Build a region cache (GeoPackage) from an OSM file", app::make_preprocess_command());
-  add(&app, "localize", "Localize routes against a region cache", app::make_localize_command());
-  add(&app, "evaluate", "Recompute the recall table from localize outputs", app::make_evaluate_command());
-  add(&app, "simulate", "Simulate routes with BEV observations along a cache's roads", app::make_simulate_command());
-  add(&app, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time", app::make_render_command());
-  add(&app, "serve", "Serve region caches over HTTP: tiles, crops, points, WMTS, the viewer page",
+  add(&cli, "preprocess", "Build a region cache (GeoPackage) from an OSM file", app::make_preprocess_command());
+  add(&cli, "localize", "Localize routes against a region cache", app::make_localize_command());
+  add(&cli, "evaluate", "Recompute the recall table from localize outputs", app::make_evaluate_command());
+  add(&cli, "simulate", "Simulate routes with BEV observations along a cache's roads", app::make_simulate_command());
+  add(&cli, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time", app::make_render_command());
+  add(&cli, "serve", "Serve region caches over HTTP: tiles, crops, points, WMTS, the viewer page",
       app::make_serve_command());
-  add(&app, "export", "Export a layer of a region cache as a Cloud Optimized GeoTIFF, or the cache as a VRT",
+  add(&cli, "export", "Export a layer of a region cache as a Cloud Optimized GeoTIFF, or the cache as a VRT",
       app::make_export_command());
-  CLI::App* cache = app.add_subcommand("cache", "Inspect and combine region caches");
+  CLI::App* cache = cli.add_subcommand("cache", "Inspect and combine region caches");
   cache->require_subcommand(1);
   add(cache, "info", "Print a cache's metadata", app::make_cache_info_command());
   add(cache, "merge", "Merge the shards of a sharded build into one cache", app::make_cache_merge_command());
 
   try {
-    app.parse(argc, argv);
+    cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);
+    const int code = cli.exit(e);
     return code == 0 ? app::kExitOk : app::kExitUsage;
   }
   try {

@@ -20,7 +20,9 @@
 #include "seqloc/serve/map_layers.hpp"
 
 namespace py = pybind11;
-using namespace seqloc;
+namespace filter = seqloc::filter;
+namespace raster = seqloc::raster;
+namespace serve = seqloc::serve;
 
 namespace {
 
@@ -137,7 +139,7 @@ class PyFilter {
  public:
   explicit PyFilter(const py::dict& config) : filter_(config_from(config)) {}
 
-  void reset(py::object gps) {
+  void reset(const py::object& gps) {
     if (gps.is_none()) {
       filter_.reset_uniform();
     } else {
@@ -147,7 +149,7 @@ class PyFilter {
   }
 
   py::dict step(const py::array& volume, std::tuple<double, double, double> odometry,
-                std::tuple<double, double, double> crop_pose, py::object road_distance, bool probabilities,
+                std::tuple<double, double, double> crop_pose, const py::object& road_distance, bool probabilities,
                 double cell_m) {
     if (volume.ndim() != 3) throw py::value_error("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) + " dimensions");
     filter::FrameVolume view;

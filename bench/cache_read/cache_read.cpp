@@ -50,7 +50,7 @@ int main(int argc, char** argv) {
     }
   }
   // Peer: copying a decoded class tile (786 KB), the floor of any read that hands out a buffer.
-  std::vector<std::uint8_t> src(512 * 512 * 3, 1), dst(src.size());
+  std::vector<std::uint8_t> src(std::size_t{512} * 512 * 3, 1), dst(src.size());
   const int copies = 2000;
   const auto t0 = Clock::now();
   for (int i = 0; i < copies; ++i) {

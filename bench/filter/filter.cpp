@@ -49,7 +49,7 @@ int main() {
       seqloc::filter::SeqLocFilter filter(c);
       std::vector<float> road(static_cast<std::size_t>(size) * size);
       for (int v = 0; v < size; ++v)
-        for (int u = 0; u < size; ++u) road[static_cast<std::size_t>(v * size + u)] = static_cast<float>(std::abs(u - size / 2) * 0.5);
+        for (int u = 0; u < size; ++u) road[static_cast<std::size_t>(v) * static_cast<std::size_t>(size) + static_cast<std::size_t>(u)] = static_cast<float>(std::abs(u - size / 2) * 0.5);
       std::vector<double> step_ms, intake_ms;
       for (int i = 0; i < 12; ++i) {
         const auto t0 = Clock::now();
@@ -77,7 +77,7 @@ int main() {
                   static_cast<double>(b.size()) * 4 / 1e6, r.memcpy_ms, r.step_ms / r.memcpy_ms);
     }
   }
-  std::string json = "{\"benchmark\": \"filter\", \"volume\": \"128x128x256 float32\", \"rows\": [";
+  std::string json = R"({"benchmark": "filter", "volume": "128x128x256 float32", "rows": [)";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     char buffer[256];
     std::snprintf(buffer, sizeof buffer,

@@ -15,7 +15,8 @@
 #include "seqloc/pipeline/matcher.hpp"
 #include "seqloc/pipeline/simulate.hpp"
 
-using namespace seqloc;
+namespace pipeline = seqloc::pipeline;
+namespace raster = seqloc::raster;
 using Clock = std::chrono::steady_clock;
 
 int main(int argc, char** argv) {

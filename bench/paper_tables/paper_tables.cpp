@@ -23,7 +23,9 @@
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/render.hpp"
 
-using namespace seqloc;
+namespace filter = seqloc::filter;
+namespace pipeline = seqloc::pipeline;
+namespace raster = seqloc::raster;
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
@@ -219,7 +221,7 @@ int main(int argc, char** argv) {
       if (p.entropy < 0.5) low++, low_hit += hit;
       else high++, high_hit += hit;
     }
-    const double n = static_cast<double>(s.x.size());
+    const auto n = static_cast<double>(s.x.size());
     char b[256];
     std::snprintf(b, sizeof b, "| %s | %zu | %.3f | %.1f | %.1f | %.1f%% |\n", region.c_str(), s.x.size(), sum / n,
                   low ? 100.0 * static_cast<double>(low_hit) / static_cast<double>(low) : 0.0,

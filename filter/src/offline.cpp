@@ -51,7 +51,8 @@ Pose argmax_pose(const BeliefVolume& sum) {
   const auto cells = static_cast<std::ptrdiff_t>(sum.slice_cells());
   const int k = static_cast<int>(best / cells);
   const auto rest = best % cells;
-  return {static_cast<double>(rest % sum.width()), static_cast<double>(rest / sum.width()), sum.bin_heading_deg(k)};
+  const auto u = rest % sum.width(), v = rest / sum.width();  // whole cells
+  return {static_cast<double>(u), static_cast<double>(v), sum.bin_heading_deg(k)};
 }
 
 }  // namespace
@@ -70,7 +71,7 @@ Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, con
     place(frames[s], placed, blend);
     const BeliefVolume* source = &placed;
     if (s != t) {
-      const float no_info = static_cast<float>(-frames[s].frame->log_cells);
+      const auto no_info = static_cast<float>(-frames[s].frame->log_cells);
       detail::warp_volume(placed, warped, motion_between(frames, s, t), no_info, config.threads);
       source = &warped;
     }
@@ -100,7 +101,7 @@ std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const F
     for (int s = s0; s <= s1; ++s) {
       const BeliefVolume* source = &placed[static_cast<std::size_t>(s)];
       if (s != t) {
-        const float no_info = static_cast<float>(-frames[static_cast<std::size_t>(s)].frame->log_cells);
+        const auto no_info = static_cast<float>(-frames[static_cast<std::size_t>(s)].frame->log_cells);
         detail::warp_volume(*source, warped,
                             motion_between(frames, static_cast<std::size_t>(s), static_cast<std::size_t>(t)), no_info,
                             config.threads);

@@ -132,7 +132,7 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
       bad = x.isNaN().any() || (x == kInf).any();
       if (!bad) x = (x == -kInf).select(kLogZero, x);
     }
-    chunk_bad[static_cast<std::size_t>(t)] = bad;
+    chunk_bad[static_cast<std::size_t>(t)] = static_cast<char>(bad);
     if (!bad) chunk_max[static_cast<std::size_t>(t)] = x.maxCoeff();
   });
   const bool bad = std::find(chunk_bad.begin(), chunk_bad.end(), 1) != chunk_bad.end();
@@ -412,8 +412,9 @@ void SeqLocFilter::predict(const Odometry& odometry) {
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
           double acc = 0;
-          for (int i = -rx; i <= rx; ++i) {
-            if (u + i >= 0 && u + i < W) acc += kx[static_cast<std::size_t>(i + rx)] * p[idx(u + i, v, k)];
+          for (std::size_t j = 0; j < kx.size(); ++j) {  // offsets -rx..rx
+            const int uu = u + static_cast<int>(j) - rx;
+            if (uu >= 0 && uu < W) acc += kx[j] * p[idx(uu, v, k)];
           }
           tmp[idx(u, v, k)] = static_cast<float>(acc);
         }
@@ -421,16 +422,18 @@ void SeqLocFilter::predict(const Odometry& odometry) {
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
           double acc = 0;
-          for (int i = -rx; i <= rx; ++i) {
-            if (v + i >= 0 && v + i < H) acc += kx[static_cast<std::size_t>(i + rx)] * tmp[idx(u, v + i, k)];
+          for (std::size_t j = 0; j < kx.size(); ++j) {
+            const int vv = v + static_cast<int>(j) - rx;
+            if (vv >= 0 && vv < H) acc += kx[j] * tmp[idx(u, vv, k)];
           }
           p[idx(u, v, k)] = static_cast<float>(acc);
         }
     for (int k = 0; k < R; ++k)
       for (std::size_t c = 0; c < n; ++c) {
         double acc = 0;
-        for (int i = -rh; i <= rh; ++i) {
-          acc += kh[static_cast<std::size_t>(i + rh)] * p[static_cast<std::size_t>((k + i + R) % R) * n + c];
+        for (std::size_t j = 0; j < kh.size(); ++j) {  // offsets -rh..rh, wrapping in heading
+          const int kk = (k + static_cast<int>(j) - rh + R) % R;
+          acc += kh[j] * p[static_cast<std::size_t>(kk) * n + c];
         }
         tmp[static_cast<std::size_t>(k) * n + c] = static_cast<float>(acc);
       }

@@ -16,6 +16,11 @@ namespace {
 
 constexpr double kCellM = 0.5;
 
+/// Offset of (row, col) in a row-major table `width` wide, computed in size_t (all are >= 0).
+std::size_t flat(int row, int col, int width) {
+  return static_cast<std::size_t>(row) * static_cast<std::size_t>(width) + static_cast<std::size_t>(col);
+}
+
 int class_count(int channel) { return static_cast<int>(osm::group_names(static_cast<osm::Channel>(channel)).size()); }
 
 void require(bool ok, const char* field, double value, const char* rule) {
@@ -72,8 +77,9 @@ BevMatcher::BevMatcher(const MatcherConfig& config) : config_(config) {
   for (int c = 0; c < 3; ++c) {
     const int k = class_count(c);
     auto& p = likelihood_[static_cast<std::size_t>(c)];
-    p.assign(static_cast<std::size_t>((k + 1) * (k + 1)), 0.0);
-    auto at = [&](int o, int m) -> double& { return p[static_cast<std::size_t>(o * (k + 1) + m)]; };
+    const auto side = static_cast<std::size_t>(k) + 1;
+    p.assign(side * side, 0.0);
+    auto at = [&](int o, int m) -> double& { return p[flat(o, m, k + 1)]; };
     // Map background: seen as background, or a spurious detection of any class.
     at(0, 0) = 1 - config_.spurious_rate;
     for (int o = 1; o <= k; ++o) at(o, 0) = config_.spurious_rate / k;
@@ -91,8 +97,8 @@ double BevMatcher::cell_score(int channel, int observed, std::span<const double>
   const auto& p = likelihood_[static_cast<std::size_t>(channel)];
   const int k = class_count(channel);
   double likelihood = 0;
-  for (int m = 0; m <= k; ++m) likelihood += map_share[static_cast<std::size_t>(m)] * p[static_cast<std::size_t>(observed * (k + 1) + m)];
-  return std::log(likelihood) - std::log(p[static_cast<std::size_t>(observed * (k + 1))]);
+  for (int m = 0; m <= k; ++m) likelihood += map_share[static_cast<std::size_t>(m)] * p[flat(observed, m, k + 1)];
+  return std::log(likelihood) - std::log(p[flat(observed, 0, k + 1)]);
 }
 
 std::vector<float> BevMatcher::map_term(int channel, int observed, std::span<const std::uint8_t> map_rgb, int side) const {
@@ -112,11 +118,11 @@ std::vector<float> BevMatcher::map_term(int channel, int observed, std::span<con
     auto* ind = indicator.ptr<float>();
     for (std::size_t i = 0; i < cells; ++i) ind[i] = map_rgb[3 * i + static_cast<std::size_t>(channel)] == m ? 1.0f : 0.0f;
     if (sigma > 0) cv::GaussianBlur(indicator, indicator, cv::Size(0, 0), sigma, sigma, cv::BORDER_REPLICATE);
-    const double pm = p[static_cast<std::size_t>(observed * (k + 1) + m)];
+    const double pm = p[flat(observed, m, k + 1)];
     ind = indicator.ptr<float>();
     for (std::size_t i = 0; i < cells; ++i) mixture[i] += static_cast<double>(ind[i]) * pm;
   }
-  const double background = p[static_cast<std::size_t>(observed * (k + 1))];
+  const double background = p[flat(observed, 0, k + 1)];
   const double floor = std::min(config_.spurious_rate / k, config_.confusion_rate / (k - 1)) * 1e-3;
   std::vector<float> term(cells);
   for (std::size_t i = 0; i < cells; ++i) {
@@ -133,7 +139,7 @@ std::vector<float> BevMatcher::rotated_template(const Observation& observation, 
   std::vector<float> body(observation.cells(), 0.0f);
   for (int r = 0; r < t; ++r) {
     for (int c = 0; c < t; ++c) {
-      const auto i = static_cast<std::size_t>(r * t + c);
+      const auto i = flat(r, c, t);
       const double dr = r - centre, dc = c - centre;
       if (observation.visible[i] && observation.classes[3 * i + static_cast<std::size_t>(channel)] == code &&
           dr * dr + dc * dc <= centre * centre + 1e-9) {
@@ -157,10 +163,10 @@ std::vector<float> BevMatcher::rotated_template(const Observation& observation, 
           const int rr = static_cast<int>(r0) + dr, cc = static_cast<int>(c0) + dc;
           if (rr < 0 || rr >= t || cc < 0 || cc >= t) continue;
           const double w = (dr ? wr : 1 - wr) * (dc ? wc : 1 - wc);
-          value += w * body[static_cast<std::size_t>(rr * t + cc)];
+          value += w * body[flat(rr, cc, t)];
         }
       }
-      out[static_cast<std::size_t>(row * t + col)] = static_cast<float>(value);
+      out[flat(row, col, t)] = static_cast<float>(value);
     }
   }
   return out;
@@ -204,7 +210,7 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
 
   std::vector<float> volume(static_cast<std::size_t>(s) * static_cast<std::size_t>(s) * static_cast<std::size_t>(n_bins));
   const int quarter = n_bins / 4;
-  const float scale = static_cast<float>(1.0 / config_.temperature);
+  const auto scale = static_cast<float>(1.0 / config_.temperature);
   auto work = [&](int j0, int j1) {
     std::array<cv::Mat, 4> acc;
     cv::Mat product, correlation;
@@ -223,9 +229,9 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
       for (int q = 0; q < 4; ++q) {
         cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE);
         const cv::Mat slice = rotate_cw(correlation(cv::Rect(0, 0, s, s)), q);
-        const auto bin = static_cast<std::size_t>(j + q * quarter);
+        const std::size_t bin = flat(q, j, quarter);  // heading bin j + q quarter turns
         for (int v = 0; v < s; ++v) {
-          const float* row = slice.ptr<float>(v);
+          const auto* row = slice.ptr<float>(v);
           float* out = volume.data() + static_cast<std::size_t>(v) * static_cast<std::size_t>(s) * static_cast<std::size_t>(n_bins) + bin;
           for (int u = 0; u < s; ++u) out[static_cast<std::size_t>(u) * static_cast<std::size_t>(n_bins)] = row[u] * scale;
         }

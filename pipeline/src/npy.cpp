@@ -8,6 +8,7 @@
 #include <cctype>
 #include <cstring>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace seqloc::pipeline {
@@ -23,7 +24,7 @@ struct Header {
 
 class HeaderParser {
  public:
-  HeaderParser(const std::string& text, const std::string& file) : s_(text), file_(file) {}
+  HeaderParser(const std::string& text, std::string file) : s_(text), file_(std::move(file)) {}
 
   Header parse() {
     Header h;

@@ -1,13 +1,12 @@
 #include "seqloc/pipeline/outputs.hpp"
 
-#include <fcntl.h>
-#include <signal.h>
-#include <stdio.h>
+#include <fcntl.h>  // AT_FDCWD
 #include <unistd.h>
 
 #include <cerrno>
 #include <cmath>
-#include <cstdio>
+#include <csignal>  // ::kill (POSIX)
+#include <cstdio>   // ::renameat2, RENAME_EXCHANGE (glibc)
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -99,7 +98,7 @@ std::filesystem::path staging_directory(const std::filesystem::path& target) {
     const auto pid = static_cast<pid_t>(std::stol(digits));
     if (pid != ::getpid() && ::kill(pid, 0) != 0 && errno == ESRCH) std::filesystem::remove_all(entry.path(), ec);
   }
-  const std::filesystem::path staged = target.string() + ".partial-" + std::to_string(::getpid());
+  std::filesystem::path staged = target.string() + ".partial-" + std::to_string(::getpid());
   std::filesystem::remove_all(staged, ec);
   return staged;
 }

@@ -236,6 +236,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   };
   std::vector<StageTimes> stage_times(static_cast<std::size_t>(threads));
   std::vector<std::jthread> workers;
+  workers.reserve(static_cast<std::size_t>(threads));
   for (int t = 0; t < threads; ++t) {
     workers.emplace_back([&, t] {
       StageTimes& times = stage_times[static_cast<std::size_t>(t)];

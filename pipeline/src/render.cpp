@@ -35,7 +35,7 @@ Rgb way_colour(int code) {
   return colours[std::clamp(code, 0, 10)];
 }
 
-cv::Mat to_mat(Picture& p) { return cv::Mat(p.height, p.width, CV_8UC3, p.rgb.data()); }
+cv::Mat to_mat(Picture& p) { return {p.height, p.width, CV_8UC3, p.rgb.data()}; }
 
 Picture from_mat(const cv::Mat& m) {
   Picture p;
@@ -48,9 +48,9 @@ Picture from_mat(const cv::Mat& m) {
   return p;
 }
 
-cv::Scalar rgb(int r, int g, int b) { return cv::Scalar(r, g, b); }  // our Mats hold RGB
+cv::Scalar rgb(double r, double g, double b) { return {r, g, b}; }  // our Mats hold RGB
 
-void text(cv::Mat& m, const std::string& s, cv::Point at, double scale = 0.45, cv::Scalar colour = rgb(0, 0, 0)) {
+void text(cv::Mat& m, const std::string& s, cv::Point at, double scale = 0.45, const cv::Scalar& colour = rgb(0, 0, 0)) {
   cv::putText(m, s, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv::LINE_AA);
 }
 
@@ -87,7 +87,7 @@ void overlay_mass(cv::Mat& m, const std::vector<double>& mass) {
   for (int v = 0; v < m.rows; ++v) {
     for (int u = 0; u < m.cols; ++u) {
       const double a =
-          0.85 * std::sqrt(std::max(0.0, mass[static_cast<std::size_t>(v * m.cols + u)] - floor) / (top - floor));
+          0.85 * std::sqrt(std::max(0.0, mass[static_cast<std::size_t>(v) * static_cast<std::size_t>(m.cols) + static_cast<std::size_t>(u)] - floor) / (top - floor));
       auto& px = m.at<Rgb>(v, u);
       px = Rgb(static_cast<std::uint8_t>((1 - a) * px[0] + a * 230), static_cast<std::uint8_t>((1 - a) * px[1] + a * 20),
                static_cast<std::uint8_t>((1 - a) * px[2] + a * 20));
@@ -153,11 +153,16 @@ Picture plot(const std::vector<Series>& series, const std::string& title, const 
   };
   cv::rectangle(m, px(x0, 0), px(x1, y1), rgb(0, 0, 0));
   const double ys = nice_step(y1), xs = nice_step(x1 - x0);
-  for (double y = 0; y <= y1 + 1e-9; y += ys) {
+  // Grid lines at whole multiples of the step, counted in integers.
+  for (int i = 0; i * ys <= y1 + 1e-9; ++i) {
+    const double y = i * ys;
     cv::line(m, px(x0, y), px(x1, y), rgb(225, 225, 225));
     text(m, fmt(y, ys < 1 ? 2 : 0), px(x0, y) + cv::Point(-50, 5), 0.4);
   }
-  for (double x = std::ceil(x0 / xs) * xs; x <= x1 + 1e-9; x += xs) text(m, fmt(x, xs < 1 ? 2 : 0), px(x, 0) + cv::Point(-10, 18), 0.4);
+  for (auto i = static_cast<int>(std::ceil(x0 / xs)); i * xs <= x1 + 1e-9; ++i) {
+    const double x = i * xs;
+    text(m, fmt(x, xs < 1 ? 2 : 0), px(x, 0) + cv::Point(-10, 18), 0.4);
+  }
   static const cv::Scalar palette[] = {rgb(31, 119, 180), rgb(255, 127, 14), rgb(44, 160, 44), rgb(214, 39, 40),
                                        rgb(148, 103, 189), rgb(140, 86, 75)};
   for (std::size_t k = 0; k < series.size(); ++k) {

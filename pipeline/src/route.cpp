@@ -94,10 +94,10 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
     if (!it->is_string()) meta_fail(std::string("\"") + key + "\" must be a string");
     return it->get<std::string>();
   };
-  if (string_member("format", "") != "seqloc-route") meta_fail("\"format\" must be \"seqloc-route\"");
+  if (string_member("format", "") != "seqloc-route") meta_fail(R"("format" must be "seqloc-route")");
   // Compared as a JSON number: 4294967297 is not 1, as a cast to int would make it.
   if (!meta.contains("version") || !meta["version"].is_number_integer() || meta["version"] != 1) {
-    meta_fail("\"version\" must be 1 (this seqloc reads route format 1)");
+    meta_fail(R"("version" must be 1 (this seqloc reads route format 1))");
   }
   route.name = string_member("name", dir.filename().string().c_str());
   const std::string kind = string_member("volume_kind", "log_prob");
@@ -106,7 +106,7 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
   } else if (kind == "prob") {
     route.volume_kind = filter::VolumeValues::prob;
   } else {
-    meta_fail("\"volume_kind\" must be \"log_prob\" or \"prob\", not \"" + kind + "\"");
+    meta_fail(R"("volume_kind" must be "log_prob" or "prob", not ")" + kind + "\"");
   }
   if (meta.contains("cell_m")) {
     if (!meta["cell_m"].is_number() || !(meta["cell_m"].get<double>() > 0)) meta_fail("\"cell_m\" must be > 0");

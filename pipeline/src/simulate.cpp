@@ -131,7 +131,7 @@ void corrupt(Observation& obs, const ObservationModel& m, std::mt19937_64& rng) 
     for (std::size_t i = 0; i < obs.cells(); ++i) {
       if (obs.visible[i]) seen[obs.classes[3 * i + c]] = 1;
     }
-    for (std::size_t code = 1; code < 256; ++code) missed[code] = seen[code] && uniform(rng) < m.class_miss;
+    for (std::size_t code = 1; code < 256; ++code) missed[code] = static_cast<char>(seen[code] && uniform(rng) < m.class_miss);
     for (std::size_t i = 0; i < obs.cells(); ++i) {
       std::uint8_t& v = obs.classes[3 * i + c];
       if (v != 0 && (missed[v] || uniform(rng) < m.cell_dropout)) v = 0;
@@ -150,11 +150,14 @@ void corrupt(Observation& obs, const ObservationModel& m, std::mt19937_64& rng) 
     const double dir = uniform(rng) * 2 * M_PI;
     auto paint = [&](int r, int c) {
       if (r < 0 || r >= t || c < 0 || c >= t) return;
-      const auto i = static_cast<std::size_t>(r * t + c);
+      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(t) + static_cast<std::size_t>(c);
       if (obs.visible[i]) obs.classes[3 * i + channel] = code;
     };
     if (channel == 1) {
-      for (double s = 0; s <= length; s += 0.5) {
+      // Half-cell steps, counted in integers (0.5 is exact, so the points are the same).
+      const auto steps = static_cast<int>(std::floor(length / 0.5));
+      for (int k = 0; k <= steps; ++k) {
+        const double s = 0.5 * k;
         paint(static_cast<int>(std::lround(r0 + s * std::cos(dir))), static_cast<int>(std::lround(c0 + s * std::sin(dir))));
       }
     } else {
@@ -239,7 +242,7 @@ Observation render_observation(raster::CacheReader& cache, const GridPose& pose,
         }
         if (hidden) continue;
       }
-      const auto i = static_cast<std::size_t>(r * t + c);
+      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(t) + static_cast<std::size_t>(c);
       obs.visible[i] = 1;
       std::copy_n(target, 3, obs.classes.data() + 3 * i);
     }

@@ -10,6 +10,7 @@
 #include <ctime>
 #include <map>
 #include <set>
+#include <utility>
 
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/raster/png_codec.hpp"
@@ -115,9 +116,11 @@ std::vector<osm::GridPoint> parse_linestring_blob(std::span<const std::uint8_t> 
   offset += 9;
   if (type != 2 || blob.size() != offset + static_cast<std::size_t>(count) * 16) return fail();
   std::vector<osm::GridPoint> points(count);
-  for (std::uint32_t i = 0; i < count; ++i) {
-    std::memcpy(&points[i].x_m, blob.data() + offset + i * 16, 8);
-    std::memcpy(&points[i].y_m, blob.data() + offset + i * 16 + 8, 8);
+  const auto* point = blob.data() + offset;
+  for (auto& p : points) {
+    std::memcpy(&p.x_m, point, 8);
+    std::memcpy(&p.y_m, point + 8, 8);
+    point += 16;
   }
   return points;
 }
@@ -228,8 +231,8 @@ std::vector<std::pair<std::string, std::string>> metadata_rows(const CacheMetada
 // ---------------------------------------------------------------------------------------------
 // Writer
 
-CacheWriter::CacheWriter(const std::filesystem::path& final_path, const CacheMetadata& metadata)
-    : final_(final_path), partial_(final_path.string() + ".partial"), metadata_(metadata) {
+CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata)
+    : final_(final_path), partial_(final_path.string() + ".partial"), metadata_(std::move(metadata)) {
   const auto dir = final_.has_parent_path() ? final_.parent_path() : std::filesystem::path(".");
   std::error_code ec;
   if (!std::filesystem::is_directory(dir, ec)) {

@@ -238,13 +238,13 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
       if (all_sub) {
         // Byte-wise sub with bpp 2 adds the high and the low bytes separately, modulo 256.
         std::uint8_t hi = 0, lo = 0;
-        for (int i = 0; i < image.width; ++i) {
-          hi = static_cast<std::uint8_t>(hi + src[2 * i]);
-          lo = static_cast<std::uint8_t>(lo + src[2 * i + 1]);
+        for (int i = 0; i < image.width; ++i, src += 2) {
+          hi = static_cast<std::uint8_t>(hi + src[0]);
+          lo = static_cast<std::uint8_t>(lo + src[1]);
           dst[i] = static_cast<std::uint16_t>((hi << 8) | lo);
         }
       } else {
-        for (int i = 0; i < image.width; ++i) dst[i] = static_cast<std::uint16_t>((src[2 * i] << 8) | src[2 * i + 1]);
+        for (int i = 0; i < image.width; ++i, src += 2) dst[i] = static_cast<std::uint16_t>((src[0] << 8) | src[1]);
       }
     }
   } else {

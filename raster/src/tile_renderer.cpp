@@ -121,9 +121,9 @@ void TileRenderer::render_classes_window(const Window& window, RenderScratch& sc
 void TileRenderer::draw_classes(const Window& w, const std::vector<std::uint32_t>& areas,
                                 const std::vector<std::uint32_t>& lines, const std::vector<std::uint32_t>& nodes,
                                 RenderScratch& scratch, std::vector<std::uint8_t>& rgb) const {
-  rgb.assign(static_cast<std::size_t>(w.width * w.height) * 3, 0);
+  rgb.assign(static_cast<std::size_t>(w.width) * static_cast<std::size_t>(w.height) * 3, 0);
   auto plotter = [&](osm::Group group) {
-    const std::size_t channel = static_cast<std::size_t>(group.channel);
+    const auto channel = static_cast<std::size_t>(group.channel);
     const std::uint8_t code = group.code();
     return [&rgb, &w, channel, code](std::int64_t u, std::int64_t v) { paint(rgb[w.index(u, v) * 3 + channel], code); };
   };

@@ -52,7 +52,7 @@ void build(SyntheticMap& map) {
   // Main road, shared node at the T intersection (x = 40).
   std::vector<std::int64_t> main_nodes;
   std::int64_t junction = 0;
-  for (double x = -750; x <= 750; x += 15) {
+  for (int x = -750; x <= 750; x += 15) {  // whole metres
     main_nodes.push_back(map.node(main_road(x)));
     if (x == 45) junction = main_nodes.back();
   }
@@ -61,7 +61,7 @@ void build(SyntheticMap& map) {
   // The side road north to the hamlet, starting at the junction, curving.
   std::vector<std::int64_t> side{junction};
   const LocalPoint j = main_road(45);
-  for (double t = 15; t <= 520; t += 15) {
+  for (int t = 15; t <= 520; t += 15) {
     side.push_back(map.node({j.x_m + 40.0 * std::sin(t / 140.0), j.y_m + t}));
   }
   map.way_through(side, {{"highway", "unclassified"}, {"name", "Dorfweg"}});

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <unistd.h>
 
@@ -151,7 +152,8 @@ Window window_of(const raster::CacheReader& cache, const std::optional<osm::GeoB
   // The box's outline, sampled along its edges (a Transverse Mercator image of a lon/lat box is
   // not a rectangle), gives the extent in the region CRS.
   const auto projection = cache.metadata().projection();
-  double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double x0 = kInf, y0 = kInf, x1 = -kInf, y1 = -kInf;
   constexpr int kSamples = 16;
   for (int i = 0; i <= kSamples; ++i) {
     const double f = static_cast<double>(i) / kSamples;

@@ -385,7 +385,7 @@ Response Service::route(const Request& request) {
   }
   if (parts[0] == "catalog" && parts.size() == 1) return catalog(request);
   if (parts[0] == "static" && parts.size() >= 2) {
-    const std::size_t offset = static_cast<std::size_t>(parts[1].data() - request.path.data());
+    const auto offset = static_cast<std::size_t>(parts[1].data() - request.path.data());
     return static_file(std::string_view(request.path).substr(offset));
   }
   if (parts[0] != "regions") return error_response(404, "no such resource: " + request.path);
@@ -509,7 +509,7 @@ Response Service::crop(Region& region, const Request& request, bool sidecar_only
   }();
   const auto& m = region.cache->metadata();
   std::string canonical;
-  for (const auto& [k, v] : request.query) canonical += k + "=" + v + "&";
+  for (const auto& [k, v] : request.query) canonical.append(k).append("=").append(v).append("&");
   const std::string etag = "\"" + region.build_tag + "-" + hex(fnv1a(canonical + (sidecar_only ? "json" : ""))) + "\"";
   Response r;
   if (sidecar_only) {
@@ -634,7 +634,9 @@ Response Service::tilejson(const Region& region, const Request& request) const {
   ordered_json layers = ordered_json::object();
   for (MapLayer layer : kAllLayers) {
     const std::string name = layer_name(layer);
-    layers[name] = {{"tiles", {base + "/" + name + "/{x}/{y}.png"}},
+    std::string tiles = base;
+    tiles.append("/").append(name).append("/{x}/{y}.png");
+    layers[name] = {{"tiles", {tiles}},
                     {"formats", {"png", "tif", "npy"}},
                     {"styles", {"data", "color"}}};
   }
@@ -687,11 +689,11 @@ Response Service::wmts(const Region& region, const Request& request) const {
       << "<ows:WGS84BoundingBox><ows:LowerCorner>" << region.bounds.min_lon << " " << region.bounds.min_lat
       << "</ows:LowerCorner><ows:UpperCorner>" << region.bounds.max_lon << " " << region.bounds.max_lat
       << "</ows:UpperCorner></ows:WGS84BoundingBox>"
-      << "<Style isDefault=\"true\"><ows:Identifier>data</ows:Identifier></Style>"
+      << R"(<Style isDefault="true"><ows:Identifier>data</ows:Identifier></Style>)"
       << "<Style><ows:Identifier>color</ows:Identifier></Style>"
       << "<Format>image/png</Format>"
       << "<TileMatrixSetLink><TileMatrixSet>" << matrix_set << "</TileMatrixSet></TileMatrixSetLink>"
-      << "<ResourceURL format=\"image/png\" resourceType=\"tile\" template=\"" << base << "/" << name
+      << R"(<ResourceURL format="image/png" resourceType="tile" template=")" << base << "/" << name
       << "/{TileCol}/{TileRow}.png?style={Style}\"/></Layer>\n";
   }
   x << "    <TileMatrixSet><ows:Identifier>" << matrix_set << "</ows:Identifier>"

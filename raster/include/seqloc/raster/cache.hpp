@@ -100,7 +100,7 @@ class CacheWriter {
  public:
   /// Opens `final_path`.partial, resuming it when it holds the same build, else starting anew.
   /// Throws CacheIoError when the output directory is missing or not writable.
-  CacheWriter(const std::filesystem::path& final_path, const CacheMetadata& metadata);
+  CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata);
   ~CacheWriter();
   CacheWriter(const CacheWriter&) = delete;
   CacheWriter& operator=(const CacheWriter&) = delete;
