@@ -20,7 +20,7 @@ std::filesystem::path small_map(const test::ScratchDir& dir) {
   osm::SyntheticMap map(47.5, 10.5);
   map.way({{-200, 0}, {0, 30}, {200, 0}}, {{"highway", "track"}});
   map.way({{10, 10}, {20, 10}, {20, 20}, {10, 20}}, {{"building", "yes"}}, true);
-  const auto path = dir / "map.osm.pbf";
+  auto path = dir / "map.osm.pbf";
   map.write(path, 100);
   return path;
 }

@@ -80,6 +80,8 @@ TEST(Baselines, OfflineRecoversAStraightRoute) {
     volumes.push_back(vol);
     (void)true_v;
   }
+  frames.reserve(static_cast<std::size_t>(n));
+  input.reserve(static_cast<std::size_t>(n));
   for (int t = 0; t < n; ++t) frames.push_back(prepare_frame(view(volumes[static_cast<std::size_t>(t)], 9, 9, 16), 16));
   for (int t = 0; t < n; ++t) {
     input.push_back({&frames[static_cast<std::size_t>(t)], CropPose{20, 30.0 - 4 * t, 0}, Odometry{t == 0 ? 0.0 : 2.0, 0, 0}});

@@ -2,11 +2,11 @@
 // folder stays as it was, nothing half-written appears under the final name, and a rerun
 // completes (preprocess resuming) to the same result as an uninterrupted run.
 
-#include <signal.h>
 #include <sys/wait.h>
 
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <map>
 #include <random>
 #include <thread>
@@ -120,6 +120,7 @@ TEST(CrashSafety, KillNineDuringLocalizeLeavesThePreviousOutputOrTheNewOne) {
                 .exit_code,
             0);
   std::vector<std::string> route_dirs;
+  route_dirs.reserve(static_cast<std::size_t>(routes));
   for (int r = 0; r < routes; ++r) route_dirs.push_back((dir / "routes" / ("route_00" + std::to_string(r))).string());
   auto localize = [&](const std::string& mode) {
     std::vector<std::string> args{"localize", cache.string()};
@@ -196,6 +197,7 @@ TEST(Concurrency, ReadersOfACacheBeingRebuiltSeeOneWholeBuild) {
   std::atomic<bool> stop{false};
   std::atomic<int> reads{0}, as_a{0}, as_b{0}, mixed{0}, errors{0};
   std::vector<std::thread> readers;
+  readers.reserve(3);
   for (int t = 0; t < 3; ++t) {
     readers.emplace_back([&] {
       while (!stop) {

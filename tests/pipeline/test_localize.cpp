@@ -225,7 +225,7 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
       for (int col = 0; col < side; ++col)
         for (int j = 0; j < kBins; ++j) {
           const double dj = std::min(std::abs(j - 16), kBins - std::abs(j - 16));
-          float value = static_cast<float>(-(row - centre) * (row - centre) / 2.0 - dj * dj / 2.0);
+          auto value = static_cast<float>(-(row - centre) * (row - centre) / 2.0 - dj * dj / 2.0);
           if (row == centre) value += noise(rng);  // where along the road: nobody knows
           if (t == distinctive && std::abs(col - (centre - shift)) > 1) value -= 6.0f;
           v[static_cast<std::size_t>((row * side + col) * kBins + j)] = value;

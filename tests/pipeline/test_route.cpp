@@ -96,10 +96,10 @@ void expect_error(const std::string& json, const std::string& csv, const std::st
 TEST(Route, BadRouteJson) {
   const std::string csv = rows({"0,0,v0.npy,47.95,11.25,0,0,0,,,,,,"});
   expect_error("{not json", csv, "route.json: not valid JSON");
-  expect_error(R"({"format": "other", "version": 1})", csv, "\"format\" must be \"seqloc-route\"");
+  expect_error(R"({"format": "other", "version": 1})", csv, R"("format" must be "seqloc-route")");
   expect_error(R"({"format": "seqloc-route", "version": 2})", csv, "\"version\" must be 1");
   expect_error(R"({"format": "seqloc-route", "version": 1, "volume_kind": "logits"})", csv,
-               "\"volume_kind\" must be \"log_prob\" or \"prob\"");
+               R"("volume_kind" must be "log_prob" or "prob")");
   expect_error(R"({"format": "seqloc-route", "version": 1, "cell_m": 0})", csv, "\"cell_m\" must be > 0");
   // Members of the wrong JSON type (found by fuzz/route.cpp: json::value threw a type_error that
   // escaped as an unexplained exception).

@@ -74,7 +74,7 @@ CacheMetadata test_metadata(int shard_index = 0, int shard_count = 1) {
 
 // Renders and stores the tiles of one shard; stops after `max_tiles` without finishing when set.
 void build(const std::filesystem::path& path, const TileRenderer& renderer, const RegionFeatures& features,
-           CacheMetadata metadata, int max_tiles = -1) {
+           const CacheMetadata& metadata, int max_tiles = -1) {
   CacheWriter writer(path, metadata);
   writer.write_roads(features.roads);
   RenderScratch scratch;

@@ -12,7 +12,6 @@
 
 #include <gtest/gtest.h>
 
-extern char** environ;
 
 namespace seqloc::test {
 
@@ -45,6 +44,7 @@ pid_t spawn(const std::string& program, const std::vector<std::string>& args, co
   std::vector<std::string> storage{program};
   storage.insert(storage.end(), args.begin(), args.end());
   std::vector<char*> argv;
+  argv.reserve(storage.size() + 1);
   for (auto& a : storage) argv.push_back(a.data());
   argv.push_back(nullptr);
   posix_spawn_file_actions_t actions;
