@@ -10,16 +10,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include "seqloc/osm/classes.hpp"
+#include "flat_index.hpp"
 
 namespace seqloc::pipeline {
 namespace {
 
 constexpr double kCellM = 0.5;
 
-/// Offset of (row, col) in a row-major table `width` wide, computed in size_t (all are >= 0).
-std::size_t flat(int row, int col, int width) {
-  return static_cast<std::size_t>(row) * static_cast<std::size_t>(width) + static_cast<std::size_t>(col);
-}
+using detail::flat;
 
 int class_count(int channel) { return static_cast<int>(osm::group_names(static_cast<osm::Channel>(channel)).size()); }
 

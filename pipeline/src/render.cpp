@@ -15,6 +15,7 @@
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/raster/png_codec.hpp"
+#include "flat_index.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -87,7 +88,7 @@ void overlay_mass(cv::Mat& m, const std::vector<double>& mass) {
   for (int v = 0; v < m.rows; ++v) {
     for (int u = 0; u < m.cols; ++u) {
       const double a =
-          0.85 * std::sqrt(std::max(0.0, mass[static_cast<std::size_t>(v) * static_cast<std::size_t>(m.cols) + static_cast<std::size_t>(u)] - floor) / (top - floor));
+          0.85 * std::sqrt(std::max(0.0, mass[detail::flat(v, u, m.cols)] - floor) / (top - floor));
       auto& px = m.at<Rgb>(v, u);
       px = Rgb(static_cast<std::uint8_t>((1 - a) * px[0] + a * 230), static_cast<std::uint8_t>((1 - a) * px[1] + a * 20),
                static_cast<std::uint8_t>((1 - a) * px[2] + a * 20));

@@ -14,6 +14,7 @@
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
+#include "flat_index.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -150,7 +151,7 @@ void corrupt(Observation& obs, const ObservationModel& m, std::mt19937_64& rng) 
     const double dir = uniform(rng) * 2 * M_PI;
     auto paint = [&](int r, int c) {
       if (r < 0 || r >= t || c < 0 || c >= t) return;
-      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(t) + static_cast<std::size_t>(c);
+      const std::size_t i = detail::flat(r, c, t);
       if (obs.visible[i]) obs.classes[3 * i + channel] = code;
     };
     if (channel == 1) {
@@ -242,7 +243,7 @@ Observation render_observation(raster::CacheReader& cache, const GridPose& pose,
         }
         if (hidden) continue;
       }
-      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(t) + static_cast<std::size_t>(c);
+      const std::size_t i = detail::flat(r, c, t);
       obs.visible[i] = 1;
       std::copy_n(target, 3, obs.classes.data() + 3 * i);
     }
