@@ -1,5 +1,6 @@
 #include "seqloc/serve/server.hpp"
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
@@ -116,6 +117,9 @@ class HttpServer::Impl {
   std::atomic<std::uint64_t> rejected{0};
   std::atomic<int> busy{0};
   std::mutex log_mutex;
+  // httplib's stop() does nothing until listen has started running: these make a stop() that
+  // comes first (a signal right after bind()) stop the listen that follows.
+  std::atomic<bool> stop_requested{false}, listen_entered{false}, listen_returned{false};
 };
 
 HttpServer::HttpServer(Service& service, const ServerOptions& options) : impl_(std::make_unique<Impl>()) {
@@ -190,10 +194,20 @@ void HttpServer::bind() {
   }
 }
 
-void HttpServer::listen() { impl_->server.listen_after_bind(); }
+void HttpServer::listen() {
+  impl_->listen_entered = true;
+  if (!impl_->stop_requested) impl_->server.listen_after_bind();
+  impl_->listen_returned = true;
+}
 
 void HttpServer::stop() {
-  if (impl_ && impl_->server.is_running()) impl_->server.stop();
+  if (!impl_) return;
+  impl_->stop_requested = true;
+  // Either listen() sees the request and does not start, or this sees listen() entered and waits
+  // for it to be running (or to have returned) before stopping it.
+  if (!impl_->listen_entered) return;
+  while (!impl_->server.is_running() && !impl_->listen_returned) std::this_thread::yield();
+  impl_->server.stop();
 }
 
 std::uint64_t HttpServer::rejected() const { return impl_->rejected.load(); }
