@@ -9,17 +9,16 @@ constexpr std::array<std::string_view, 7> kAreas{"building", "parking", "playgro
                                                  "park",     "forest",  "water"};
 constexpr std::array<std::string_view, 10> kWays{"fence",    "wall", "hedge", "kerb",   "building_outline",
                                                  "cycleway", "path", "road",  "busway", "tree_row"};
-// conventions.md order. OrienterNet's Patterns.nodes dict lists a few groups in another order
-// (bicycle_parking, waste_basket, artwork); no label matches two node groups, so only the encoding
-// differs, and the encoding is the one of conventions.md.
+// OrienterNet's Patterns.nodes order (conventions.md section 2): a model trained on OrienterNet's
+// tiles reads these codes from the nodes channel.
 constexpr std::array<std::string_view, 33> kNodes{
-    "tree",          "stone",           "crossing",          "lamp",         "traffic_signal",
-    "bus_stop",      "stop_sign",       "junction",          "bus_stop_position", "gate",
-    "bollard",       "shop",            "restaurant",        "bar",          "pharmacy",
-    "fuel",          "charging_station", "parking_entrance", "atm",          "toilets",
-    "vending_machine", "fountain",      "bench",             "post_box",     "recycling",
-    "clock",         "bicycle_parking", "waste_basket",      "artwork",      "give_way",
-    "fire_hydrant",  "pole",            "street_cabinet"};
+    "tree",         "stone",           "crossing",         "lamp",             "traffic_signal",
+    "bus_stop",     "stop_sign",       "junction",         "bus_stop_position", "gate",
+    "bollard",      "shop",            "restaurant",       "bar",              "pharmacy",
+    "fuel",         "bicycle_parking", "charging_station", "parking_entrance", "atm",
+    "toilets",      "vending_machine", "fountain",         "waste_basket",     "bench",
+    "post_box",     "artwork",         "recycling",        "give_way",         "clock",
+    "fire_hydrant", "pole",            "street_cabinet"};
 
 }  // namespace
 

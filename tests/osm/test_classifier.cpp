@@ -1,6 +1,7 @@
 // OrienterNet's tag rules (maploc/osm/parser.py) as tables: label -> group, element -> drawn or
 // not, with the quirks of Python's re.match (prefix matching) spelled out.
 
+#include <array>
 #include <cmath>
 #include <optional>
 #include <string>
@@ -108,14 +109,95 @@ TEST(Encoding, CodesFollowConventionsLists) {
   EXPECT_EQ(find_group("road")->code(), 8);
   EXPECT_EQ(find_group("tree_row")->code(), 10);
   EXPECT_EQ(find_group("tree")->code(), 1);
-  EXPECT_EQ(find_group("bench")->code(), 23);
-  EXPECT_EQ(find_group("bicycle_parking")->code(), 27);
+  EXPECT_EQ(find_group("bicycle_parking")->code(), 17);
+  EXPECT_EQ(find_group("bench")->code(), 25);
   EXPECT_EQ(find_group("street_cabinet")->code(), 33);
   EXPECT_EQ(group_names(Channel::areas).size(), 7u);
   EXPECT_EQ(group_names(Channel::ways).size(), 10u);
   EXPECT_EQ(group_names(Channel::nodes).size(), 33u);
   EXPECT_EQ(kRoad, *find_group("road"));
   EXPECT_EQ(kBuildingOutline, *find_group("building_outline"));
+}
+
+// The whole pattern table: for every group of every channel, one label OrienterNet's pattern
+// matches and the code a model trained on OrienterNet's tiles reads for it (Patterns.areas,
+// .ways, .nodes in dict order; codes written out from conventions.md section 2, not computed).
+struct TableRow {
+  Channel channel;
+  const char* label;
+  const char* group;
+  int code;
+};
+
+TEST(Encoding, EveryGroupOfThePatternTableHasOrienterNetsCode) {
+  const std::vector<TableRow> table{
+      {Channel::areas, "building", "building", 1},
+      {Channel::areas, "amenity:parking", "parking", 2},
+      {Channel::areas, "leisure:pitch", "playground", 3},
+      {Channel::areas, "landuse:meadow", "grass", 4},
+      {Channel::areas, "leisure:garden", "park", 5},
+      {Channel::areas, "natural:wood", "forest", 6},
+      {Channel::areas, "waterway:riverbank", "water", 7},
+      {Channel::ways, "barrier:yes", "fence", 1},
+      {Channel::ways, "barrier:retaining_wall", "wall", 2},
+      {Channel::ways, "barrier:hedge", "hedge", 3},
+      {Channel::ways, "barrier:kerb", "kerb", 4},
+      {Channel::ways, "building:house", "building_outline", 5},
+      {Channel::ways, "highway:cycleway", "cycleway", 6},
+      {Channel::ways, "highway:steps", "path", 7},
+      {Channel::ways, "highway:primary_link", "road", 8},
+      {Channel::ways, "highway:busway", "busway", 9},
+      {Channel::ways, "natural:tree_row", "tree_row", 10},
+      {Channel::nodes, "natural:tree", "tree", 1},
+      {Channel::nodes, "natural:stone", "stone", 2},
+      {Channel::nodes, "highway:crossing", "crossing", 3},
+      {Channel::nodes, "highway:street_lamp", "lamp", 4},
+      {Channel::nodes, "highway:traffic_signals", "traffic_signal", 5},
+      {Channel::nodes, "highway:bus_stop", "bus_stop", 6},
+      {Channel::nodes, "highway:stop", "stop_sign", 7},
+      {Channel::nodes, "highway:motorway_junction", "junction", 8},
+      {Channel::nodes, "public_transport:stop_position", "bus_stop_position", 9},
+      {Channel::nodes, "barrier:cycle_barrier", "gate", 10},
+      {Channel::nodes, "barrier:bollard", "bollard", 11},
+      {Channel::nodes, "amenity:post_office", "shop", 12},
+      {Channel::nodes, "amenity:restaurant", "restaurant", 13},
+      {Channel::nodes, "amenity:pub", "bar", 14},
+      {Channel::nodes, "amenity:pharmacy", "pharmacy", 15},
+      {Channel::nodes, "amenity:fuel", "fuel", 16},
+      {Channel::nodes, "amenity:bicycle_parking", "bicycle_parking", 17},
+      {Channel::nodes, "amenity:charging_station", "charging_station", 18},
+      {Channel::nodes, "amenity:parking_entrance", "parking_entrance", 19},
+      {Channel::nodes, "amenity:atm", "atm", 20},
+      {Channel::nodes, "amenity:toilets", "toilets", 21},
+      {Channel::nodes, "amenity:vending_machine", "vending_machine", 22},
+      {Channel::nodes, "amenity:fountain", "fountain", 23},
+      {Channel::nodes, "amenity:waste_basket", "waste_basket", 24},
+      {Channel::nodes, "amenity:bench", "bench", 25},
+      {Channel::nodes, "amenity:post_box", "post_box", 26},
+      {Channel::nodes, "tourism:artwork", "artwork", 27},
+      {Channel::nodes, "amenity:recycling", "recycling", 28},
+      {Channel::nodes, "highway:give_way", "give_way", 29},
+      {Channel::nodes, "amenity:clock", "clock", 30},
+      {Channel::nodes, "emergency:fire_hydrant", "fire_hydrant", 31},
+      {Channel::nodes, "man_made:flagpole", "pole", 32},
+      {Channel::nodes, "man_made:street_cabinet", "street_cabinet", 33},
+  };
+  std::array<std::size_t, kChannelCount> rows_per_channel{};
+  for (const auto& row : table) {
+    SCOPED_TRACE(row.label);
+    const auto group = match_group(row.label, row.channel);
+    ASSERT_TRUE(group.has_value());
+    EXPECT_EQ(group_name(*group), row.group);
+    EXPECT_EQ(group->code(), row.code);
+    // The list position is the code: the table walks each channel's list in order.
+    const auto names = group_names(row.channel);
+    const std::size_t position = rows_per_channel[static_cast<std::size_t>(row.channel)]++;
+    ASSERT_LT(position, names.size());
+    EXPECT_EQ(names[position], row.group);
+  }
+  for (Channel channel : {Channel::areas, Channel::ways, Channel::nodes}) {
+    EXPECT_EQ(rows_per_channel[static_cast<std::size_t>(channel)], group_names(channel).size()) << channel_name(channel);
+  }
 }
 
 TEST(Levels, ParsesLikePythonFloat) {
