@@ -41,9 +41,69 @@ TEST(Lines, AxisAlignedAndDiagonal) {
   EXPECT_EQ(line_cells({2, 5}, {2, 2}), (Cells{{2, 2}, {2, 3}, {2, 4}, {2, 5}}));
   EXPECT_EQ(line_cells({0, 0}, {3, 3}), (Cells{{0, 0}, {1, 1}, {2, 2}, {3, 3}}));
   EXPECT_EQ(line_cells({0, 0}, {3, -3}), (Cells{{0, 0}, {1, -1}, {2, -2}, {3, -3}}));
-  // Shallow slope 1/4: the minor coordinate is the nearest to the exact line, ties upward.
-  EXPECT_EQ(line_cells({0, 0}, {4, 1}), (Cells{{0, 0}, {1, 0}, {2, 1}, {3, 1}, {4, 1}}));
+  // Shallow slope 1/4: the minor coordinate is the nearest to the exact line; at u = 2 the line
+  // is half-way between rows 0 and 1 and the tie goes toward the left endpoint (0, 0).
+  EXPECT_EQ(line_cells({0, 0}, {4, 1}), (Cells{{0, 0}, {1, 0}, {2, 0}, {3, 1}, {4, 1}}));
+  EXPECT_EQ(line_cells({4, 1}, {0, 0}), (Cells{{0, 0}, {1, 0}, {2, 0}, {3, 1}, {4, 1}}));
+  // Steep, left endpoint at the bottom: ties at v = 3 and v = 1 go toward (0, 4).
+  EXPECT_EQ(line_cells({2, 0}, {0, 4}), (Cells{{0, 4}, {0, 3}, {1, 2}, {1, 1}, {2, 0}}));
   EXPECT_EQ(line_cells({7, 7}, {7, 7}), (Cells{{7, 7}}));
+}
+
+// The tie rule of conventions.md section 2 written out by brute force: at each step t of the
+// major axis from the left endpoint L, try every cell across the minor axis and keep the one whose
+// centre is nearest to the exact line; of two equally near, the one nearer to L's minor
+// coordinate. Integer arithmetic only (distances scaled by the major extent).
+Cells brute_force_line(Pixel a, Pixel b) {
+  const Pixel left = (a.u < b.u || (a.u == b.u && a.v <= b.v)) ? a : b;
+  const Pixel right = (left == a) ? b : a;
+  const std::int64_t du = right.u - left.u, dv = right.v - left.v;
+  const bool u_major = du >= std::abs(dv);
+  const std::int64_t major = u_major ? du : std::abs(dv);
+  const std::int64_t minor_delta = u_major ? dv : du;  // signed change of the minor coordinate
+  const std::int64_t major_step = u_major ? 1 : (dv < 0 ? -1 : 1);
+  Cells cells;
+  for (std::int64_t t = 0; t <= major; ++t) {
+    const std::int64_t minor0 = u_major ? left.v : left.u;
+    // Exact minor coordinate = minor0 + t * minor_delta / major; compare c * major with it.
+    const std::int64_t exact_scaled = minor0 * std::max<std::int64_t>(major, 1) + t * minor_delta;
+    std::int64_t best = 0, best_distance = -1;
+    for (std::int64_t c = minor0 - std::abs(minor_delta) - 1; c <= minor0 + std::abs(minor_delta) + 1; ++c) {
+      const std::int64_t distance = std::abs(c * std::max<std::int64_t>(major, 1) - exact_scaled);
+      const bool nearer = best_distance < 0 || distance < best_distance;
+      const bool tie_toward_left = distance == best_distance && std::abs(c - minor0) < std::abs(best - minor0);
+      if (nearer || tie_toward_left) {
+        best = c;
+        best_distance = distance;
+      }
+    }
+    if (u_major) {
+      cells.emplace(left.u + t, best);
+    } else {
+      cells.emplace(best, left.v + major_step * t);
+    }
+  }
+  return cells;
+}
+
+TEST(Lines, TieRuleMatchesBruteForceInEveryOctantAndDirection) {
+  // Every segment from the origin to a point of the 17 x 17 square around it (all eight octants,
+  // the axes and the diagonals), each drawn in both directions and moved around the lattice so
+  // that negative coordinates are covered too.
+  int ties = 0;
+  for (std::int64_t du = -8; du <= 8; ++du) {
+    for (std::int64_t dv = -8; dv <= 8; ++dv) {
+      for (const Pixel origin : {Pixel{0, 0}, Pixel{-13, 5}, Pixel{21, -34}}) {
+        const Pixel a = origin, b{origin.u + du, origin.v + dv};
+        const auto expected = brute_force_line(a, b);
+        EXPECT_EQ(line_cells(a, b), expected) << a.u << "," << a.v << " -> " << b.u << "," << b.v;
+        EXPECT_EQ(line_cells(b, a), expected) << b.u << "," << b.v << " -> " << a.u << "," << a.v;
+      }
+      const std::int64_t major = std::max(std::abs(du), std::abs(dv)), minor = std::min(std::abs(du), std::abs(dv));
+      for (std::int64_t t = 1; t < major; ++t) ties += (2 * t * minor) % (2 * major) == major ? 1 : 0;
+    }
+  }
+  EXPECT_GT(ties, 100) << "the square must hold many exact ties, or the test shows nothing";
 }
 
 TEST(Lines, SameCellsInBothDirectionsAndEightConnected) {

@@ -6,9 +6,12 @@
 //
 // - snap(): a vertex goes to the nearest cell centre, ties to even, as OrienterNet rounds its
 //   pixel coordinates (numpy round) before handing them to OpenCV.
-// - Lines are 1 px, 8-connected: along the major axis every cell, on the minor axis the cell
-//   nearest to the exact line (ties upward in the canonical direction, which is from the
-//   lexicographically smaller endpoint, so a segment gives the same cells in both directions).
+// - Lines are 1 px, 8-connected, the cells OpenCV's 8-connected line (cv::polylines) draws:
+//   along the major axis every cell, on the minor axis the cell nearest to the exact line, an
+//   exact tie going toward the segment's start, where the start is the endpoint with the smaller
+//   u (OpenCV's LineIterator walks left to right whichever way the segment is given). A segment
+//   thus gives the same cells in both directions. Unlike OpenCV, a segment is never clipped to a
+//   canvas: cells are computed on the global lattice, so any window sees the same cells.
 // - Polygons: a cell is filled when its centre is inside the rings under the even-odd rule
 //   (half-open: a centre on a left edge is in, on a right edge is out), plus every ring drawn as
 //   a line, as OpenCV's fillPoly draws the outline too. Thin polygons thus never vanish.
@@ -54,15 +57,17 @@ void for_each_line_cell(Pixel a, Pixel b, const Window& w, Plot&& plot) {
       if (w.contains(a.u, a.v)) plot(a.u, a.v);
       return;
     }
-    // Major axis u: cell i is (a.u + i, a.v + sv * round_half_up(i * adv / du)).
+    // Major axis u: cell i is (a.u + i, a.v + sv * m) with m the integer nearest to i * adv / du,
+    // ties down (toward a): m = ceil((2 i adv - du) / (2 du)), numerator + du - 1 >= 0.
     const std::int64_t i0 = std::max<std::int64_t>(0, w.u0 - a.u);
     const std::int64_t i1 = std::min<std::int64_t>(du, w.u0 + w.width - 1 - a.u);
     for (std::int64_t i = i0; i <= i1; ++i) {
-      const std::int64_t v = a.v + sv * ((2 * i * adv + du) / (2 * du));
+      const std::int64_t v = a.v + sv * ((2 * i * adv + du - 1) / (2 * du));
       if (v >= w.v0 && v < w.v0 + w.height) plot(a.u + i, v);
     }
   } else {
-    // Major axis v (adv > du >= 0): walk v from a.v by sv.
+    // Major axis v (adv > du >= 0): walk v from a.v by sv; u is nearest to i * du / adv, ties
+    // toward a (the left endpoint).
     std::int64_t i0 = 0, i1 = adv;
     if (sv > 0) {
       i0 = std::max<std::int64_t>(0, w.v0 - a.v);
@@ -72,7 +77,7 @@ void for_each_line_cell(Pixel a, Pixel b, const Window& w, Plot&& plot) {
       i1 = std::min<std::int64_t>(adv, a.v - w.v0);
     }
     for (std::int64_t i = i0; i <= i1; ++i) {
-      const std::int64_t u = a.u + (2 * i * du + adv) / (2 * adv);
+      const std::int64_t u = a.u + (2 * i * du + adv - 1) / (2 * adv);
       if (u >= w.u0 && u < w.u0 + w.width) plot(u, a.v + sv * i);
     }
   }
