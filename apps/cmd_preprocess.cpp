@@ -69,6 +69,10 @@ class PreprocessCommand : public Command {
       out << "note: " << report.ways_missing_nodes << " ways referenced nodes missing from the input (drawn with the "
           << "nodes present)\n";
     }
+    if (report.multipolygon_open_chains > 0) {
+      out << "note: " << report.multipolygon_open_chains << " multipolygon member chains did not close (members "
+          << "missing from the input); their relations are drawn from the rings that close\n";
+    }
     std::fputs(out.str().c_str(), stdout);
     if (!report_path_.empty()) write_report(report);
     return kExitOk;
@@ -92,6 +96,8 @@ class PreprocessCommand : public Command {
     j["encode_cpu_seconds"] = r.encode_cpu_seconds;
     j["write_seconds"] = r.write_seconds;
     j["features"] = {{"nodes", r.nodes}, {"lines", r.lines}, {"areas", r.areas}, {"roads", r.roads}};
+    j["ways_missing_nodes"] = r.ways_missing_nodes;
+    j["multipolygon_open_chains"] = r.multipolygon_open_chains;
     pipeline::write_file(report_path_, j.dump(2) + "\n");
   }
 

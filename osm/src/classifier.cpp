@@ -345,10 +345,6 @@ std::optional<Classification> classify_way(const TagView& tags, bool closed) {
 std::optional<Classification> classify_relation(const TagView& tags) {
   const auto* type = tags.find("type");
   if (!type || *type != "multipolygon") return std::nullopt;
-  return classify_multipolygon(tags);
-}
-
-std::optional<Classification> classify_multipolygon(const TagView& tags) {
   auto label = area_label(tags);
   if (!label) return std::nullopt;
   const auto group = match_in_order(*label, {Channel::areas, Channel::ways, Channel::nodes});

@@ -3,19 +3,17 @@
 #include <memory>
 #include <string>
 #include <system_error>
+#include <unordered_map>
 
-#include <osmium/area/assembler.hpp>
-#include <osmium/area/multipolygon_manager.hpp>
 #include <osmium/handler.hpp>
 #include <osmium/handler/node_locations_for_ways.hpp>
 #include <osmium/index/map/flex_mem.hpp>
 #include <osmium/index/map/sparse_mem_array.hpp>
 #include <osmium/io/any_input.hpp>
-#include <osmium/relations/manager_util.hpp>
-#include <osmium/tags/tags_filter.hpp>
 #include <osmium/visitor.hpp>
 
 #include "seqloc/osm/classifier.hpp"
+#include "seqloc/osm/multipolygon.hpp"
 
 namespace seqloc::osm {
 namespace {
@@ -50,9 +48,39 @@ GeoBox box_of(const std::vector<GeoPoint>& points) {
   return box;
 }
 
+// A classified type=multipolygon relation, waiting for its member ways.
+struct PendingRelation {
+  Group group;
+  std::int64_t id;
+  std::vector<RingMember> members;
+};
+
+// Pass one: the multipolygon relations that classify, and the ways they need.
+class RelationCollector : public osmium::handler::Handler {
+ public:
+  void relation(const osmium::Relation& relation) {
+    const auto c = classify_relation(view_of(relation.tags()));
+    if (!c) return;
+    PendingRelation pending{c->group, relation.id(), {}};
+    for (const auto& member : relation.members()) {
+      if (member.type() != osmium::item_type::way) continue;
+      const std::string_view role = member.role();
+      if (role != "outer" && role != "inner") continue;  // OrienterNet ignores other roles
+      pending.members.push_back({member.ref(), role == "outer"});
+      member_ways.emplace(member.ref(), std::nullopt);
+    }
+    if (!pending.members.empty()) relations.push_back(std::move(pending));
+  }
+
+  std::vector<PendingRelation> relations;
+  /// Every member way; pass two fills in those the input holds.
+  std::unordered_map<std::int64_t, std::optional<NodeChain>> member_ways;
+};
+
 class FeatureCollector : public osmium::handler::Handler {
  public:
-  FeatureCollector(FeatureSet& out, const ReadOptions& options) : out_(out), options_(options) {}
+  FeatureCollector(FeatureSet& out, const ReadOptions& options, RelationCollector& relations)
+      : out_(out), options_(options), relations_(relations) {}
 
   void node(const osmium::Node& node) {
     if (!node.location().valid()) return;
@@ -69,6 +97,7 @@ class FeatureCollector : public osmium::handler::Handler {
 
   void way(const osmium::Way& way) {
     const auto& refs = way.nodes();
+    keep_if_member(way);
     if (refs.size() < 2 || way.tags().empty()) return;
     const bool closed = refs.front().ref() == refs.back().ref();
     const TagView tags = view_of(way.tags());
@@ -96,32 +125,41 @@ class FeatureCollector : public osmium::handler::Handler {
     }
   }
 
-  // Areas assembled by libosmium from type=multipolygon relations.
-  void area(const osmium::Area& area) {
-    if (area.from_way()) return;  // closed ways are classified in way()
-    const auto c = classify_multipolygon(view_of(area.tags()));
-    if (!c) return;
-    AreaFeature feature{c->group, area.orig_id(), true, {}};
-    GeoBox box = GeoBox::empty();
-    for (const auto& outer : area.outer_rings()) {
-      std::vector<GeoPoint> ring;
-      for (const auto& ref : outer) ring.push_back(geo_of(ref.location()));
-      for (const auto& p : ring) box.extend(p);
-      feature.rings.push_back(std::move(ring));
-      for (const auto& inner : area.inner_rings(outer)) {
-        std::vector<GeoPoint> hole;
-        for (const auto& ref : inner) hole.push_back(geo_of(ref.location()));
-        feature.rings.push_back(std::move(hole));
+  // Assembles every pending relation from the member ways pass two kept.
+  void assemble_relations() {
+    auto find_way = [this](std::int64_t id) -> const NodeChain* {
+      const auto it = relations_.member_ways.find(id);
+      return it != relations_.member_ways.end() && it->second ? &*it->second : nullptr;
+    };
+    for (const auto& relation : relations_.relations) {
+      auto rings = assemble_rings(relation.members, find_way, &out_.multipolygon_open_chains);
+      if (rings.empty()) continue;
+      GeoBox box = GeoBox::empty();
+      for (const auto& ring : rings) {
+        for (const auto& p : ring) box.extend(p);
       }
+      if (options_.keep_box && !options_.keep_box->intersects(box)) continue;
+      out_.areas.push_back({relation.group, relation.id, true, std::move(rings)});
     }
-    if (feature.rings.empty()) return;
-    if (options_.keep_box && !options_.keep_box->intersects(box)) return;
-    out_.areas.push_back(std::move(feature));
   }
 
  private:
+  void keep_if_member(const osmium::Way& way) {
+    const auto it = relations_.member_ways.find(way.id());
+    if (it == relations_.member_ways.end()) return;
+    NodeChain chain;
+    chain.reserve(way.nodes().size());
+    for (const auto& ref : way.nodes()) {
+      WayNode node{ref.ref(), std::nullopt};
+      if (ref.location().valid()) node.where = geo_of(ref.location());
+      chain.push_back(node);
+    }
+    it->second = std::move(chain);
+  }
+
   FeatureSet& out_;
   const ReadOptions& options_;
+  RelationCollector& relations_;
 };
 
 void check_readable(const std::filesystem::path& input) {
@@ -165,33 +203,32 @@ OsmHeaderInfo read_osm_header(const std::filesystem::path& input) {
 
 namespace {
 
-// Both passes (multipolygon relations, then everything) over one input, file or buffer. `name`
+// Both passes (multipolygon relations, then nodes and ways) over one input, file or buffer. `name`
 // names the input in errors.
 FeatureSet read_features(const osmium::io::File& file, std::uintmax_t input_bytes, const std::string& name,
                          const ReadOptions& options) {
   FeatureSet out;
   try {
-    osmium::area::Assembler::config_type assembler_config;
-    assembler_config.create_way_polygons = false;  // OrienterNet's is_area decides for closed ways
-    assembler_config.create_old_style_polygons = false;
-    osmium::TagsFilter multipolygons{false};
-    multipolygons.add_rule(true, osmium::TagMatcher{"type", "multipolygon"});
-    osmium::area::MultipolygonManager<osmium::area::Assembler> mp_manager{assembler_config, multipolygons};
-    osmium::relations::read_relations(file, mp_manager);
+    RelationCollector relations;
+    {
+      osmium::io::Reader relation_reader{file, osmium::osm_entity_bits::relation, osmium::io::read_meta::no};
+      osmium::apply(relation_reader, relations);
+      relation_reader.close();
+    }
 
     const auto index = make_location_index(input_bytes);
     LocationHandler locations{*index};
     locations.ignore_errors();  // a way with missing nodes keeps the nodes that exist
-    FeatureCollector collector{out, options};
+    FeatureCollector collector{out, options, relations};
 
-    osmium::io::Reader reader{file, osmium::io::read_meta::no};
+    osmium::io::Reader reader{file, osmium::osm_entity_bits::node | osmium::osm_entity_bits::way,
+                              osmium::io::read_meta::no};
     const auto info = header_info(reader.header());
     out.header_box = info.box;
     out.replication_timestamp = info.replication_timestamp;
-    osmium::apply(reader, locations, collector, mp_manager.handler([&collector](osmium::memory::Buffer&& buffer) {
-                    osmium::apply(buffer, collector);
-                  }));
+    osmium::apply(reader, locations, collector);
     reader.close();
+    collector.assemble_relations();
   } catch (const OsmError&) {
     throw;
   } catch (const std::exception& e) {

@@ -26,7 +26,7 @@ struct SyntheticMap::Impl {
   };
   struct Relation {
     std::int64_t id;
-    std::vector<std::pair<std::int64_t, std::string>> ways;  // id, role
+    std::vector<SyntheticMap::Member> members;
     Tags tags;
   };
   std::vector<Node> nodes;
@@ -62,13 +62,17 @@ std::int64_t SyntheticMap::way_through(const std::vector<std::int64_t>& node_ids
 
 std::int64_t SyntheticMap::multipolygon(const std::vector<std::vector<LocalPoint>>& outers,
                                         const std::vector<std::vector<LocalPoint>>& inners, Tags tags) {
-  Impl::Relation relation{static_cast<std::int64_t>(impl_->relations.size()) + 1, {}, {}};
-  for (const auto& ring : outers) relation.ways.emplace_back(way(ring, {}, true), "outer");
-  for (const auto& ring : inners) relation.ways.emplace_back(way(ring, {}, true), "inner");
+  std::vector<Member> members;
+  for (const auto& ring : outers) members.push_back({'w', way(ring, {}, true), "outer"});
+  for (const auto& ring : inners) members.push_back({'w', way(ring, {}, true), "inner"});
   tags.emplace_back("type", "multipolygon");
-  relation.tags = std::move(tags);
-  impl_->relations.push_back(std::move(relation));
-  return impl_->relations.back().id;
+  return relation(std::move(members), std::move(tags));
+}
+
+std::int64_t SyntheticMap::relation(std::vector<Member> members, Tags tags) {
+  const auto id = static_cast<std::int64_t>(impl_->relations.size()) + 1;
+  impl_->relations.push_back({id, std::move(members), std::move(tags)});
+  return id;
 }
 
 void SyntheticMap::write(const std::filesystem::path& path, double margin_m) const {
@@ -101,7 +105,12 @@ void SyntheticMap::write(const std::filesystem::path& path, double margin_m) con
     builder.set_id(r.id).set_version(1);
     {
       osmium::builder::RelationMemberListBuilder members{builder};
-      for (const auto& [id, role] : r.ways) members.add_member(osmium::item_type::way, id, role.c_str());
+      for (const auto& m : r.members) {
+        const auto type = m.type == 'n' ? osmium::item_type::node
+                          : m.type == 'r' ? osmium::item_type::relation
+                                          : osmium::item_type::way;
+        members.add_member(type, m.ref, m.role.c_str());
+      }
     }
     add_tags(builder, r.tags);
   }

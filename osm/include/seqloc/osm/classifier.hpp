@@ -46,8 +46,5 @@ struct Classification {
 [[nodiscard]] std::optional<Classification> classify_way(const TagView& tags, bool closed);
 /// A relation: only type=multipolygon relations are areas (no level filter, as OrienterNet).
 [[nodiscard]] std::optional<Classification> classify_relation(const TagView& tags);
-/// The same for an area already known to come from a type=multipolygon relation (libosmium's
-/// assembler passes the relation's tags without "type").
-[[nodiscard]] std::optional<Classification> classify_multipolygon(const TagView& tags);
 
 }  // namespace seqloc::osm

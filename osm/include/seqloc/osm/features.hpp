@@ -63,6 +63,7 @@ struct FeatureSet {
   GeoBox data_box = GeoBox::empty();  ///< the bbox of every node location in the file
   std::string replication_timestamp;  ///< from the header, empty if absent
   std::uint64_t ways_missing_nodes = 0;  ///< ways that referenced nodes absent from the file
+  std::size_t multipolygon_open_chains = 0;  ///< member chains of relations that did not close
 };
 
 }  // namespace seqloc::osm

@@ -35,9 +35,19 @@ class SyntheticMap {
   std::int64_t way(const std::vector<LocalPoint>& points, const Tags& tags, bool closed = false);
   /// A way through existing nodes (to share nodes at intersections).
   std::int64_t way_through(const std::vector<std::int64_t>& node_ids, const Tags& tags);
+  /// A relation member: `type` is 'n', 'w' or 'r'; `ref` need not exist (an extract that cut it).
+  struct Member {
+    char type = 'w';
+    std::int64_t ref = 0;
+    std::string role;
+  };
+
   /// A type=multipolygon relation of closed untagged ways.
   std::int64_t multipolygon(const std::vector<std::vector<LocalPoint>>& outers,
                             const std::vector<std::vector<LocalPoint>>& inners, Tags tags);
+
+  /// A relation of any members; the tags are written as given (add "type" yourself).
+  std::int64_t relation(std::vector<Member> members, Tags tags);
 
   [[nodiscard]] const RegionProjection& projection() const { return projection_; }
   [[nodiscard]] GeoPoint to_geo(LocalPoint p) const { return projection_.reverse({p.x_m, p.y_m}); }

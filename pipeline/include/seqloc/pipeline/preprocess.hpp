@@ -52,6 +52,7 @@ struct PreprocessReport {
   std::int64_t tiles_wide = 0, tiles_high = 0;
   std::size_t nodes = 0, lines = 0, areas = 0, roads = 0;
   std::uint64_t ways_missing_nodes = 0;
+  std::size_t multipolygon_open_chains = 0;  ///< relation member chains left open (members cut)
   double read_seconds = 0;    ///< reading and classifying the OSM input (wall)
   double render_seconds = 0;  ///< rendering, encoding and writing the tiles (wall)
   double total_seconds = 0;
