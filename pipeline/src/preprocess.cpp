@@ -52,13 +52,23 @@ raster::RegionGrid grid_for(const osm::GeoBox& bbox, const osm::RegionProjection
   return raster::RegionGrid::covering(min_x, min_y, max_x, max_y);
 }
 
-// The bbox grown by the clamp plus a margin, in degrees, to keep the features that reach into
-// the region's halo.
-osm::GeoBox grown(const osm::GeoBox& b, double metres) {
-  const double lat_deg = metres / 111'000.0;
-  const double cos_lat = std::max(0.05, std::cos(std::max(std::abs(b.min_lat), std::abs(b.max_lat)) * M_PI / 180.0));
-  const double lon_deg = metres / (111'000.0 * cos_lat);
-  return {b.min_lon - lon_deg, b.min_lat - lat_deg, b.max_lon + lon_deg, b.max_lat + lat_deg};
+// The geographic box to keep features from: every tile of `grid` (which reaches up to a tile
+// beyond the bbox) plus the clamp (roads that far outside still set distances inside), plus a
+// margin for snapping. The grown grid's boundary is sampled densely, as in grid_for.
+osm::GeoBox keep_box_for(const raster::RegionGrid& grid, const osm::RegionProjection& projection, double clamp_m) {
+  const double reach = clamp_m + 2.0;
+  const double x0 = grid.min_x() - reach, x1 = grid.max_x() + reach;
+  const double y0 = grid.min_y() - reach, y1 = grid.max_y() + reach;
+  osm::GeoBox box = osm::GeoBox::empty();
+  constexpr int kSamples = 64;
+  for (int i = 0; i <= kSamples; ++i) {
+    const double t = static_cast<double>(i) / kSamples;
+    const double x = x0 + t * (x1 - x0), y = y0 + t * (y1 - y0);
+    for (osm::GridPoint p : {osm::GridPoint{x, y0}, osm::GridPoint{x, y1}, osm::GridPoint{x0, y}, osm::GridPoint{x1, y}}) {
+      box.extend(projection.reverse(p));
+    }
+  }
+  return box;
 }
 
 // A bounded queue between the rendering workers and the single SQLite writer.
@@ -156,7 +166,11 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
     if (header.box && header.box->valid() && header.box->min_lon < header.box->max_lon) bbox = header.box;
   }
   osm::ReadOptions read_options;
-  if (bbox) read_options.keep_box = grown(*bbox, options.max_distance_m + 50.0);
+  if (bbox) {
+    const osm::GeoPoint centre = bbox->centre();
+    const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
+    read_options.keep_box = keep_box_for(grid_for(*bbox, projection), projection, options.max_distance_m);
+  }
   const auto features = osm::read_osm(options.input, read_options);
   if (!bbox) {
     if (!features.data_box.valid()) throw UsageError(options.input.string() + ": holds no nodes, so no region");
@@ -188,6 +202,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   report.lines = features.lines.size();
   report.areas = features.areas.size();
   report.ways_missing_nodes = features.ways_missing_nodes;
+  report.multipolygon_open_chains = features.multipolygon_open_chains;
   report.read_seconds = seconds_since(start);
 
   raster::CacheMetadata metadata;

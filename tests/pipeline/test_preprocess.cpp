@@ -121,6 +121,102 @@ TEST(Preprocess, KnownGeometryGivesKnownPixels) {
   EXPECT_NEAR(roads[0].points[0].x_m, raster::centre_x(-201), 0.02);  // OSM stores 1e-7 degrees
 }
 
+// Pixels a model trained on OrienterNet's tiles must read, each checked by hand from the geometry
+// (conventions.md section 2 as corrected on 2026-12-01): node codes in Patterns.nodes order, exact
+// ties of lines going toward the left endpoint, a multipolygon relation with members missing from
+// the extract, and features beyond the bbox that fall into the grid's edge tiles. kBox spans
+// +-301 m east-west and +-334 m north-south, so the grid is cells -1024..1023 both ways (+-512 m).
+TEST(Preprocess, OrienterNetGoldenPixels) {
+  test::ScratchDir dir;
+  osm::SyntheticMap map(kLat0, kLon0);
+  map.node(cell(10, -300), {{"amenity", "bicycle_parking"}});
+  map.node(cell(12, -300), {{"amenity", "bench"}});
+  map.node(cell(14, -300), {{"tourism", "artwork"}});
+  map.node(cell(16, -300), {{"amenity", "clock"}});
+  // Slope 1/4 drawn left to right and right to left: the line is half-way between two rows at
+  // the middle column, and the tie goes to the left endpoint's row.
+  map.way({cell(0, -250), cell(4, -249)}, {{"highway", "footway"}});
+  map.way({cell(24, -249), cell(20, -250)}, {{"highway", "footway"}});
+  // A steep road with ties at its first and third steps: road cells (100,-300), (100,-299),
+  // (101,-298), (101,-297), (102,-296).
+  map.way({cell(100, -300), cell(102, -296)}, {{"highway", "track"}});
+  // A forest relation cut by the extract: its outer square (-400..-200 x -600..-400) is three open
+  // ways, one reversed, with an inner square hole; a fourth outer member is missing; and a second
+  // outer chain (-150..-50 x -600..-500) lost its closing way.
+  const auto a = map.node(cell(-400, -600)), b = map.node(cell(-200, -600)), c = map.node(cell(-200, -400)),
+             d = map.node(cell(-400, -400));
+  const auto w1 = map.way_through({a, b, c}, {});
+  const auto w2 = map.way_through({d, c}, {});  // reversed
+  const auto w3 = map.way_through({d, a}, {});
+  const auto hole = map.way({cell(-320, -520), cell(-280, -520), cell(-280, -480), cell(-320, -480)}, {}, true);
+  const auto broken = map.way({cell(-150, -600), cell(-50, -600), cell(-50, -500), cell(-150, -500)}, {});
+  map.relation({{'w', w1, "outer"}, {'w', 99999, "outer"}, {'w', w2, "outer"}, {'w', broken, "outer"},
+                {'w', w3, "outer"}, {'w', hole, "inner"}},
+               {{"type", "multipolygon"}, {"natural", "wood"}});
+  // Beyond the bbox (east edge +301 m) but in the grid's edge tiles: a tree at x = 479.75 m, and a
+  // road at x = 539.75 m, beyond the grid's edge (512 m) but within the 100 m clamp of it.
+  map.node(cell(959, 10), {{"natural", "tree"}});
+  map.way({cell(1079, -200), cell(1079, 200)}, {{"highway", "service"}});
+  map.write(dir / "map.osm.pbf", 400);
+
+  PreprocessOptions options;
+  options.input = dir / "map.osm.pbf";
+  options.output = dir / "r.gpkg";
+  options.bbox = kBox;
+  preprocess_region(options);
+  raster::CacheReader reader(options.output);
+  const auto& m = reader.metadata();
+  ASSERT_EQ(m.grid.origin().u, -1024);
+  ASSERT_EQ(m.grid.origin().v, -1024);
+  ASSERT_EQ(m.grid.width_px(), 2048);
+  ASSERT_EQ(m.grid.height_px(), 2048);
+  std::vector<std::uint8_t> rgb;
+  std::vector<std::uint16_t> cm;
+  reader.read_classes(0, 0, 2048, 2048, rgb);
+  reader.read_road_distance(0, 0, 2048, 2048, cm);
+  auto at = [](std::int64_t u, std::int64_t v) { return static_cast<std::size_t>((v + 1024) * 2048 + (u + 1024)); };
+  auto areas = [&](std::int64_t u, std::int64_t v) { return int{rgb[at(u, v) * 3]}; };
+  auto ways = [&](std::int64_t u, std::int64_t v) { return int{rgb[at(u, v) * 3 + 1]}; };
+  auto nodes = [&](std::int64_t u, std::int64_t v) { return int{rgb[at(u, v) * 3 + 2]}; };
+  auto metres = [&](std::int64_t u, std::int64_t v) { return cm[at(u, v)] / 100.0; };
+
+  // Node codes, written out: OrienterNet's Patterns.nodes order.
+  EXPECT_EQ(nodes(10, -300), 17) << "bicycle_parking";
+  EXPECT_EQ(nodes(12, -300), 25) << "bench";
+  EXPECT_EQ(nodes(14, -300), 27) << "artwork";
+  EXPECT_EQ(nodes(16, -300), 30) << "clock";
+
+  // Ties of the footways (path = 7) in both drawing directions.
+  for (std::int64_t u0 : {0, 20}) {
+    EXPECT_EQ(ways(u0 + 1, -250), 7);
+    EXPECT_EQ(ways(u0 + 2, -250), 7) << "tie at the middle column goes to the left endpoint's row";
+    EXPECT_EQ(ways(u0 + 2, -249), 0);
+    EXPECT_EQ(ways(u0 + 3, -249), 7);
+  }
+  // The steep road (road = 8) and its road distances.
+  EXPECT_EQ(ways(100, -299), 8);
+  EXPECT_EQ(ways(101, -299), 0);
+  EXPECT_EQ(ways(101, -297), 8);
+  EXPECT_EQ(ways(102, -297), 0);
+  EXPECT_EQ(metres(100, -299), 0.0);
+  EXPECT_EQ(metres(101, -299), 0.5);
+  EXPECT_EQ(metres(102, -297), 0.5);
+
+  // The incomplete forest relation (forest = 6).
+  EXPECT_EQ(areas(-300, -450), 6) << "inside the glued outer ring";
+  EXPECT_EQ(areas(-210, -590), 6);
+  EXPECT_EQ(areas(-300, -500), 0) << "inside the hole";
+  EXPECT_EQ(areas(-320, -500), 6) << "the hole's outline is drawn";
+  EXPECT_EQ(areas(-401, -500), 0) << "outside";
+  EXPECT_EQ(areas(-100, -550), 0) << "inside the chain that does not close";
+  EXPECT_EQ(areas(-100, -600), 0) << "an open chain is not drawn at all";
+
+  // Beyond the bbox, inside the grid.
+  EXPECT_EQ(nodes(959, 10), 1) << "tree";
+  EXPECT_EQ(metres(1023, 0), 28.0) << "56 cells west of the road outside the grid";
+  EXPECT_EQ(metres(1023, 500), 100.0) << "152 m from the road's end: the clamp";
+}
+
 TEST(Preprocess, DefaultRegionIsTheHeaderBbox) {
   test::ScratchDir dir;
   known_map().write(dir / "map.osm.pbf", 50);

@@ -196,15 +196,20 @@ TEST_F(CacheTest, ForeignAndOtherVersionFilesAreRefused) {
   build(dir / "r.gpkg", renderer, features, test_metadata());
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open((dir / "r.gpkg").c_str(), &db), SQLITE_OK);
-  sqlite3_exec(db, "UPDATE seqloc_metadata SET value = '99' WHERE key = 'format_version'", nullptr, nullptr, nullptr);
-  sqlite3_close(db);
-  try {
-    CacheReader reader(dir / "r.gpkg");
-    FAIL();
-  } catch (const CacheFormatError& e) {
-    EXPECT_NE(std::string(e.what()).find("format version 99"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("seqloc preprocess"), std::string::npos) << e.what();
+  // Version 1 caches hold other node codes and line cells: they must be rebuilt, not read.
+  for (const char* version : {"1", "99"}) {
+    const std::string sql = std::string("UPDATE seqloc_metadata SET value = '") + version + "' WHERE key = 'format_version'";
+    sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr);
+    try {
+      CacheReader reader(dir / "r.gpkg");
+      FAIL();
+    } catch (const CacheFormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("format version ") + version + ","), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("reads version 2"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("rebuild the cache with `seqloc preprocess`"), std::string::npos) << e.what();
+    }
   }
+  sqlite3_close(db);
   std::ofstream(dir / "text.gpkg") << "not a database, but long enough to look like one to nobody";
   EXPECT_THROW(CacheReader(dir / "text.gpkg"), CacheError);
   EXPECT_THROW(CacheReader(dir / "missing.gpkg"), CacheIoError);

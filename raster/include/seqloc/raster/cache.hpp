@@ -55,7 +55,7 @@ class CacheRangeError : public CacheError {
 };
 
 /// Version of the cache layout this build reads and writes.
-inline constexpr int kCacheFormatVersion = 1;
+inline constexpr int kCacheFormatVersion = 2;
 
 enum class Layer { classes, road_distance };
 [[nodiscard]] const char* layer_table(Layer layer);
