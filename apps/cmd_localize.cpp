@@ -55,6 +55,12 @@ class LocalizeCommand : public Command {
     app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->default_val(200.0);
     app.add_option("--max-speed", limits_.max_speed_mps, "Largest plausible speed, m/s")->default_val(70.0);
     app.add_option("--max-yaw", limits_.max_yaw_deg, "Largest plausible yaw per step, degrees")->default_val(120.0);
+    app.add_option("--max-crop-jump", options_.max_crop_jump_m,
+                   "Largest distance between consecutive crop centres, m (0: the window's size)")
+        ->default_val(0.0);
+    app.add_option("--max-crop-outside", options_.max_crop_outside_m,
+                   "How far beyond the region's edge a crop centre may lie, m (0: crops must be in the region)")
+        ->default_val(0.0);
     auto& m = options_.matcher;
     app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
         ->default_val(m.size);
@@ -114,6 +120,7 @@ class LocalizeCommand : public Command {
     for (const auto& dir : route_dirs_) {
       routes.push_back(pipeline::read_route(dir, limits_));
       auto& route = routes.back();
+      pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
       if (!names.insert(route.name).second) route.name += "-" + std::to_string(routes.size());
       names.insert(route.name);
       if (noise_t > 0 || noise_r > 0) pipeline::perturb_odometry(route, noise_t, noise_r, seed_);

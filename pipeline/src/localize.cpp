@@ -3,10 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <chrono>
+#include <cstring>
 #include <future>
+#include <iomanip>
 #include <map>
 #include <random>
 #include <sstream>
+
+#include <GeographicLib/Geodesic.hpp>
 
 #include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
@@ -34,6 +38,38 @@ struct RegionFrame {
   [[nodiscard]] double y_of(double v) const { return grid.max_y() - (v + 0.5) * kCellM; }
 };
 
+// A frame's .npy volume as the filter takes it, (H, W, N). An NHW volume is transposed into
+// `buffer`; an undeclared layout whose shape reads better as (N, H, W) is refused, since reading
+// it as (H, W, N) would run to the end and give nonsense.
+filter::FrameVolume volume_view(const Route& route, const RouteFrame& f, const NpyVolume& npy,
+                                std::vector<unsigned char>& buffer) {
+  auto where = [&] { return f.volume.string() + " (frames.csv line " + std::to_string(f.line) + ")"; };
+  auto shape = [&] {
+    return "(" + std::to_string(npy.height()) + ", " + std::to_string(npy.width()) + ", " + std::to_string(npy.bins()) +
+           ")";
+  };
+  if (route.layout == VolumeLayout::hwn) {
+    if (!route.layout_declared && npy.width() == npy.bins() && npy.height() != npy.width()) {
+      throw DataError(where() + ": shape " + shape() + " looks like (N, H, W), headings first and a square crop " +
+                      "last, but volumes are read as (H, W, N); set \"layout\": \"NHW\" in route.json (or " +
+                      "\"layout\": \"HWN\" if " + shape() + " is H, W, N)");
+    }
+    return npy.view(route.volume_kind, route.cell_m);
+  }
+  const int n = npy.height(), h = npy.width(), w = npy.bins();
+  const std::size_t element = npy.type() == filter::VolumeType::float16 ? 2 : 4;
+  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(h) * static_cast<std::size_t>(w);
+  buffer.resize(cells * element);
+  const auto* source = static_cast<const unsigned char*>(npy.data());
+  std::size_t from = 0;  // (k, y, x) in C order
+  for (std::size_t k = 0; k < static_cast<std::size_t>(n); ++k) {
+    for (std::size_t yx = 0; yx < static_cast<std::size_t>(h) * static_cast<std::size_t>(w); ++yx, ++from) {
+      std::memcpy(buffer.data() + (yx * static_cast<std::size_t>(n) + k) * element, source + from * element, element);
+    }
+  }
+  return {buffer.data(), npy.type(), route.volume_kind, h, w, n, route.cell_m};
+}
+
 }  // namespace
 
 GridCrop frame_crop(const RouteFrame& f, const raster::RegionGrid& grid, const osm::RegionProjection& projection) {
@@ -60,9 +96,10 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
     const RouteFrame& f = route.frames[i];
     if (f.observation.empty()) {
       const NpyVolume npy(f.volume);
+      std::vector<unsigned char> transposed;
+      const filter::FrameVolume volume = volume_view(route, f, npy, transposed);
       try {
-        return std::make_shared<const filter::PreparedFrame>(
-            filter::prepare_frame(npy.view(route.volume_kind, route.cell_m), headings, threads));
+        return std::make_shared<const filter::PreparedFrame>(filter::prepare_frame(volume, headings, threads));
       } catch (const filter::FilterError& e) {
         // The filter checks the values (NaN, infinities, negative probabilities); the user needs
         // to know which file holds them.
@@ -102,10 +139,76 @@ const char* mode_name(Mode mode) {
 void LocalizeOptions::validate() const {
   filter.validate();
   matcher.validate();
+  if (!(max_crop_outside_m >= 0)) {
+    std::ostringstream s;
+    s << "localize options: max_crop_outside_m = " << max_crop_outside_m << ": must be >= 0";
+    throw filter::FilterError(s.str());
+  }
+  if (!(max_crop_jump_m >= 0)) {
+    std::ostringstream s;
+    s << "localize options: max_crop_jump_m = " << max_crop_jump_m << ": must be >= 0 (0: the window's size)";
+    throw filter::FilterError(s.str());
+  }
   if (!(recentre_margin > 0 && recentre_margin < 0.5)) {
     std::ostringstream s;
     s << "localize options: recentre_margin = " << recentre_margin << ": must be in (0, 0.5)";
     throw filter::FilterError(s.str());
+  }
+}
+
+void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::RegionProjection& projection,
+                 const LocalizeOptions& options) {
+  const double max_jump_m = options.crop_jump_limit_m(), margin = options.max_crop_outside_m;
+  const auto csv = (route.dir / "frames.csv").string();
+  auto fail = [&](const RouteFrame& f, const std::string& what) {
+    throw DataError(csv + ":" + std::to_string(f.line) + ": " + what);
+  };
+  auto inside = [&](double x, double y) {
+    return std::isfinite(x) && std::isfinite(y) && x >= grid.min_x() - margin && x <= grid.max_x() + margin &&
+           y >= grid.min_y() - margin && y <= grid.max_y() + margin;
+  };
+  std::ostringstream extent;
+  extent.precision(1);
+  extent << std::fixed << "x in [" << grid.min_x() << ", " << grid.max_x() << "], y in [" << grid.min_y() << ", "
+         << grid.max_y() << "] m";
+  const RouteFrame* previous = nullptr;
+  GridCrop previous_crop;
+  for (const auto& f : route.frames) {
+    const GridCrop crop = frame_crop(f, grid, projection);
+    if (!inside(crop.x, crop.y)) {
+      std::ostringstream s;
+      s.precision(7);
+      if (f.crop_geo) {
+        double metres = 0;
+        GeographicLib::Geodesic::WGS84().Inverse(f.crop_geo->lat_deg, f.crop_geo->lon_deg, projection.lat0_deg(),
+                                                 projection.lon0_deg(), metres);
+        const double km = metres / 1000.0;
+        s << "crop centre (crop_lat " << f.crop_geo->lat_deg << ", crop_lon " << f.crop_geo->lon_deg << ") lies "
+          << std::setprecision(4) << km << " km from the region's centre, outside the region";
+        const auto swapped = projection.forward(osm::GeoPoint{f.crop_geo->lon_deg, f.crop_geo->lat_deg});
+        if (std::abs(f.crop_geo->lon_deg) <= 90 && inside(swapped.x_m, swapped.y_m)) {
+          s << "; crop_lat and crop_lon look swapped";
+        }
+      } else {
+        s << "crop centre (crop_x " << crop.x << ", crop_y " << crop.y << ") lies outside the region (" << extent.str()
+          << " in the region CRS)";
+      }
+      if (margin > 0) s << " by more than the allowed " << margin << " m (--max-crop-outside)";
+      fail(f, s.str());
+    }
+    if (previous != nullptr) {
+      const double jump = std::hypot(crop.x - previous_crop.x, crop.y - previous_crop.y);
+      if (jump > max_jump_m) {
+        std::ostringstream s;
+        s.precision(1);
+        s << std::fixed << "crop centre lies " << jump << " m from the previous frame's (line " << previous->line
+          << "), more than the limit of " << max_jump_m
+          << " m (the belief window's size unless --max-crop-jump says otherwise)";
+        fail(f, s.str());
+      }
+    }
+    previous = &f;
+    previous_crop = crop;
   }
 }
 
@@ -117,6 +220,7 @@ double heading_difference_deg(double a, double b) {
 RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                            const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   options.validate();
+  check_crops(route, cache.grid(), cache.metadata().projection(), options);
   if (!source) source = route_frames(route, cache, options);
   const RegionFrame region{cache.grid(), cache.metadata().projection()};
   filter::FilterConfig config = options.filter;

@@ -86,6 +86,15 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
   }
   auto meta_fail = [&](const std::string& what) { throw DataError(json_path.string() + ": " + what); };
   if (!meta.is_object()) meta_fail("not a JSON object");
+  // Unknown keys are errors: a misspelt "volume_knd" would otherwise be read as the default.
+  // "simulated" is the provenance `seqloc simulate` records (read by no one, kept for people).
+  static const std::set<std::string> kKnownKeys{"format", "version", "name", "volume_kind", "cell_m", "layout",
+                                                "simulated"};
+  for (const auto& [key, value] : meta.items()) {
+    if (!kKnownKeys.count(key)) {
+      meta_fail("unknown key \"" + key + "\" (known: format, version, name, volume_kind, cell_m, layout, simulated)");
+    }
+  }
   // A member of the expected type, or the fallback when it is absent; any other type is an error
   // naming the member (json::value would throw a type_error that names nothing).
   auto string_member = [&](const char* key, const char* fallback) -> std::string {
@@ -107,6 +116,13 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
     route.volume_kind = filter::VolumeValues::prob;
   } else {
     meta_fail(R"("volume_kind" must be "log_prob" or "prob", not ")" + kind + "\"");
+  }
+  const std::string layout = string_member("layout", "");
+  if (layout == "HWN" || layout == "NHW") {
+    route.layout = layout == "HWN" ? VolumeLayout::hwn : VolumeLayout::nhw;
+    route.layout_declared = true;
+  } else if (!layout.empty() || meta.contains("layout")) {
+    meta_fail(R"("layout" must be "HWN" or "NHW", not ")" + layout + "\"");
   }
   if (meta.contains("cell_m")) {
     if (!meta["cell_m"].is_number() || !(meta["cell_m"].get<double>() > 0)) meta_fail("\"cell_m\" must be > 0");

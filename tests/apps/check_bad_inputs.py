@@ -144,8 +144,25 @@ def main():
         localize_case("route.json: a member of the wrong type", ["route.json", "\"format\" must be a string"],
                       lambda: open(os.path.join(route, "route.json"), "w").write('{"format": 1, "version": 1}'),
                       lambda: json.dump({"format": "seqloc-route", "version": 1}, open(os.path.join(route, "route.json"), "w")))
+        restore_json = lambda: json.dump({"format": "seqloc-route", "version": 1},
+                                         open(os.path.join(route, "route.json"), "w"))
+        localize_case("route.json: an unknown key", ["route.json", 'unknown key "volume_knd"'],
+                      lambda: open(os.path.join(route, "route.json"), "w").write(
+                          '{"format": "seqloc-route", "version": 1, "volume_knd": "prob"}'), restore_json)
+        # The region's centre, for crops in lat/lon.
+        info = json.loads(run("cache", "info", cache, "--json").stdout)
+        lat, lon = float(info["centre_lat"]), float(info["centre_lon"])
+        geo_csv = ("frame,timestamp,volume,crop_lat,crop_lon,odo_forward_m,odo_left_m,odo_yaw_deg\n"
+                   f"f0,0,v0.npy,{lat},{lon},0,0,0\nf1,1,v1.npy,{lon},{lat},5,0,0\n")
+        localize_case("frames.csv: crop_lat and crop_lon swapped", ["frames.csv:3:", "outside the region", "swapped"],
+                      write_csv(geo_csv), restore_csv)
+        localize_case("frames.csv: a crop 100 m from the previous one", ["frames.csv:3:", "previous frame's (line 2)"],
+                      write_csv(good_csv.replace("f1,1,v1.npy,5,0", "f1,1,v1.npy,100,0")), restore_csv)
         v1 = os.path.join(route, "v1.npy")
         restore_v1 = lambda: np.save(v1, vol)
+        localize_case(".npy in (N, H, W) order, layout not declared",
+                      ["v1.npy (frames.csv line 3)", "looks like (N, H, W)", '"layout": "NHW"'],
+                      lambda: np.save(v1, np.ascontiguousarray(np.moveaxis(vol, -1, 0))), restore_v1)
         localize_case(".npy that is not 3-D", ["v1.npy"], lambda: np.save(v1, vol[:, :, 0]), restore_v1)
         localize_case(".npy with NaNs", ["v1.npy", "line 3", "NaN"],
                       lambda: np.save(v1, np.where(np.arange(vol.size).reshape(vol.shape) == 7, np.nan, vol).astype(np.float32)),
@@ -158,10 +175,11 @@ def main():
         old = os.path.join(w, "old.gpkg")
         shutil.copy(cache, old)
         db = sqlite3.connect(old)
-        db.execute("UPDATE seqloc_metadata SET value = '999' WHERE key = 'format_version'")
+        db.execute("UPDATE seqloc_metadata SET value = '1' WHERE key = 'format_version'")
         db.commit()
         db.close()
-        case("cache of another format version", "cache info old.gpkg", run("cache", "info", old), 1, ["old.gpkg", "version"])
+        case("cache of an older format version", "cache info old.gpkg", run("cache", "info", old), 1,
+             ["old.gpkg", "format version 1,", "rebuild the cache"])
         notgpkg = bad_pbf("notacache.gpkg", b"SQLite format 3\x00" + os.urandom(2000))
         case("a file that is not a cache", "cache info notacache.gpkg", run("cache", "info", notgpkg), 1, ["notacache.gpkg"])
         case("export of a bbox outside the region", "export valley.gpkg --bbox 0,0,0.01,0.01 -o x.tif",

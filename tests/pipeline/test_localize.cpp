@@ -6,6 +6,7 @@
 #include <cstring>
 #include <fstream>
 #include <random>
+#include <set>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -288,20 +289,137 @@ TEST(Localize, MemoryStaysConstantAlongA20KmRoute) {
   EXPECT_EQ(short_result.poses.size(), 400u);
 }
 
-TEST(Localize, ARouteLeavingTheRegionKeepsGoingWithoutMap) {
+TEST(Localize, ARouteAllowedToLeaveTheRegionKeepsGoingWithoutMap) {
   // The region spans about +-300 m; the route drives from inside to 150 m beyond its east edge.
   // Outside, the road distance is the clamp (no map information), so MGR's prior is flat there.
+  // Crops outside the region are refused unless the user allows them (max_crop_outside_m).
   const auto region = make_region(47.5, 10.5, -300, 300, 0.004, 0.002);
   raster::CacheReader cache(region->cache);
   const double east_edge = cache.grid().max_x();
   test::ScratchDir dir;
   const Route route = straight_route(dir, cache.metadata().projection(), east_edge - 100.25, 50);
+  EXPECT_THROW((void)localize_route(route, cache, small_options(), Mode::single), DataError);
+  auto options = small_options();
+  options.max_crop_outside_m = 150;
   for (const Mode mode : {Mode::seqloc, Mode::single}) {
-    const auto r = localize_route(route, cache, small_options(), mode);
+    const auto r = localize_route(route, cache, options, mode);
     ASSERT_EQ(r.poses.size(), 50u);
     EXPECT_GT(r.poses.back().x_m, east_edge + 100) << "the last frames are outside the region";
     for (const auto& p : r.poses) EXPECT_LT(*p.position_error_m, 1e-3) << mode_name(mode) << " " << p.frame;
   }
+}
+
+// The same random volumes written as (H, W, N) and as (N, H, W) with "layout": "NHW" must give the
+// same poses to the last bit; undeclared, an (N, H, W)-looking shape is refused by name.
+TEST(VolumeLayout, NhwRoutesMatchHwnRoutesAndUndeclaredNhwIsRefused) {
+  const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  const auto projection = cache.metadata().projection();
+  test::ScratchDir hwn_dir, nhw_dir;
+  const int frames = 6;
+  Route hwn = straight_route(hwn_dir, projection, -20.25, frames);
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0.0F, 3.0F);
+  std::ofstream(nhw_dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "layout": "NHW"})";
+  {
+    std::ifstream in(hwn_dir / "frames.csv");
+    std::ofstream out(nhw_dir / "frames.csv");
+    std::string line;
+    int row = 0;
+    while (std::getline(in, line)) {
+      if (row > 0) {
+        const std::string name = "v" + std::to_string(row) + ".npy";
+        line.replace(line.find("v.npy"), 5, name);
+        std::vector<float> hwn_values(kSide * kSide * kBins), nhw_values(hwn_values.size());
+        for (auto& value : hwn_values) value = noise(rng);
+        for (int v = 0; v < kSide; ++v) {
+          for (int u = 0; u < kSide; ++u) {
+            for (int k = 0; k < kBins; ++k) {
+              nhw_values[static_cast<std::size_t>((k * kSide + v) * kSide + u)] =
+                  hwn_values[static_cast<std::size_t>((v * kSide + u) * kBins + k)];
+            }
+          }
+        }
+        test::write_npy_float32(hwn_dir / name, kSide, kSide, kBins, hwn_values);
+        test::write_npy_float32(nhw_dir / name, kBins, kSide, kSide, nhw_values);
+      }
+      out << line << "\n";
+      ++row;
+    }
+  }
+  {  // the HWN route names the same per-frame files
+    std::ifstream in(nhw_dir / "frames.csv");
+    std::ofstream(hwn_dir / "frames.csv") << in.rdbuf();
+  }
+  hwn = read_route(hwn_dir.path());
+  const Route nhw = read_route(nhw_dir.path());
+  ASSERT_EQ(nhw.layout, VolumeLayout::nhw);
+  for (const Mode mode : {Mode::single, Mode::seqloc}) {
+    const auto a = localize_route(hwn, cache, small_options(), mode);
+    const auto b = localize_route(nhw, cache, small_options(), mode);
+    ASSERT_EQ(a.poses.size(), b.poses.size());
+    for (std::size_t i = 0; i < a.poses.size(); ++i) {
+      EXPECT_EQ(a.poses[i].x_m, b.poses[i].x_m) << mode_name(mode) << " frame " << i;
+      EXPECT_EQ(a.poses[i].y_m, b.poses[i].y_m) << mode_name(mode) << " frame " << i;
+      EXPECT_EQ(a.poses[i].compass_heading_deg, b.poses[i].compass_heading_deg) << mode_name(mode) << " frame " << i;
+    }
+  }
+  // A transposition that swapped H and W would still put a centred peak at the centre: the
+  // random volumes above have their argmax anywhere, and single mode is that argmax.
+  std::set<std::pair<long, long>> cells;
+  for (const auto& p : localize_route(hwn, cache, small_options(), Mode::single).poses) {
+    cells.emplace(std::lround(p.x_m * 2), std::lround(p.y_m * 2));
+  }
+  EXPECT_GT(cells.size(), 3u);
+
+  // Undeclared: the (64, 15, 15) volumes read as (H, W, N) would be 64 x 15 cells of 15 headings.
+  std::ofstream(nhw_dir / "route.json") << R"({"format": "seqloc-route", "version": 1})";
+  const Route undeclared = read_route(nhw_dir.path());
+  try {
+    (void)localize_route(undeclared, cache, small_options(), Mode::single);
+    FAIL() << "an (N, H, W)-looking volume must be refused";
+  } catch (const DataError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("v1.npy (frames.csv line 2)"), std::string::npos) << what;
+    EXPECT_NE(what.find("shape (64, 15, 15) looks like (N, H, W)"), std::string::npos) << what;
+    EXPECT_NE(what.find(R"("layout": "NHW")"), std::string::npos) << what;
+  }
+}
+
+TEST(Crops, OutsideTheRegionOrJumpingAreRefusedNamingTheLine) {
+  const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  const auto projection = cache.metadata().projection();
+  test::ScratchDir dir;
+  Route route = straight_route(dir, projection, -20.25, 4);
+  const auto options = small_options();
+  EXPECT_NO_THROW(check_crops(route, cache.grid(), projection, options));
+  auto expect_refused = [&](const Route& r, const std::vector<std::string>& fragments) {
+    try {
+      check_crops(r, cache.grid(), projection, options);
+      FAIL() << "expected a refusal";
+    } catch (const DataError& e) {
+      for (const auto& fragment : fragments) EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    }
+    EXPECT_THROW((void)localize_route(r, cache, options, Mode::single), DataError);
+  };
+  // Latitude and longitude exchanged on the third frame: thousands of km away, and called swapped.
+  Route swapped = route;
+  const auto geo = projection.reverse({swapped.frames[2].crop_grid->x_m, swapped.frames[2].crop_grid->y_m});
+  swapped.frames[2].crop_grid.reset();
+  swapped.frames[2].crop_geo = osm::GeoPoint{geo.lon_deg, geo.lat_deg};
+  expect_refused(swapped, {"frames.csv:4: ", "km from the region's centre, outside the region", "look swapped"});
+  // A grid crop just outside the region's east edge.
+  Route outside = route;
+  outside.frames[1].crop_grid->x_m = cache.grid().max_x() + 1;
+  expect_refused(outside, {"frames.csv:3: ", "lies outside the region (x in ["});
+  // A jump of 40 m between consecutive crops, beyond the 32 m window of these options.
+  Route jump = route;
+  jump.frames[3].crop_grid->x_m += 40;
+  expect_refused(jump, {"frames.csv:5: crop centre lies 45.0 m from the previous frame's (line 4), more than the limit of 32.0 m"});
+  auto wider = options;
+  wider.max_crop_jump_m = 50;
+  EXPECT_NO_THROW(check_crops(jump, cache.grid(), projection, wider));
 }
 
 }  // namespace

@@ -108,6 +108,13 @@ TEST(Route, BadRouteJson) {
   expect_error(R"({"format": "seqloc-route", "version": 1, "name": []})", csv, "\"name\" must be a string");
   expect_error(R"([1, 2])", csv, "route.json: not a JSON object");
   expect_error(R"({"format": "seqloc-route", "version": 4294967297})", csv, "\"version\" must be 1");
+  // Unknown keys: a misspelt key would otherwise be a silent default.
+  expect_error(R"({"format": "seqloc-route", "version": 1, "volume_knd": "prob"})", csv,
+               "route.json: unknown key \"volume_knd\" (known: format, version, name, volume_kind, cell_m, layout, "
+               "simulated)");
+  expect_error(R"({"format": "seqloc-route", "version": 1, "layout": "WHN"})", csv,
+               R"(route.json: "layout" must be "HWN" or "NHW", not "WHN")");
+  expect_error(R"({"format": "seqloc-route", "version": 1, "layout": 3})", csv, "\"layout\" must be a string");
 }
 
 TEST(Route, BadFramesCsvRowsNameTheLine) {

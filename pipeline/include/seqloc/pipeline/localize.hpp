@@ -3,6 +3,7 @@
 // window follows the vehicle, the road-distance window is stitched from the cache's tiles, and
 // every pose crosses the interface in the conventions' terms (conventions.md sections 1 and 7).
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -30,7 +31,16 @@ struct LocalizeOptions {
   int offline_half_window = 10;
   /// The built-in matcher, for frames with an observation instead of a volume.
   MatcherConfig matcher;
+  /// Largest distance between consecutive crop centres (m) before the route is refused as
+  /// implausible; 0: the belief window's size (a larger jump leaves the window anyway).
+  double max_crop_jump_m = 0;
+  /// How far beyond the region's edge a crop centre may lie (m). 0: crops must be in the region
+  /// (a route that drives off the map has nothing to be localized against there).
+  double max_crop_outside_m = 0;
 
+  [[nodiscard]] double crop_jump_limit_m() const {
+    return max_crop_jump_m > 0 ? max_crop_jump_m : std::max(filter.width, filter.height) * raster::kCellM;
+  }
   void validate() const;
 };
 
@@ -75,6 +85,13 @@ struct GridCrop {
 };
 [[nodiscard]] GridCrop frame_crop(const RouteFrame& frame, const raster::RegionGrid& grid,
                                   const osm::RegionProjection& projection);
+
+/// Checks a route's crops against the region before any work: every crop centre must lie in the
+/// region grid (or within options.max_crop_outside_m of it), and consecutive centres at most
+/// options.crop_jump_limit_m() apart. Throws DataError "DIR/frames.csv:LINE: ..." (a lat/lon crop
+/// that would fall in the region with its two coordinates exchanged is called swapped).
+void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::RegionProjection& projection,
+                 const LocalizeOptions& options);
 
 /// What a frame left behind, for pictures: its prepared volume and crop, and for the online modes
 /// the belief after the step (window cell (0, 0) is region pixel (origin_u, origin_v)).

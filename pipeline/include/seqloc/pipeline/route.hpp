@@ -36,11 +36,17 @@ struct RouteFrame {
   std::optional<GroundTruth> truth;
 };
 
+/// The axis order of a route's volumes: (H, W, N), OrienterNet's log_probs without the batch
+/// axis, or (N, H, W), headings first, as a network's scores often come.
+enum class VolumeLayout { hwn, nhw };
+
 struct Route {
   std::filesystem::path dir;
   std::string name;
   filter::VolumeValues volume_kind = filter::VolumeValues::log_prob;
   double cell_m = 0.5;
+  VolumeLayout layout = VolumeLayout::hwn;
+  bool layout_declared = false;  ///< route.json names the layout (else HWN, with a check of each shape)
   std::vector<RouteFrame> frames;
 };
 
