@@ -63,6 +63,7 @@ std::int64_t SyntheticMap::way_through(const std::vector<std::int64_t>& node_ids
 std::int64_t SyntheticMap::multipolygon(const std::vector<std::vector<LocalPoint>>& outers,
                                         const std::vector<std::vector<LocalPoint>>& inners, Tags tags) {
   std::vector<Member> members;
+  members.reserve(outers.size() + inners.size());
   for (const auto& ring : outers) members.push_back({'w', way(ring, {}, true), "outer"});
   for (const auto& ring : inners) members.push_back({'w', way(ring, {}, true), "inner"});
   tags.emplace_back("type", "multipolygon");

@@ -51,8 +51,8 @@ filter::FrameVolume volume_view(const Route& route, const RouteFrame& f, const N
   if (route.layout == VolumeLayout::hwn) {
     if (!route.layout_declared && npy.width() == npy.bins() && npy.height() != npy.width()) {
       throw DataError(where() + ": shape " + shape() + " looks like (N, H, W), headings first and a square crop " +
-                      "last, but volumes are read as (H, W, N); set \"layout\": \"NHW\" in route.json (or " +
-                      "\"layout\": \"HWN\" if " + shape() + " is H, W, N)");
+                      R"(last, but volumes are read as (H, W, N); set "layout": "NHW" in route.json (or )" +
+                      R"("layout": "HWN" if )" + shape() + " is H, W, N)");
     }
     return npy.view(route.volume_kind, route.cell_m);
   }
