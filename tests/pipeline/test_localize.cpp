@@ -106,6 +106,51 @@ TEST(Localize, DeltaAtTheTruthGivesZeroErrorInEveryMode) {
   }
 }
 
+// A delta route the way a backbone would write one: lat/lon crops centred on the truth (so off the
+// cell lattice), moves of 1.3 m and turns of one heading bin, each volume a single cell at the
+// truth. Every mode must find it; offline once lost it (a constant 90 m error) because bilinear
+// warping of log-probabilities turned the sub-cell-shifted peaks into log(0), after which only
+// cells no frame observes were left.
+TEST(Localize, SubCellDeltaRouteIsFoundByEveryMode) {
+  const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  const auto projection = cache.metadata().projection();
+  test::ScratchDir dir;
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "delta"})";
+  std::ofstream csv(dir / "frames.csv");
+  csv.precision(17);
+  csv << "frame,timestamp,volume,crop_lat,crop_lon,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,gt_heading_deg\n";
+  const double bin_deg = 360.0 / kBins;
+  const std::vector<double> turns{0, 1, 1, 1, 0, 0, -1, -1, 0, 0, 1, 0, 0, 0};  // in bins, left positive
+  double x = -20.3, y = 3.1, compass = 90.0;
+  for (std::size_t t = 0; t < turns.size(); ++t) {
+    const double step = t == 0 ? 0.0 : 1.3;
+    const double yaw = turns[t] * bin_deg;
+    if (t > 0) {
+      // Move along the previous heading, then turn (the odometry of conventions.md section 1).
+      x += step * std::sin(compass * M_PI / 180.0);
+      y += step * std::cos(compass * M_PI / 180.0);
+      compass = std::fmod(compass - yaw + 360.0, 360.0);
+    }
+    const auto where = projection.reverse({x, y});
+    const std::string name = "v" + std::to_string(t) + ".npy";
+    write_delta(dir / name, 7, 7, static_cast<int>(std::lround(compass / bin_deg)) % kBins);
+    csv << t << "," << static_cast<double>(t) * 0.2 << "," << name << "," << where.lat_deg << "," << where.lon_deg << "," << step
+        << ",0," << (t == 0 ? 0.0 : yaw) << "," << where.lat_deg << "," << where.lon_deg << "," << compass << "\n";
+  }
+  csv.close();
+  const Route route = read_route(dir.path());
+  for (const Mode mode : {Mode::single, Mode::offline, Mode::online, Mode::seqloc}) {
+    const RouteResult result = localize_route(route, cache, small_options(), mode);
+    ASSERT_EQ(result.poses.size(), turns.size());
+    for (const auto& p : result.poses) {
+      // The window's cells are 0.5 m: the nearest cell to a truth off the lattice is < 0.36 m away.
+      EXPECT_LT(*p.position_error_m, 0.5) << mode_name(mode) << " frame " << p.frame;
+      EXPECT_LT(*p.heading_error_deg, bin_deg / 2) << mode_name(mode) << " frame " << p.frame;
+    }
+  }
+}
+
 TEST(Localize, TheWindowFollowsCropsTheEstimateLostTrackOf) {
   // The odometry claims the vehicle stands still while it drives 75 m east: the estimate stays
   // behind (cells outside a 3.5 m crop keep the 1/M level of conventions.md, so an old strong

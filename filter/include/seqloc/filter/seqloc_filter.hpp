@@ -13,7 +13,7 @@
 // - The update multiplies the belief by the tempered likelihood p^w (w from ETU), computed on the
 //   frame's own cells and sampled at each window cell and bin by bilinear interpolation in space
 //   and linear interpolation in heading; window cells whose centre falls outside the crop get
-//   (1/M)^w. (The offline baseline, which adds log-likelihoods, interpolates those linearly.)
+//   (1/M)^w. (The offline baseline interpolates probabilities too, and takes logs only to add.)
 
 #include <memory>
 #include <optional>
