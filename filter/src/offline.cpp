@@ -60,7 +60,7 @@ void accumulate(const BeliefVolume& relative, const PreparedFrame& frame, Belief
   const auto n = static_cast<Eigen::Index>(sum.size());
   const ConstArrayMap p(relative.data(), n);
   const auto no_info = static_cast<float>(-frame.log_cells);
-  ArrayMap(sum.data(), n) += (p == p).select(p.max(kRelativeFloor).log() + frame.max_log_prob, no_info);
+  ArrayMap(sum.data(), n) += p.isNaN().select(no_info, p.max(kRelativeFloor).log() + frame.max_log_prob);
 }
 
 // Motion from frame s to frame t: the increments in between, inverted when s is later.
@@ -78,8 +78,7 @@ Pose argmax_pose(const BeliefVolume& sum, const BeliefVolume& own) {
   std::ptrdiff_t best = -1;
   float top = -std::numeric_limits<float>::infinity();
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sum.size()); ++i) {
-    const float own_value = own.data()[i];
-    if (own_value == own_value && (best < 0 || sum.data()[i] > top)) {
+    if (!std::isnan(own.data()[i]) && (best < 0 || sum.data()[i] > top)) {
       best = i;
       top = sum.data()[i];
     }
