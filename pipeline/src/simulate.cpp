@@ -73,6 +73,19 @@ double grid_heading(const osm::GridPoint& a, const osm::GridPoint& b) {
 }
 
 // A walk along the network, straight on at most junctions, turning sometimes; never a U-turn.
+// Independent random streams: one per route (its path, its first GPS error) and one per frame
+// (GPS drift, camera error, perception noise), each seeded from (seed, route, frame). What a frame
+// draws never depends on what earlier frames or routes drew, so two runs that differ in one
+// frame's view (a map edit, a fix of the rasterizer) differ in that frame only, and variants of
+// the method are compared on the same noise.
+constexpr std::uint32_t kRouteStream = 0xFFFFFFFFu;
+
+std::mt19937_64 noise_stream(std::uint64_t seed, int route, std::uint32_t frame) {
+  std::seed_seq sequence{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32),
+                         static_cast<std::uint32_t>(route), frame};
+  return std::mt19937_64(sequence);
+}
+
 std::vector<int> walk(const RoadGraph& graph, double length_m, std::mt19937_64& rng) {
   std::uniform_int_distribution<std::size_t> pick_edge(0, graph.edges.size() - 1);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
@@ -265,11 +278,11 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
   const std::filesystem::path partial = staging_directory(out);
   std::filesystem::create_directories(partial);
 
-  std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   std::normal_distribution<double> normal(0.0, 1.0);
   const double length = options.frames * options.max_spacing_m + 10;
   for (int r = 0; r < options.routes; ++r) {
+    std::mt19937_64 rng = noise_stream(options.seed, r, kRouteStream);  // the path and the first GPS error
     std::vector<GridPose> poses;
     for (int attempt = 0; attempt < kAttempts && poses.empty(); ++attempt) {
       const auto path = walk(graph, length, rng);
@@ -302,9 +315,11 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
     double timestamp = 0;
     for (std::size_t i = 0; i < poses.size(); ++i) {
       const GridPose& p = poses[i];
+      std::mt19937_64 frame_rng = noise_stream(options.seed, r, static_cast<std::uint32_t>(i));
+      normal.reset();
       if (i > 0) {
-        ex += options.gps_drift_m * normal(rng);
-        ey += options.gps_drift_m * normal(rng);
+        ex += options.gps_drift_m * normal(frame_rng);
+        ey += options.gps_drift_m * normal(frame_rng);
         const double norm = std::hypot(ex, ey);
         if (norm > options.gps_error_m) {
           ex *= options.gps_error_m / norm;
@@ -313,18 +328,18 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
       }
       // What the camera saw: another place now and then, else here with a small pose error.
       GridPose seen = p;
-      if (uniform(rng) < options.camera.wrong_frame) {
-        seen = poses[static_cast<std::size_t>(uniform(rng) * static_cast<double>(poses.size())) % poses.size()];
-        seen.x += 60 * (uniform(rng) - 0.5);
-        seen.y += 60 * (uniform(rng) - 0.5);
-        seen.heading_deg = 360 * uniform(rng);
+      if (uniform(frame_rng) < options.camera.wrong_frame) {
+        seen = poses[static_cast<std::size_t>(uniform(frame_rng) * static_cast<double>(poses.size())) % poses.size()];
+        seen.x += 60 * (uniform(frame_rng) - 0.5);
+        seen.y += 60 * (uniform(frame_rng) - 0.5);
+        seen.heading_deg = 360 * uniform(frame_rng);
       } else {
-        seen.x += options.camera.jitter_m * normal(rng);
-        seen.y += options.camera.jitter_m * normal(rng);
-        seen.heading_deg = wrap360(seen.heading_deg + options.camera.jitter_deg * normal(rng));
+        seen.x += options.camera.jitter_m * normal(frame_rng);
+        seen.y += options.camera.jitter_m * normal(frame_rng);
+        seen.heading_deg = wrap360(seen.heading_deg + options.camera.jitter_deg * normal(frame_rng));
       }
       Observation obs = render_observation(cache, seen, options.camera);
-      corrupt(obs, options.camera, rng);
+      corrupt(obs, options.camera, frame_rng);
       std::ostringstream frame;
       frame << std::setw(6) << std::setfill('0') << i;
       write_observation(dir / "observations" / (frame.str() + ".png"), obs);

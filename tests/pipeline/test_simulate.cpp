@@ -5,9 +5,11 @@
 
 #include <cmath>
 #include <fstream>
+#include <utility>
 
 #include <gtest/gtest.h>
 
+#include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/pipeline/render.hpp"
@@ -119,6 +121,70 @@ TEST(Simulate, TheSameSeedWritesTheSameFiles) {
     EXPECT_EQ(test::read_file(out / "a" / file), test::read_file(out / "b" / file)) << file;
   }
   EXPECT_NE(test::read_file(out / "a/route_001/frames.csv"), test::read_file(out / "c/route_001/frames.csv"));
+}
+
+// A ring road 300 m square with houses along it, as a synthetic map (local metres = grid metres).
+osm::SyntheticMap ring_map() {
+  osm::SyntheticMap map(47.5, 10.5);
+  const auto a = map.node({-150, -150}), b = map.node({150, -150}), c = map.node({150, 150}), d = map.node({-150, 150});
+  map.way_through({a, b, c, d, a}, {{"highway", "tertiary"}});
+  for (double t = -120; t <= 120; t += 40) {
+    for (const auto& [x, y] : {std::pair{t, -165.0}, std::pair{165.0, t}, std::pair{t, 165.0}, std::pair{-165.0, t}}) {
+      map.way({{x - 4, y - 4}, {x + 4, y - 4}, {x + 4, y + 4}, {x - 4, y + 4}}, {{"building", "house"}}, true);
+    }
+  }
+  return map;
+}
+
+std::filesystem::path ring_cache(const osm::SyntheticMap& map, const test::ScratchDir& dir, const std::string& name) {
+  map.write(dir / (name + ".osm.pbf"));
+  PreprocessOptions options;
+  options.input = dir / (name + ".osm.pbf");
+  options.output = dir / (name + ".gpkg");
+  options.bbox = osm::GeoBox{10.5 - 0.003, 47.5 - 0.002, 10.5 + 0.003, 47.5 + 0.002};
+  preprocess_region(options);
+  return options.output;
+}
+
+TEST(Simulate, AFrameDrawsItsOwnNoiseSoAMapEditChangesOnlyTheFramesThatSeeIt) {
+  // The same seed over two maps that differ by one tree beside the first route: every frame that
+  // cannot see the tree must come out byte for byte the same. With one random stream for the whole
+  // run, the frame that saw the tree drew other numbers, and every later frame of every route
+  // changed with it (a one-pixel fix of the rasterizer reshuffled the whole benchmark).
+  test::ScratchDir dir;
+  SimulateOptions options;
+  options.routes = 2;
+  options.frames = 24;
+  options.seed = 5;
+  options.camera.wrong_frame = 0;  // a wrong frame may look at the tree from anywhere
+  osm::SyntheticMap map = ring_map();
+  raster::CacheReader plain(ring_cache(map, dir, "plain"));
+  simulate_routes(plain, options, dir / "a");
+  const Route first = read_route(dir / "a" / "route_000");
+  const auto tree_at = plain.metadata().projection().forward(first.frames[8].truth->where);
+  map.node({tree_at.x_m + 3, tree_at.y_m}, {{"natural", "tree"}});
+  raster::CacheReader edited(ring_cache(map, dir, "edited"));
+  simulate_routes(edited, options, dir / "b");
+
+  int same = 0, differ = 0;
+  for (const char* route : {"route_000", "route_001"}) {
+    EXPECT_EQ(test::read_file(dir / "a" / route / "frames.csv"), test::read_file(dir / "b" / route / "frames.csv"));
+    const Route r = read_route(dir / "a" / route);
+    for (std::size_t i = 0; i < r.frames.size(); ++i) {
+      const auto name = r.frames[i].observation.filename();
+      const bool equal = test::read_file(dir / "a" / route / "observations" / name) ==
+                         test::read_file(dir / "b" / route / "observations" / name);
+      const auto at = plain.metadata().projection().forward(r.frames[i].truth->where);
+      const double distance = std::hypot(at.x_m - tree_at.x_m - 3, at.y_m - tree_at.y_m);
+      // Seen only within the camera's range, plus its pose error (1.5 m and 4 degrees of jitter).
+      if (distance > options.camera.range_m * std::sqrt(2.0) + 10) {
+        EXPECT_TRUE(equal) << route << " frame " << i << " is " << distance << " m from the tree";
+      }
+      (equal ? same : differ) += 1;
+    }
+  }
+  EXPECT_GT(differ, 0) << "the tree must be seen by some frame, or the test shows nothing";
+  EXPECT_GT(same, 30);
 }
 
 TEST(Simulate, CleanObservationsAreLocalizedAtTheTruth) {
