@@ -14,6 +14,7 @@
 
 #include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/observation.hpp"
 
@@ -89,6 +90,18 @@ GridCrop frame_crop(const RouteFrame& f, const raster::RegionGrid& grid, const o
   return crop;
 }
 
+std::vector<float> match_frame(const RouteFrame& f, raster::CacheReader& cache, const BevMatcher& matcher) {
+  const Observation obs = read_observation(f.observation);
+  const GridCrop crop = frame_crop(f, cache.grid(), cache.metadata().projection());
+  // The crop centre is a cell corner: region pixel edges at integers.
+  const int side = matcher.map_side(obs.size);
+  const auto corner_u = std::llround(cache.grid().region_u(crop.x) + 0.5);
+  const auto corner_v = std::llround(cache.grid().region_v(crop.y) + 0.5);
+  std::vector<std::uint8_t> map;
+  cache.read_classes(corner_u - side / 2, corner_v - side / 2, side, side, map, /*fill_outside=*/true);
+  return matcher.match(obs, map);
+}
+
 FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
   auto matcher = std::make_shared<const BevMatcher>(options.matcher);
   const int headings = options.filter.headings, threads = options.filter.threads;
@@ -106,16 +119,10 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
         throw DataError(f.volume.string() + " (frames.csv line " + std::to_string(f.line) + "): " + e.what());
       }
     }
-    const Observation obs = read_observation(f.observation);
-    const GridCrop crop = frame_crop(f, cache.grid(), cache.metadata().projection());
-    // The crop centre is a cell corner: region pixel edges at integers.
-    const int side = matcher->map_side(obs.size);
-    const auto corner_u = std::llround(cache.grid().region_u(crop.x) + 0.5);
-    const auto corner_v = std::llround(cache.grid().region_v(crop.y) + 0.5);
-    std::vector<std::uint8_t> map;
-    cache.read_classes(corner_u - side / 2, corner_v - side / 2, side, side, map, /*fill_outside=*/true);
-    const auto values = matcher->match(obs, map);
+    auto values = match_frame(f, cache, *matcher);
     const int size = matcher->config().size;
+    const auto& calibration = matcher->config().calibration;
+    if (!calibration.identity()) calibrate_volume(values, size, size, matcher->config().headings, calibration);
     const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
                                      size, size, matcher->config().headings, kCellM};
     return std::make_shared<const filter::PreparedFrame>(filter::prepare_frame(volume, headings, threads));
@@ -304,7 +311,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     double x = 0, y = 0, grid_heading = 0;
     FramePose pose;
     pose.entropy = frame.entropy;
-    pose.etu_weight = filter::etu_weight(frame.entropy);
+    pose.etu_weight = filter::etu_weight(frame.entropy, config.etu_reference_entropy);
     if (mode == Mode::offline) {
       // A window centred on frame t's crop; every frame of the range placed by its own crop and
       // warped to t by the relative motion.

@@ -68,6 +68,7 @@ void MatcherConfig::validate() const {
   require(std::isfinite(tolerance_m) && tolerance_m >= 0 && tolerance_m <= 20, "tolerance_m", tolerance_m,
           "must be in [0, 20]");
   require(threads >= 1 && threads <= 256, "threads", threads, "must be in [1, 256]");
+  calibration.validate();
 }
 
 BevMatcher::BevMatcher(const MatcherConfig& config) : config_(config) {

@@ -77,6 +77,12 @@ using FrameSource = std::function<std::shared_ptr<const filter::PreparedFrame>(s
 /// against the cache's class raster. Throws DataError naming the file.
 [[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
 
+/// The built-in matcher's raw volume for an observation frame: (size, size, headings) float32
+/// log-likelihood scores over the frame's crop (before any calibration). Throws DataError for an
+/// unreadable observation.
+[[nodiscard]] std::vector<float> match_frame(const RouteFrame& frame, raster::CacheReader& cache,
+                                             const BevMatcher& matcher);
+
 /// The region-grid centre of a frame's crop (x, y in metres) and the rotation of its north from
 /// grid north (degrees clockwise). Observation frames are matched on a crop in grid coordinates
 /// whose centre is snapped to the nearest cell corner, so that volume and map cells coincide.

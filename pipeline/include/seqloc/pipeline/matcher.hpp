@@ -16,6 +16,7 @@
 #include <span>
 #include <vector>
 
+#include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/observation.hpp"
 
 namespace seqloc::pipeline {
@@ -23,11 +24,16 @@ namespace seqloc::pipeline {
 struct MatcherConfig {
   int size = 128;        ///< the volume's side H = W in 0.5 m cells (even)
   int headings = 256;    ///< N heading bins (a multiple of 4)
-  double temperature = 8.0;  ///< the log-likelihood is divided by this
+  /// The log-likelihood is divided by this. 3, with the calibration below, is the fit of
+  /// bench/calibrate on development routes (docs/matcher.md, "Calibration").
+  double temperature = 3.0;
   double miss_rate = 0.75;   ///< P(observed background | the map has a class there); see docs/matcher.md
   double spurious_rate = 0.05;  ///< P(observed some class | the map has background)
   double confusion_rate = 0.1;  ///< P(observed another class of the channel | the map has a class)
   double tolerance_m = 1.0;     ///< sigma of the Gaussian that blurs the map's class indicators
+  /// Applied by localize to each volume after the temperature (calibration.hpp; docs/matcher.md):
+  /// blur of 3 cells (1.5 m) and 2 bins (2.8 degrees), half the mass spread uniformly.
+  VolumeCalibration calibration{3.0, 2.0, 0.5};
   int threads = 1;
 
   /// Throws std::invalid_argument naming the bad field.

@@ -1,0 +1,219 @@
+#include "seqloc/pipeline/calibration.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include <Eigen/Core>
+
+namespace seqloc::pipeline {
+namespace {
+
+using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+
+// log sum exp(values / temperature), accumulated in double over blocks.
+double log_sum_exp(std::span<const float> values, float top, double temperature) {
+  constexpr std::size_t kBlock = 1 << 14;
+  const auto inverse = static_cast<float>(1.0 / temperature);
+  double sum = 0;
+  for (std::size_t start = 0; start < values.size(); start += kBlock) {
+    const std::size_t n = std::min(kBlock, values.size() - start);
+    const ConstArrayMap block(values.data() + start, static_cast<Eigen::Index>(n));
+    sum += static_cast<double>(((block - top) * inverse).exp().sum());
+  }
+  return static_cast<double>(top) / temperature + std::log(sum);
+}
+
+// Convolves `data` along one axis with `taps` (centred): `count` positions spaced `stride`
+// apart, for each of the `lines` starting offsets `start(line)`; circular or truncated.
+template <class Start>
+void convolve_axis(std::vector<double>& data, std::vector<double>& line_buffer, std::size_t lines, int count,
+                   std::size_t stride, const std::vector<double>& taps, bool circular, Start&& start) {
+  const int radius = static_cast<int>(taps.size() / 2);
+  line_buffer.resize(static_cast<std::size_t>(count));
+  for (std::size_t line = 0; line < lines; ++line) {
+    const std::size_t first = start(line);
+    for (int i = 0; i < count; ++i) line_buffer[static_cast<std::size_t>(i)] = data[first + static_cast<std::size_t>(i) * stride];
+    for (int i = 0; i < count; ++i) {
+      double acc = 0;
+      for (int j = -radius; j <= radius; ++j) {
+        int source = i + j;
+        if (circular) {
+          source = ((source % count) + count) % count;
+        } else if (source < 0 || source >= count) {
+          continue;
+        }
+        acc += taps[static_cast<std::size_t>(j + radius)] * line_buffer[static_cast<std::size_t>(source)];
+      }
+      data[first + static_cast<std::size_t>(i) * stride] = acc;
+    }
+  }
+}
+
+}  // namespace
+
+void VolumeCalibration::validate() const {
+  auto fail = [](const char* field, double value, const char* constraint) {
+    std::ostringstream s;
+    s << "calibration: " << field << " = " << value << ": " << constraint;
+    throw std::invalid_argument(s.str());
+  };
+  if (!(blur_cells >= 0 && blur_cells <= 64)) fail("blur_cells", blur_cells, "must be in [0, 64]");
+  if (!(blur_bins >= 0 && blur_bins <= 64)) fail("blur_bins", blur_bins, "must be in [0, 64]");
+  if (!(floor >= 0 && floor < 1)) fail("floor", floor, "must be in [0, 1)");
+}
+
+std::vector<double> gaussian_taps(double sigma) {
+  if (!(sigma > 0)) return {1.0};
+  const int radius = static_cast<int>(std::ceil(3 * sigma));
+  std::vector<double> taps(static_cast<std::size_t>(2 * radius + 1));
+  double sum = 0;
+  for (int i = -radius; i <= radius; ++i) {
+    const double w = std::exp(-0.5 * (i / sigma) * (i / sigma));
+    taps[static_cast<std::size_t>(i + radius)] = w;
+    sum += w;
+  }
+  for (auto& w : taps) w /= sum;
+  return taps;
+}
+
+void calibrate_volume(std::span<float> volume, int height, int width, int bins, const VolumeCalibration& c) {
+  c.validate();
+  const std::size_t cells = volume.size();
+  if (cells != static_cast<std::size_t>(height) * static_cast<std::size_t>(width) * static_cast<std::size_t>(bins) ||
+      cells == 0) {
+    throw std::invalid_argument("calibrate_volume: the volume's size is not height * width * bins");
+  }
+  const float top = *std::max_element(volume.begin(), volume.end());
+  std::vector<double> p(cells);
+  for (std::size_t i = 0; i < cells; ++i) p[i] = std::exp(static_cast<double>(volume[i] - top));
+  std::vector<double> buffer;
+  const auto W = static_cast<std::size_t>(width), N = static_cast<std::size_t>(bins);
+  if (c.blur_bins > 0) {
+    convolve_axis(p, buffer, static_cast<std::size_t>(height) * W, bins, 1, gaussian_taps(c.blur_bins), true,
+                  [&](std::size_t line) { return line * N; });
+  }
+  if (c.blur_cells > 0) {
+    const auto taps = gaussian_taps(c.blur_cells);
+    // Along u (stride N) for every row and bin, then along v (stride W N) for every column and bin.
+    convolve_axis(p, buffer, static_cast<std::size_t>(height) * N, width, N, taps, false,
+                  [&](std::size_t line) { return (line / N) * W * N + line % N; });
+    convolve_axis(p, buffer, W * N, height, W * N, taps, false, [](std::size_t line) { return line; });
+  }
+  double sum = 0;
+  for (double v : p) sum += v;
+  const double a = c.floor, uniform = a / static_cast<double>(cells);
+  for (std::size_t i = 0; i < cells; ++i) {
+    const double q = (1 - a) * p[i] / sum + uniform;
+    volume[i] = static_cast<float>(std::log(std::max(q, std::numeric_limits<double>::min())));
+  }
+}
+
+CalibrationFit::CalibrationFit() : CalibrationFit(Grid{}) {}
+
+CalibrationFit::CalibrationFit(Grid grid) : grid_(std::move(grid)) {
+  for (double s : grid_.blur_cells) radius_cells_ = std::max(radius_cells_, static_cast<int>(gaussian_taps(s).size() / 2));
+  for (double s : grid_.blur_bins) radius_bins_ = std::max(radius_bins_, static_cast<int>(gaussian_taps(s).size() / 2));
+}
+
+void CalibrationFit::add(std::span<const float> scores, int height, int width, int bins, int true_v, int true_u,
+                         int true_bin) {
+  if (true_v < 0 || true_u < 0 || true_v >= height || true_u >= width) {
+    ++skipped_;
+    return;
+  }
+  Frame frame;
+  frame.bins = bins;
+  frame.log_cells = std::log(static_cast<double>(scores.size()));
+  const float top = *std::max_element(scores.begin(), scores.end());
+  for (double t : grid_.temperatures) frame.log_z.push_back(log_sum_exp(scores, top, t));
+  const int rc = radius_cells_, rb = radius_bins_;
+  const int side = 2 * rc + 1, depth = 2 * rb + 1;
+  frame.window.assign(static_cast<std::size_t>(side) * static_cast<std::size_t>(side) * static_cast<std::size_t>(depth),
+                      std::numeric_limits<float>::quiet_NaN());
+  for (int dv = -rc; dv <= rc; ++dv) {
+    for (int du = -rc; du <= rc; ++du) {
+      const int v = true_v + dv, u = true_u + du;
+      if (v < 0 || u < 0 || v >= height || u >= width) continue;
+      for (int db = -rb; db <= rb; ++db) {
+        const int b = (((true_bin + db) % bins) + bins) % bins;
+        const std::size_t from = (static_cast<std::size_t>(v) * static_cast<std::size_t>(width) + static_cast<std::size_t>(u)) *
+                                     static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
+        const std::size_t to = (static_cast<std::size_t>(dv + rc) * static_cast<std::size_t>(side) +
+                                static_cast<std::size_t>(du + rc)) * static_cast<std::size_t>(depth) +
+                               static_cast<std::size_t>(db + rb);
+        frame.window[to] = scores[from];
+      }
+    }
+  }
+  frames_.push_back(std::move(frame));
+}
+
+double CalibrationFit::blurred_at_truth(const Frame& frame, std::size_t t, double blur_cells, double blur_bins) const {
+  const auto taps_xy = gaussian_taps(blur_cells), taps_b = gaussian_taps(blur_bins);
+  const int rxy = static_cast<int>(taps_xy.size() / 2), rb = static_cast<int>(taps_b.size() / 2);
+  const int side = 2 * radius_cells_ + 1, depth = 2 * radius_bins_ + 1;
+  const double temperature = grid_.temperatures[t], log_z = frame.log_z[t];
+  double value = 0;
+  for (int dv = -rxy; dv <= rxy; ++dv) {
+    for (int du = -rxy; du <= rxy; ++du) {
+      for (int db = -rb; db <= rb; ++db) {
+        const std::size_t at = (static_cast<std::size_t>(dv + radius_cells_) * static_cast<std::size_t>(side) +
+                                static_cast<std::size_t>(du + radius_cells_)) * static_cast<std::size_t>(depth) +
+                               static_cast<std::size_t>(db + radius_bins_);
+        const float s = frame.window[at];
+        if (std::isnan(s)) continue;  // outside the volume
+        value += taps_xy[static_cast<std::size_t>(dv + rxy)] * taps_xy[static_cast<std::size_t>(du + rxy)] *
+                 taps_b[static_cast<std::size_t>(db + rb)] * std::exp(static_cast<double>(s) / temperature - log_z);
+      }
+    }
+  }
+  return value;
+}
+
+double CalibrationFit::mean_nll(double temperature, const VolumeCalibration& c) const {
+  const auto it = std::find(grid_.temperatures.begin(), grid_.temperatures.end(), temperature);
+  if (it == grid_.temperatures.end()) throw std::invalid_argument("mean_nll: the temperature is not on the grid");
+  const auto t = static_cast<std::size_t>(it - grid_.temperatures.begin());
+  double total = 0;
+  for (const auto& frame : frames_) {
+    const double p = blurred_at_truth(frame, t, c.blur_cells, c.blur_bins);
+    total -= std::log((1 - c.floor) * p + c.floor * std::exp(-frame.log_cells));
+  }
+  return frames_.empty() ? 0.0 : total / static_cast<double>(frames_.size());
+}
+
+CalibrationFit::Result CalibrationFit::best() const {
+  Result result;
+  result.frames = frames_.size();
+  result.skipped = skipped_;
+  result.nll = std::numeric_limits<double>::infinity();
+  for (const auto& frame : frames_) result.uniform_nll += frame.log_cells;
+  if (!frames_.empty()) result.uniform_nll /= static_cast<double>(frames_.size());
+  std::vector<double> blurred(frames_.size());
+  for (std::size_t t = 0; t < grid_.temperatures.size(); ++t) {
+    for (double bc : grid_.blur_cells) {
+      for (double bb : grid_.blur_bins) {
+        for (std::size_t f = 0; f < frames_.size(); ++f) blurred[f] = blurred_at_truth(frames_[f], t, bc, bb);
+        for (double a : grid_.floors) {
+          double total = 0;
+          for (std::size_t f = 0; f < frames_.size(); ++f) {
+            total -= std::log((1 - a) * blurred[f] + a * std::exp(-frames_[f].log_cells));
+          }
+          const double nll = frames_.empty() ? 0.0 : total / static_cast<double>(frames_.size());
+          if (nll < result.nll) {
+            result.nll = nll;
+            result.temperature = grid_.temperatures[t];
+            result.calibration = {bc, bb, a};
+          }
+        }
+      }
+    }
+  }
+  return result;
+}
+
+}  // namespace seqloc::pipeline
