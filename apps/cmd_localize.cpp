@@ -40,9 +40,15 @@ class LocalizeCommand : public Command {
     app.add_flag("!--no-etu", f.etu, "Switch off Entropy-Tempered Uncertainty");
     app.add_flag("!--no-mgr", f.mgr, "Switch off Map-Guided Relocalization");
     app.add_flag("!--no-pas", f.pas, "Switch off Peak-Anchored Smoothing");
+    app.add_option("--etu-reference", f.etu_reference_entropy,
+                   "ETU relative to this normalized entropy: w = min(1, (1 - H) / (1 - H_ref)); 0: the paper's 1 - H")
+        ->default_val(f.etu_reference_entropy);
     app.add_option("--epsilon", f.mgr_epsilon, "MGR's eps")->default_val(0.01);
     app.add_option("--sigma", f.mgr_sigma_m, "MGR's road-prior sigma in metres")->default_val(3.0);
     app.add_option("--pas-radius", f.pas_radius, "PAS radius in cells")->default_val(3);
+    app.add_option("--outside-crop-nats", f.outside_crop_nats,
+                   "Window cells outside a frame's crop get log(1/M) minus this (0: the paper's rule)")
+        ->default_val(f.outside_crop_nats);
     app.add_flag("--subbin-heading", f.subbin_heading, "Refine the heading between bins (beyond the paper)");
     app.add_flag("--motion-noise", f.motion_noise, "Diffuse the belief with the step length (beyond the paper)");
     app.add_flag("--gps-prior", f.gps_prior, "Use every frame's GPS fix as a prior term (beyond the paper)");
@@ -68,6 +74,15 @@ class LocalizeCommand : public Command {
         ->default_val(m.temperature);
     app.add_option("--matcher-tolerance", m.tolerance_m, "Built-in matcher: positional tolerance (sigma, m)")
         ->default_val(m.tolerance_m);
+    app.add_option("--matcher-blur-cells", m.calibration.blur_cells,
+                   "Built-in matcher calibration: positional blur of the volume (sigma, cells)")
+        ->default_val(m.calibration.blur_cells);
+    app.add_option("--matcher-blur-bins", m.calibration.blur_bins,
+                   "Built-in matcher calibration: heading blur of the volume (sigma, bins)")
+        ->default_val(m.calibration.blur_bins);
+    app.add_option("--matcher-floor", m.calibration.floor,
+                   "Built-in matcher calibration: share of each volume spread uniformly")
+        ->default_val(m.calibration.floor);
     app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
     app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
     app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"

@@ -55,11 +55,11 @@ void place(const OfflineFrame& f, BeliefVolume& out, std::vector<float>& relativ
 }
 
 // Adds frame s's log-likelihood (placed, and warped when s != t) to the sum: its own where it
-// observed the cell, log(1/M) where it did not (conventions.md section 6 step 3).
-void accumulate(const BeliefVolume& relative, const PreparedFrame& frame, BeliefVolume& sum) {
+// observed the cell, log(1/M) - outside_crop_nats where it did not (conventions.md section 6 step 3).
+void accumulate(const BeliefVolume& relative, const PreparedFrame& frame, double outside_nats, BeliefVolume& sum) {
   const auto n = static_cast<Eigen::Index>(sum.size());
   const ConstArrayMap p(relative.data(), n);
-  const auto no_info = static_cast<float>(-frame.log_cells);
+  const auto no_info = static_cast<float>(-frame.log_cells - outside_nats);
   ArrayMap(sum.data(), n) += p.isNaN().select(no_info, p.max(kRelativeFloor).log() + frame.max_log_prob);
 }
 
@@ -93,16 +93,16 @@ Pose argmax_pose(const BeliefVolume& sum, const BeliefVolume& own) {
 // The pose of frame t from the placed frames [s0, s1] (placed(s) gives frame s's placement).
 template <class Placed>
 Pose pose_from(const std::vector<OfflineFrame>& frames, std::size_t t, std::size_t s0, std::size_t s1, Placed&& placed,
-               BeliefVolume& sum, BeliefVolume& warped, int threads) {
+               BeliefVolume& sum, BeliefVolume& warped, const FilterConfig& config) {
   std::fill(sum.data(), sum.data() + sum.size(), 0.0f);
   const float unobserved = std::numeric_limits<float>::quiet_NaN();
   for (std::size_t s = s0; s <= s1; ++s) {
     const BeliefVolume& own = placed(s);
     if (s == t) {
-      accumulate(own, *frames[s].frame, sum);
+      accumulate(own, *frames[s].frame, config.outside_crop_nats, sum);
     } else {
-      detail::warp_volume(own, warped, motion_between(frames, s, t), unobserved, threads);
-      accumulate(warped, *frames[s].frame, sum);
+      detail::warp_volume(own, warped, motion_between(frames, s, t), unobserved, config.threads);
+      accumulate(warped, *frames[s].frame, config.outside_crop_nats, sum);
     }
   }
   return argmax_pose(sum, placed(t));
@@ -128,7 +128,7 @@ Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, con
         place(frames[s], other, relative, blend);
         return other;
       },
-      sum, warped, config.threads);
+      sum, warped, config);
 }
 
 std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const FilterConfig& config, int half_window) {
@@ -150,7 +150,7 @@ std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const F
     const int s1 = half_window < 0 ? n - 1 : std::min(n - 1, t + half_window);
     poses.push_back(pose_from(
         frames, static_cast<std::size_t>(t), static_cast<std::size_t>(s0), static_cast<std::size_t>(s1),
-        [&](std::size_t s) -> const BeliefVolume& { return placed[s]; }, sum, warped, config.threads));
+        [&](std::size_t s) -> const BeliefVolume& { return placed[s]; }, sum, warped, config));
   }
   return poses;
 }

@@ -125,7 +125,11 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
   }
   const double log_m = std::log(static_cast<double>(m_cells));
   const double h_hat = std::clamp(entropy / log_m, 0.0, 1.0);
-  const double w = c_.etu ? std::max(1 - h_hat, 1e-3) : 1.0;
+  // Written out here, not by etu_weight(), so the reference states the rule itself.
+  const double w = !c_.etu ? 1.0
+                   : c_.etu_reference_entropy > 0
+                       ? std::clamp((1 - h_hat) / (1 - c_.etu_reference_entropy), 1e-3, 1.0)
+                       : std::max(1 - h_hat, 1e-3);
 
   // 3. Update: b = log_softmax(w log p + b_hat). The tempered likelihood p^w is sampled at every
   //    window cell and bin by linear interpolation of p^w (bilinear in space, linear between the
@@ -143,7 +147,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
         const double ce = east * std::cos(rot) - north * std::sin(rot);
         const double cn = east * std::sin(rot) + north * std::cos(rot);
         const double x = ce / volume.cell_m + (vw - 1) / 2.0, y = -cn / volume.cell_m + (vh - 1) / 2.0;
-        double l = w * -log_m;  // outside the crop: no information
+        double l = w * (-log_m - c_.outside_crop_nats);  // outside the crop
         if (x >= 0 && y >= 0 && x <= vw - 1 && y <= vh - 1) {
           const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
           const int x1 = std::min(x0 + 1, vw - 1), y1 = std::min(y0 + 1, vh - 1);

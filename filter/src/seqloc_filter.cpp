@@ -451,11 +451,11 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
 
   FrameResult result;
   result.frame_entropy = frame.entropy;
-  result.etu_weight = config_.etu ? etu_weight(frame.entropy) : 1.0;
+  result.etu_weight = config_.etu ? etu_weight(frame.entropy, config_.etu_reference_entropy) : 1.0;
   const auto w = static_cast<float>(result.etu_weight);
 
   // The tempered likelihood p^w on the crop, scaled by its maximum (the scale cancels in the
-  // normalization); log(1/M) outside the crop.
+  // normalization); log(1/M) - outside_crop_nats outside the crop.
   const float log_p_max = frame.max_log_prob;
   impl_->tempered.resize(frame.log_prob.size());
   const std::size_t frame_slice = static_cast<std::size_t>(frame.width) * frame.height;
@@ -465,7 +465,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
     ConstArrayMap log_p(frame.log_prob.data() + begin, length);
     ArrayMap(impl_->tempered.data() + begin, length) = (log_p > kLogZero).select((w * (log_p - log_p_max)).exp(), 0.0f);
   });
-  const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - log_p_max)));
+  const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
 
   std::vector<float> gps_factor;
   if (config_.gps_prior && gps != nullptr) {

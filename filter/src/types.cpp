@@ -43,6 +43,12 @@ void FilterConfig::validate() const {
   if (!(mgr_sigma_m > 0)) fail("mgr_sigma_m", mgr_sigma_m, "must be > 0");
   if (pas_radius < 0 || pas_radius > 64) fail("pas_radius", pas_radius, "must be in [0, 64] cells");
   if (!(relocalization_jump_m > 0)) fail("relocalization_jump_m", relocalization_jump_m, "must be > 0");
+  if (!(etu_reference_entropy >= 0 && etu_reference_entropy < 1)) {
+    fail("etu_reference_entropy", etu_reference_entropy, "must be in [0, 1) (0: the paper's ETU)");
+  }
+  if (!(outside_crop_nats >= 0 && outside_crop_nats <= 50)) {
+    fail("outside_crop_nats", outside_crop_nats, "must be in [0, 50]");
+  }
   if (subbin_half_width < 1 || subbin_half_width >= headings / 2) {
     fail("subbin_half_width", subbin_half_width, "must be in [1, headings / 2)");
   }

@@ -65,6 +65,8 @@ struct Variant {
   double cell_m;
   int bins;
   int threads;
+  double outside_nats = 1.0;
+  double etu_reference = 0.9;
 };
 
 // Printed by name: without it GoogleTest dumps the struct's bytes, padding included, which
@@ -80,6 +82,8 @@ TEST_P(FastAgainstReference, AgreeOnSeededRandomSequences) {
   c.mgr = p.mgr;
   c.pas = p.pas;
   c.threads = p.threads;
+  c.outside_crop_nats = p.outside_nats;
+  c.etu_reference_entropy = p.etu_reference;
   std::mt19937 rng(1234);
   std::uniform_real_distribution<double> unit(0, 1);
   std::vector<float> road(static_cast<std::size_t>(c.width * c.height));
@@ -115,7 +119,9 @@ INSTANTIATE_TEST_SUITE_P(
                       Variant{"coarse_volume", true, true, true, 0, 1.0, 16, 1},
                       Variant{"fewer_bins", true, true, true, 0, 0.5, 8, 1},
                       Variant{"more_bins", true, true, true, 3.0, 0.5, 32, 2},
-                      Variant{"threads", true, true, true, 0, 0.5, 16, 3}),
+                      Variant{"threads", true, true, true, 0, 0.5, 16, 3},
+                      Variant{"outside_crop", true, true, true, 7.5, 0.5, 16, 1, 2.0},
+                      Variant{"paper_etu", true, true, true, 0, 0.5, 16, 1, 0.0, 0.0}),
     [](const auto& variant) { return std::string(variant.param.name); });
 
 // A volume whose mass is one cell: log-prob 0 there, -inf elsewhere.
@@ -221,6 +227,34 @@ TEST(Analytic, BeliefSumsToOneAfterEveryStep) {
       EXPECT_NEAR(filter.belief().total_probability(), 1.0, 1e-3) << "mgr " << mgr << " step " << step;
     }
   }
+}
+
+// A frame that says "I am somewhere in this crop" (its volume uniform over the crop) must move
+// the belief into the crop: the crop is placed to contain the vehicle. Under the paper's rule
+// (outside cells get log(1/M), as much as every observed cell here) it moved nothing.
+TEST(Analytic, AFlatCropPullsTheBeliefIntoItByTheOutsideOffset) {
+  for (const double nats : {0.0, 2.0, FilterConfig{}.outside_crop_nats}) {
+    FilterConfig c = small_config();
+    c.etu = c.mgr = c.pas = false;
+    c.outside_crop_nats = nats;
+    SeqLocFilter filter(c);
+    Volume flat;
+    flat.values.assign(static_cast<std::size_t>(7 * 9 * 16), 0.0F);
+    filter.step(prepare_frame(flat.view(7, 9, 16), c.headings), {12, 10, 0}, {}, nullptr);
+    // Crop cells: u in [8, 16], v in [7, 13] (centre (12, 10), 9 x 7 cells, whole cells).
+    const double inside = filter.belief().position_mass(12, 10), outside = filter.belief().position_mass(2, 2);
+    EXPECT_NEAR(std::log(inside / outside), nats, 1e-4) << "offset " << nats;
+  }
+  EXPECT_GT(FilterConfig{}.outside_crop_nats, 0.0) << "the default must not leave a crop without pull";
+}
+
+TEST(Analytic, RelativeEtuCountsTypicalFramesFullyAndTempersFlatterOnes) {
+  EXPECT_DOUBLE_EQ(etu_weight(0.9, 0.9), 1.0) << "a frame as sharp as the reference";
+  EXPECT_DOUBLE_EQ(etu_weight(0.5, 0.9), 1.0) << "sharper: still 1, never more";
+  EXPECT_NEAR(etu_weight(0.95, 0.9), 0.5, 1e-12) << "halfway to uniform from the reference";
+  EXPECT_DOUBLE_EQ(etu_weight(1.0, 0.9), 1e-3) << "uniform";
+  EXPECT_NEAR(etu_weight(0.95, 0.0), 0.05, 1e-12) << "the paper's ETU";
+  EXPECT_GT(FilterConfig{}.etu_reference_entropy, 0.0) << "the default is ours (docs/filter.md)";
 }
 
 TEST(Analytic, EtuWeightOfUniformAndDelta) {

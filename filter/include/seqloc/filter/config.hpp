@@ -15,12 +15,24 @@ struct FilterConfig {
   bool etu = true;   ///< Entropy-Tempered Uncertainty
   bool mgr = true;   ///< Map-Guided Relocalization
   bool pas = true;   ///< Peak-Anchored Smoothing
+  /// ETU relative to a typical frame (ours; 0 is the paper's ETU, w = 1 - H): w = clamp((1 - H) /
+  /// (1 - H_ref), 1e-3, 1). Calibrated volumes are spread by design (their floor), so the paper's
+  /// weights temper every frame (w ~ 0.1) and the belief hardly moves. 0.9: the median entropy of
+  /// the calibrated matcher's volumes on development routes (docs/filter.md, "ETU").
+  double etu_reference_entropy = 0.9;
   double mgr_epsilon = 0.01;  ///< eps of MGR
   /// sigma of the road prior g(x) = exp(-d^2 / (2 sigma^2)). 3 m: a vehicle's centre lies within
   /// a lane or two of the mapped centerline, and the OSM centerline itself is off by a few metres
   /// on rural roads; the benchmark's sigma sweep refines this per region.
   double mgr_sigma_m = 3.0;
   int pas_radius = 3;  ///< r of PAS, cells
+
+  /// Window cells outside a frame's crop get the density log(1/M) - outside_crop_nats (conventions.md
+  /// section 6 step 3 has 0, kept reproducible with 0). The crop is placed to contain the vehicle,
+  /// so outside is less likely than an average observed cell; with 0 an unobserved cell outranks
+  /// most observed ones and mass leaks out of the crop. 1: chosen on development routes
+  /// (docs/filter.md, "Outside the crop").
+  double outside_crop_nats = 1.0;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the
   /// odometry is flagged "relocalized".

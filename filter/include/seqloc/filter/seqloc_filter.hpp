@@ -15,6 +15,7 @@
 //   and linear interpolation in heading; window cells whose centre falls outside the crop get
 //   (1/M)^w. (The offline baseline interpolates probabilities too, and takes logs only to add.)
 
+#include <algorithm>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -46,9 +47,14 @@ struct PreparedFrame {
 /// index in (H, W, N) order); a -inf log-probability is a valid zero.
 [[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1);
 
-/// ETU weight of a frame (conventions.md section 6, step 2).
-[[nodiscard]] inline double etu_weight(double normalized_entropy) {
-  return normalized_entropy < 1.0 - 1e-3 ? 1.0 - normalized_entropy : 1e-3;
+/// ETU weight of a frame (conventions.md section 6, step 2): w = max(1 - H, 1e-3). With a
+/// reference entropy H_ref > 0 (ours, FilterConfig::etu_reference_entropy) the weight is relative
+/// to a typical frame: w = clamp((1 - H) / (1 - H_ref), 1e-3, 1), so frames as sharp as H_ref or
+/// sharper count fully and only flatter ones are tempered.
+[[nodiscard]] inline double etu_weight(double normalized_entropy, double reference_entropy = 0.0) {
+  const double w = reference_entropy > 0 ? (1.0 - normalized_entropy) / (1.0 - reference_entropy)
+                                         : 1.0 - normalized_entropy;
+  return std::clamp(w, 1e-3, 1.0);
 }
 
 /// The road prior of MGR over the window: log q(x) for every cell (one heading's share).
