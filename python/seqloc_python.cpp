@@ -114,6 +114,8 @@ filter::FilterConfig config_from(const py::dict& d) {
     else if (key == "etu") c.etu = value.cast<bool>();
     else if (key == "mgr") c.mgr = value.cast<bool>();
     else if (key == "pas") c.pas = value.cast<bool>();
+    else if (key == "etu_reference_entropy") c.etu_reference_entropy = value.cast<double>();
+    else if (key == "outside_crop_nats") c.outside_crop_nats = value.cast<double>();
     else if (key == "mgr_epsilon") c.mgr_epsilon = value.cast<double>();
     else if (key == "mgr_sigma_m") c.mgr_sigma_m = value.cast<double>();
     else if (key == "pas_radius") c.pas_radius = value.cast<int>();
