@@ -14,6 +14,14 @@ namespace {
 
 using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 
+// Offset of (row, column, bin) in a window of side x side x depth, row-major.
+std::size_t window_index(int row, int column, int bin, int side, int depth) {
+  return static_cast<std::size_t>((static_cast<long long>(row) * side + column) * depth + bin);
+}
+
+// taps[index] for an index computed in int (offsets from a kernel's centre).
+double tap(const std::vector<double>& taps, int index) { return taps[static_cast<std::size_t>(index)]; }
+
 // log sum exp(values / temperature), accumulated in double over blocks.
 double log_sum_exp(std::span<const float> values, float top, double temperature) {
   constexpr std::size_t kBlock = 1 << 14;
@@ -46,7 +54,7 @@ void convolve_axis(std::vector<double>& data, std::vector<double>& line_buffer, 
         } else if (source < 0 || source >= count) {
           continue;
         }
-        acc += taps[static_cast<std::size_t>(j + radius)] * line_buffer[static_cast<std::size_t>(source)];
+        acc += tap(taps, j + radius) * tap(line_buffer, source);
       }
       data[first + static_cast<std::size_t>(i) * stride] = acc;
     }
@@ -71,10 +79,10 @@ std::vector<double> gaussian_taps(double sigma) {
   const int radius = static_cast<int>(std::ceil(3 * sigma));
   std::vector<double> taps(static_cast<std::size_t>(2 * radius + 1));
   double sum = 0;
-  for (int i = -radius; i <= radius; ++i) {
-    const double w = std::exp(-0.5 * (i / sigma) * (i / sigma));
-    taps[static_cast<std::size_t>(i + radius)] = w;
-    sum += w;
+  for (std::size_t k = 0; k < taps.size(); ++k) {
+    const double i = static_cast<double>(k) - radius;
+    taps[k] = std::exp(-0.5 * (i / sigma) * (i / sigma));
+    sum += taps[k];
   }
   for (auto& w : taps) w /= sum;
   return taps;
@@ -142,9 +150,7 @@ void CalibrationFit::add(std::span<const float> scores, int height, int width, i
         const int b = (((true_bin + db) % bins) + bins) % bins;
         const std::size_t from = (static_cast<std::size_t>(v) * static_cast<std::size_t>(width) + static_cast<std::size_t>(u)) *
                                      static_cast<std::size_t>(bins) + static_cast<std::size_t>(b);
-        const std::size_t to = (static_cast<std::size_t>(dv + rc) * static_cast<std::size_t>(side) +
-                                static_cast<std::size_t>(du + rc)) * static_cast<std::size_t>(depth) +
-                               static_cast<std::size_t>(db + rb);
+        const std::size_t to = window_index(dv + rc, du + rc, db + rb, side, depth);
         frame.window[to] = scores[from];
       }
     }
@@ -161,13 +167,11 @@ double CalibrationFit::blurred_at_truth(const Frame& frame, std::size_t t, doubl
   for (int dv = -rxy; dv <= rxy; ++dv) {
     for (int du = -rxy; du <= rxy; ++du) {
       for (int db = -rb; db <= rb; ++db) {
-        const std::size_t at = (static_cast<std::size_t>(dv + radius_cells_) * static_cast<std::size_t>(side) +
-                                static_cast<std::size_t>(du + radius_cells_)) * static_cast<std::size_t>(depth) +
-                               static_cast<std::size_t>(db + radius_bins_);
-        const float s = frame.window[at];
+        const float s =
+            frame.window[window_index(dv + radius_cells_, du + radius_cells_, db + radius_bins_, side, depth)];
         if (std::isnan(s)) continue;  // outside the volume
-        value += taps_xy[static_cast<std::size_t>(dv + rxy)] * taps_xy[static_cast<std::size_t>(du + rxy)] *
-                 taps_b[static_cast<std::size_t>(db + rb)] * std::exp(static_cast<double>(s) / temperature - log_z);
+        value += tap(taps_xy, dv + rxy) * tap(taps_xy, du + rxy) * tap(taps_b, db + rb) *
+                 std::exp(static_cast<double>(s) / temperature - log_z);
       }
     }
   }

@@ -128,7 +128,8 @@ osm::SyntheticMap ring_map() {
   osm::SyntheticMap map(47.5, 10.5);
   const auto a = map.node({-150, -150}), b = map.node({150, -150}), c = map.node({150, 150}), d = map.node({-150, 150});
   map.way_through({a, b, c, d, a}, {{"highway", "tertiary"}});
-  for (double t = -120; t <= 120; t += 40) {
+  for (int k = 0; k <= 6; ++k) {
+    const double t = -120.0 + 40.0 * k;
     for (const auto& [x, y] : {std::pair{t, -165.0}, std::pair{165.0, t}, std::pair{t, 165.0}, std::pair{-165.0, t}}) {
       map.way({{x - 4, y - 4}, {x + 4, y - 4}, {x + 4, y + 4}, {x - 4, y + 4}}, {{"building", "house"}}, true);
     }
