@@ -5,6 +5,7 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 #include <Eigen/Core>
@@ -35,28 +36,58 @@ double log_sum_exp(std::span<const float> values, float top, double temperature)
   return static_cast<double>(top) / temperature + std::log(sum);
 }
 
-// Convolves `data` along one axis with `taps` (centred): `count` positions spaced `stride`
-// apart, for each of the `lines` starting offsets `start(line)`; circular or truncated.
-template <class Start>
-void convolve_axis(std::vector<double>& data, std::vector<double>& line_buffer, std::size_t lines, int count,
-                   std::size_t stride, const std::vector<double>& taps, bool circular, Start&& start) {
+// Runs f(begin, end) over [0, n) split into `threads` contiguous ranges, one thread each.
+template <class F>
+void parallel_ranges(std::size_t n, int threads, F&& f) {
+  const auto parts = static_cast<std::size_t>(std::max(1, threads));
+  if (parts == 1 || n < 2) {
+    f(std::size_t{0}, n);
+    return;
+  }
+  const std::size_t chunk = (n + parts - 1) / parts;
+  std::vector<std::thread> pool;
+  for (std::size_t begin = chunk; begin < n; begin += chunk) {
+    pool.emplace_back([&f, begin, end = std::min(n, begin + chunk)] { f(begin, end); });
+  }
+  f(std::size_t{0}, std::min(n, chunk));
+  for (auto& t : pool) t.join();
+}
+
+// One axis of a blur over `count` blocks of `block` contiguous values: out block i = sum_j taps[j]
+// * in block (i + j - radius), blocks past either end left out, for the values [b0, b1) of each
+// block. Whole runs of a block at a time, so the inner loop runs over contiguous memory.
+void convolve_blocks(double* out, const double* in, int count, std::size_t block, std::size_t b0, std::size_t b1,
+                     const std::vector<double>& taps) {
   const int radius = static_cast<int>(taps.size() / 2);
-  line_buffer.resize(static_cast<std::size_t>(count));
+  for (int i = 0; i < count; ++i) {
+    double* o = out + static_cast<std::size_t>(i) * block;
+    std::fill(o + b0, o + b1, 0.0);
+    for (int j = -radius; j <= radius; ++j) {
+      const int source = i + j;
+      if (source < 0 || source >= count) continue;
+      const double w = tap(taps, j + radius);
+      const double* x = in + static_cast<std::size_t>(source) * block;
+      for (std::size_t b = b0; b < b1; ++b) o[b] += w * x[b];
+    }
+  }
+}
+
+// Convolves each of `lines` contiguous lines of `count` values circularly with `taps` (centred),
+// through a copy of the line padded with its own wrapped ends.
+void convolve_circular(double* data, std::vector<double>& padded, std::size_t lines, int count,
+                       const std::vector<double>& taps) {
+  const int radius = static_cast<int>(taps.size() / 2);
+  padded.resize(static_cast<std::size_t>(count + 2 * radius));
   for (std::size_t line = 0; line < lines; ++line) {
-    const std::size_t first = start(line);
-    for (int i = 0; i < count; ++i) line_buffer[static_cast<std::size_t>(i)] = data[first + static_cast<std::size_t>(i) * stride];
-    for (int i = 0; i < count; ++i) {
-      double acc = 0;
-      for (int j = -radius; j <= radius; ++j) {
-        int source = i + j;
-        if (circular) {
-          source = ((source % count) + count) % count;
-        } else if (source < 0 || source >= count) {
-          continue;
-        }
-        acc += tap(taps, j + radius) * tap(line_buffer, source);
-      }
-      data[first + static_cast<std::size_t>(i) * stride] = acc;
+    double* x = data + line * static_cast<std::size_t>(count);
+    for (int i = 0; i < count + 2 * radius; ++i) padded[static_cast<std::size_t>(i)] = x[((i - radius) % count + count) % count];
+    // Tap by tap over the whole line (the same sum, in the same order, per value; the inner loop
+    // runs over contiguous memory).
+    std::fill(x, x + count, 0.0);
+    for (int j = 0; j <= 2 * radius; ++j) {
+      const double w = tap(taps, j);
+      const double* in = padded.data() + j;
+      for (int i = 0; i < count; ++i) x[i] += w * in[i];
     }
   }
 }
@@ -88,7 +119,8 @@ std::vector<double> gaussian_taps(double sigma) {
   return taps;
 }
 
-void calibrate_volume(std::span<float> volume, int height, int width, int bins, const VolumeCalibration& c) {
+void calibrate_volume(std::span<float> volume, int height, int width, int bins, const VolumeCalibration& c,
+                      int threads) {
   c.validate();
   const std::size_t cells = volume.size();
   if (cells != static_cast<std::size_t>(height) * static_cast<std::size_t>(width) * static_cast<std::size_t>(bins) ||
@@ -97,27 +129,43 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
   }
   const float top = *std::max_element(volume.begin(), volume.end());
   std::vector<double> p(cells);
-  for (std::size_t i = 0; i < cells; ++i) p[i] = std::exp(static_cast<double>(volume[i] - top));
-  std::vector<double> buffer;
-  const auto W = static_cast<std::size_t>(width), N = static_cast<std::size_t>(bins);
+  parallel_ranges(cells, threads, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) p[i] = std::exp(static_cast<double>(volume[i] - top));
+  });
+  const auto H = static_cast<std::size_t>(height), W = static_cast<std::size_t>(width), N = static_cast<std::size_t>(bins);
   if (c.blur_bins > 0) {
-    convolve_axis(p, buffer, static_cast<std::size_t>(height) * W, bins, 1, gaussian_taps(c.blur_bins), true,
-                  [&](std::size_t line) { return line * N; });
+    const auto taps = gaussian_taps(c.blur_bins);
+    parallel_ranges(H * W, threads, [&](std::size_t l0, std::size_t l1) {
+      std::vector<double> padded;
+      convolve_circular(p.data() + l0 * N, padded, l1 - l0, bins, taps);
+    });
   }
   if (c.blur_cells > 0) {
     const auto taps = gaussian_taps(c.blur_cells);
-    // Along u (stride N) for every row and bin, then along v (stride W N) for every column and bin.
-    convolve_axis(p, buffer, static_cast<std::size_t>(height) * N, width, N, taps, false,
-                  [&](std::size_t line) { return (line / N) * W * N + line % N; });
-    convolve_axis(p, buffer, W * N, height, W * N, taps, false, [](std::size_t line) { return line; });
+    // Along u: each row is `width` blocks of N headings (rows shared among threads).
+    parallel_ranges(H, threads, [&](std::size_t r0, std::size_t r1) {
+      std::vector<double> row(W * N);
+      for (std::size_t r = r0; r < r1; ++r) {
+        double* out = p.data() + r * W * N;
+        std::copy(out, out + W * N, row.begin());
+        convolve_blocks(out, row.data(), width, N, 0, N, taps);
+      }
+    });
+    // Along v: `height` blocks of whole rows (runs of each row shared among threads).
+    const std::vector<double> copy = p;
+    parallel_ranges(W * N, threads, [&](std::size_t b0, std::size_t b1) {
+      convolve_blocks(p.data(), copy.data(), height, W * N, b0, b1, taps);
+    });
   }
   double sum = 0;
   for (double v : p) sum += v;
   const double a = c.floor, uniform = a / static_cast<double>(cells);
-  for (std::size_t i = 0; i < cells; ++i) {
-    const double q = (1 - a) * p[i] / sum + uniform;
-    volume[i] = static_cast<float>(std::log(std::max(q, std::numeric_limits<double>::min())));
-  }
+  parallel_ranges(cells, threads, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
+      const double q = (1 - a) * p[i] / sum + uniform;
+      volume[i] = static_cast<float>(std::log(std::max(q, std::numeric_limits<double>::min())));
+    }
+  });
 }
 
 CalibrationFit::CalibrationFit() : CalibrationFit(Grid{}) {}
@@ -134,7 +182,6 @@ void CalibrationFit::add(std::span<const float> scores, int height, int width, i
     return;
   }
   Frame frame;
-  frame.bins = bins;
   frame.log_cells = std::log(static_cast<double>(scores.size()));
   const float top = *std::max_element(scores.begin(), scores.end());
   for (double t : grid_.temperatures) frame.log_z.push_back(log_sum_exp(scores, top, t));

@@ -122,7 +122,9 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
     auto values = match_frame(f, cache, *matcher);
     const int size = matcher->config().size;
     const auto& calibration = matcher->config().calibration;
-    if (!calibration.identity()) calibrate_volume(values, size, size, matcher->config().headings, calibration);
+    if (!calibration.identity()) {
+      calibrate_volume(values, size, size, matcher->config().headings, calibration, matcher->config().threads);
+    }
     const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
                                      size, size, matcher->config().headings, kCellM};
     return std::make_shared<const filter::PreparedFrame>(filter::prepare_frame(volume, headings, threads));

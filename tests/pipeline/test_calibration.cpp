@@ -116,6 +116,17 @@ TEST(CalibrationFit, RecoversTheTemperatureThatDrewTheTruths) {
   EXPECT_NEAR(small.mean_nll(6, c), direct / static_cast<double>(kept.size()), 1e-5);
 }
 
+TEST(CalibrateVolume, ThreadsGiveTheSameBits) {
+  std::mt19937 rng(9);
+  std::normal_distribution<float> d(0.0F, 6.0F);
+  std::vector<float> volume(static_cast<std::size_t>(23 * 17 * 12));
+  for (auto& v : volume) v = d(rng);
+  auto one = volume, three = volume;
+  calibrate_volume(one, 23, 17, 12, {2.0, 1.5, 0.3}, 1);
+  calibrate_volume(three, 23, 17, 12, {2.0, 1.5, 0.3}, 3);
+  EXPECT_EQ(one, three);
+}
+
 TEST(CalibrateVolume, RefusesBadSettingsAndSizes) {
   std::vector<float> v(8, 0.0F);
   EXPECT_THROW(calibrate_volume(v, 2, 2, 2, {0, 0, 1.0}), std::invalid_argument);

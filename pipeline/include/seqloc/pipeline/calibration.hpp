@@ -10,7 +10,6 @@
 
 #include <cstddef>
 #include <span>
-#include <string>
 #include <vector>
 
 namespace seqloc::pipeline {
@@ -28,8 +27,9 @@ struct VolumeCalibration {
 
 /// Turns an (H, W, N) volume of log-likelihoods (any offset) into calibrated, normalized
 /// log-probabilities, in place. Kernels are truncated at 3 sigma; mass blurred past the crop's
-/// edge is dropped and the rest renormalized.
-void calibrate_volume(std::span<float> volume, int height, int width, int bins, const VolumeCalibration& calibration);
+/// edge is dropped and the rest renormalized. `threads` share the work (the result is the same).
+void calibrate_volume(std::span<float> volume, int height, int width, int bins, const VolumeCalibration& calibration,
+                      int threads = 1);
 
 /// The discrete Gaussian used by calibrate_volume: 2 * ceil(3 sigma) + 1 taps summing to 1
 /// (one tap of 1 for sigma 0).
@@ -70,7 +70,6 @@ class CalibrationFit {
 
  private:
   struct Frame {
-    int bins = 0;
     double log_cells = 0;
     std::vector<double> log_z;   ///< per temperature: log sum exp(s / T)
     std::vector<float> window;   ///< scores around the true cell; NaN outside the volume
