@@ -176,10 +176,6 @@ void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::
     return std::isfinite(x) && std::isfinite(y) && x >= grid.min_x() - margin && x <= grid.max_x() + margin &&
            y >= grid.min_y() - margin && y <= grid.max_y() + margin;
   };
-  std::ostringstream extent;
-  extent.precision(1);
-  extent << std::fixed << "x in [" << grid.min_x() << ", " << grid.max_x() << "], y in [" << grid.min_y() << ", "
-         << grid.max_y() << "] m";
   const RouteFrame* previous = nullptr;
   GridCrop previous_crop;
   for (const auto& f : route.frames) {
@@ -199,8 +195,9 @@ void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::
           s << "; crop_lat and crop_lon look swapped";
         }
       } else {
-        s << "crop centre (crop_x " << crop.x << ", crop_y " << crop.y << ") lies outside the region (" << extent.str()
-          << " in the region CRS)";
+        s << "crop centre (crop_x " << crop.x << ", crop_y " << crop.y << ") lies outside the region (" << std::fixed
+          << std::setprecision(1) << "x in [" << grid.min_x() << ", " << grid.max_x() << "], y in [" << grid.min_y()
+          << ", " << grid.max_y() << "] m in the region CRS)";
       }
       if (margin > 0) s << " by more than the allowed " << margin << " m (--max-crop-outside)";
       fail(f, s.str());

@@ -4,7 +4,8 @@
 // the relative motion between s and t; its argmax is frame t's pose. It uses future frames, so
 // it is an upper reference for what sequence aggregation can reach, not an online method.
 // Frames are placed and warped as probabilities (log-probabilities interpolated across a peak's
-// edge give log(0)); a cell a frame does not observe adds log(1/M); the argmax is sought among
+// edge give log(0)); a cell a frame does not observe adds log(1/M) - outside_crop_nats (the
+// online filter's rule, FilterConfig); the argmax is sought among
 // the cells frame t observes.
 
 #include <vector>
