@@ -77,7 +77,7 @@ void convolve_blocks(double* out, const double* in, int count, std::size_t block
 void convolve_circular(double* data, std::vector<double>& padded, std::size_t lines, int count,
                        const std::vector<double>& taps) {
   const int radius = static_cast<int>(taps.size() / 2);
-  padded.resize(static_cast<std::size_t>(count + 2 * radius));
+  padded.resize(static_cast<std::size_t>(count) + taps.size() - 1);  // count + 2 radius
   for (std::size_t line = 0; line < lines; ++line) {
     double* x = data + line * static_cast<std::size_t>(count);
     for (int i = 0; i < count + 2 * radius; ++i) padded[static_cast<std::size_t>(i)] = x[((i - radius) % count + count) % count];
