@@ -67,6 +67,10 @@ class LocalizeCommand : public Command {
     app.add_option("--max-crop-outside", options_.max_crop_outside_m,
                    "How far beyond the region's edge a crop centre may lie, m (0: crops must be in the region)")
         ->default_val(0.0);
+    app.add_option("--volume-temperature", options_.volume_temperature,
+                   "Divide every volume's log-probabilities by T and renormalize (T > 1 flattens an overconfident "
+                   "backbone, T < 1 sharpens)")
+        ->default_val(1.0);
     auto& m = options_.matcher;
     app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
         ->default_val(m.size);

@@ -3,7 +3,7 @@
 
 Reads OUT/<region>/<route>/single/poses.csv written by `seqloc localize --mode single` on routes
 simulated with --clean, and prints (and appends to REPORT) per region: frames, mean normalized
-entropy, share of frames with entropy >= 0.5, single-frame R@5m.
+entropy, median normalized entropy, single-frame R@5m.
 usage: clean_entropy.py REPORT LOCALIZED_DIR REGION...
 """
 import csv
@@ -15,11 +15,11 @@ def main():
     report, localized, regions = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2]), sys.argv[3:]
     lines = [
         "",
-        "### 6b. The same analysis on clean observations (no perception noise)",
+        "## 9. Entropy of clean observations (no perception noise)",
         "",
         "Routes simulated with `--clean`: what the scenes alone leave ambiguous.",
         "",
-        "| region | frames | mean entropy | share with entropy >= 0.5 | single-frame R@5m |",
+        "| region | frames | mean entropy | median entropy | single-frame R@5m |",
         "|---|---:|---:|---:|---:|",
     ]
     for region in regions:
@@ -32,8 +32,8 @@ def main():
         n = len(entropy)
         if n == 0:
             raise SystemExit(f"{localized / region}: no poses.csv found")
-        high = sum(e >= 0.5 for e in entropy)
-        lines.append(f"| {region} | {n} | {sum(entropy) / n:.3f} | {100 * high / n:.1f}% | {100 * hits / n:.1f} |")
+        median = sorted(entropy)[n // 2]
+        lines.append(f"| {region} | {n} | {sum(entropy) / n:.3f} | {median:.3f} | {100 * hits / n:.1f} |")
     text = "\n".join(lines) + "\n"
     with open(report, "a") as f:
         f.write(text)

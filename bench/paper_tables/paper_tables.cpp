@@ -1,7 +1,8 @@
 // bench/paper_tables: the analogues of the seed paper's tables on real OSM regions, from simulated
 // routes scored by the built-in matcher. Each route's volumes are computed once and shared by
-// every configuration; configurations run side by side. Writes report.md, entropy_scatter.png
-// and results.json under the output folder and ends with one line of JSON.
+// every configuration; configurations run side by side. Writes report.md,
+// entropy_scatter_<region>.png and results.json under the output folder and ends with one line of
+// JSON.
 //   bench_paper_tables --work DIR --out DIR [--window 160] [--threads 2]
 // DIR/<region>.gpkg and DIR/<region>-routes/route_* must exist (bench/paper_tables/run makes them).
 
@@ -22,6 +23,7 @@
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/render.hpp"
+#include "seqloc/pipeline/volume_shape.hpp"
 
 namespace filter = seqloc::filter;
 namespace pipeline = seqloc::pipeline;
@@ -36,7 +38,16 @@ struct Config {
   pipeline::Mode mode = pipeline::Mode::seqloc;
   std::function<void(filter::FilterConfig&)> tweak;
   double noise_t = 0, noise_r = 0;  // odometry noise (% of step, deg per m)
+  double sharpen = 1;               // the volumes raised to this power (an overconfident backbone)
 };
+
+// The paper's exact configuration: ETU w = 1 - H, unobserved cells at log(1/M).
+void paper(filter::FilterConfig& f) {
+  f.etu_reference_entropy = 0;
+  f.outside_crop_nats = 0;
+}
+
+constexpr double kSharpen = 4;
 
 std::vector<Config> configs() {
   using M = pipeline::Mode;
@@ -46,6 +57,7 @@ std::vector<Config> configs() {
   c.push_back({"overall", "offline (+-10 frames)", M::offline, none});
   c.push_back({"overall", "online (naive recursion)", M::online, none});
   c.push_back({"overall", "SeqLoc", M::seqloc, none});
+  c.push_back({"overall", "SeqLoc, paper's configuration", M::seqloc, paper});
   c.push_back({"ablation", "+MGR", M::seqloc, [](auto& f) { f.etu = f.pas = false; }});
   c.push_back({"ablation", "+MGR+ETU", M::seqloc, [](auto& f) { f.pas = false; }});
   for (double eps : {0.02, 0.03, 0.04, 0.05}) {
@@ -58,6 +70,10 @@ std::vector<Config> configs() {
       {"good (1%, 0.005 deg/m)", 1, 0.005}, {"medium (2%, 0.010 deg/m)", 2, 0.010},
       {"poor (5%, 0.020 deg/m)", 5, 0.020}, {"very poor (10%, 0.050 deg/m)", 10, 0.050}};
   for (const auto& n : noise) c.push_back({"noise", n.name, M::seqloc, none, n.t, n.r});
+  // Calibrated volumes sharpened 4x (temperature / 4), as a trained network is out of its domain.
+  c.push_back({"overconfident", "online (naive recursion), sharpened", M::online, none, 0, 0, kSharpen});
+  c.push_back({"overconfident", "SeqLoc, sharpened", M::seqloc, none, 0, 0, kSharpen});
+  c.push_back({"overconfident", "SeqLoc, paper's configuration, sharpened", M::seqloc, paper, 0, 0, kSharpen});
   c.push_back({"extras", "+sub-bin heading", M::seqloc, [](auto& f) { f.subbin_heading = true; }});
   c.push_back({"extras", "+motion noise", M::seqloc, [](auto& f) { f.motion_noise = true; }});
   c.push_back({"extras", "+GPS term (first frame's fix)", M::seqloc, [](auto& f) { f.gps_prior = true; }});
@@ -74,6 +90,38 @@ std::string row(const std::string& name, const pipeline::Metrics& m) {
 const char* kHeader =
     "| configuration | frames | R@1m | R@3m | R@5m | R@1° | R@3° | R@5° | mean m | mean ° |\n"
     "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+
+// Spearman's rank correlation of (x, y) pairs sorted by x (ties in y get their mean rank).
+double spearman(const std::vector<std::pair<double, double>>& points) {
+  const std::size_t n = points.size();
+  auto ranks = [n](const std::vector<double>& x) {
+    std::vector<std::size_t> order(n);
+    for (std::size_t i = 0; i < n; ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return x[a] < x[b]; });
+    std::vector<double> r(n);
+    for (std::size_t i = 0; i < n;) {
+      std::size_t j = i;
+      while (j + 1 < n && x[order[j + 1]] == x[order[i]]) ++j;
+      for (std::size_t k = i; k <= j; ++k) r[order[k]] = (static_cast<double>(i + j) / 2.0) + 1.0;
+      i = j + 1;
+    }
+    return r;
+  };
+  std::vector<double> xs, ys;
+  for (const auto& [x, y] : points) {
+    xs.push_back(x);
+    ys.push_back(y);
+  }
+  const auto rx = ranks(xs), ry = ranks(ys);
+  const double mean = (static_cast<double>(n) + 1) / 2;
+  double sxy = 0, sxx = 0, syy = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    sxy += (rx[i] - mean) * (ry[i] - mean);
+    sxx += (rx[i] - mean) * (rx[i] - mean);
+    syy += (ry[i] - mean) * (ry[i] - mean);
+  }
+  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
+}
 
 }  // namespace
 
@@ -102,6 +150,7 @@ int main(int argc, char** argv) {
   // poses[config][group] and per region for the entropy analysis.
   std::map<std::string, std::map<std::string, std::vector<pipeline::FramePose>>> poses;
   std::map<std::string, std::vector<pipeline::FramePose>> single_by_region;
+  std::map<std::string, std::vector<pipeline::VolumeShape>> shapes;
   const auto start = Clock::now();
   double matcher_seconds = 0;
   std::size_t frames_matched = 0;
@@ -129,6 +178,18 @@ int main(int argc, char** argv) {
       matcher_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
       frames_matched += frames.size();
       const pipeline::FrameSource shared = [&frames](std::size_t i) { return frames[i]; };
+      const pipeline::FrameSource sharpened = [&frames](std::size_t i) {
+        return std::make_shared<const filter::PreparedFrame>(filter::temper_frame(*frames[i], kSharpen));
+      };
+      // The likelihood's shape around the vehicle's heading (crops are region-grid north-up).
+      const auto projection = cache.metadata().projection();
+      for (std::size_t i = 0; i < frames.size(); ++i) {
+        const auto& truth = route.frames[i].truth;
+        if (!truth || !truth->heading_deg) continue;
+        double gamma = 0;
+        (void)projection.forward(truth->where, gamma);
+        shapes[region].push_back(pipeline::volume_shape(*frames[i], *truth->heading_deg - gamma));
+      }
       // Every configuration, side by side, one filter thread each.
       std::vector<pipeline::RouteResult> results(all.size());
       std::atomic<std::size_t> next{0};
@@ -139,7 +200,7 @@ int main(int argc, char** argv) {
           all[c].tweak(o.filter);
           pipeline::Route r = route;
           if (all[c].noise_t > 0) pipeline::perturb_odometry(r, all[c].noise_t, all[c].noise_r, 1000 + c);
-          results[c] = pipeline::localize_route(r, cache, o, all[c].mode, {}, shared);
+          results[c] = pipeline::localize_route(r, cache, o, all[c].mode, {}, all[c].sharpen != 1 ? sharpened : shared);
         }
       };
       {
@@ -175,13 +236,17 @@ int main(int argc, char** argv) {
   const std::vector<std::pair<std::string, std::string>> tables = {
       {"overall", "1. Overall"}, {"ablation", "2. Ablation (naive recursion = online; +MGR+ETU+PAS = SeqLoc)"},
       {"eps", "3a. MGR eps (SeqLoc uses 0.01)"}, {"pas", "3b. PAS radius (SeqLoc uses 3)"},
-      {"noise", "4. Odometry noise (none = SeqLoc)"}, {"extras", "5. Beyond the paper"}};
+      {"noise", "4. Odometry noise (none = SeqLoc)"},
+      {"overconfident", "5. Overconfident backbone: the same volumes sharpened 4x (p^4, renormalized; single frames "
+                        "keep their argmax)"},
+      {"extras", "6. Beyond the paper"}};
   for (const std::string group : {"feature-sparse", "urban"}) {
     md << "\n## " << group << "\n";
     for (const auto& [table, title] : tables) {
       md << "\n### " << title << "\n\n" << kHeader;
       if (table == "ablation") md << row("naive recursion", metrics("online (naive recursion)", group));
       if (table == "eps" || table == "pas" || table == "noise" || table == "extras") md << row("SeqLoc", metrics("SeqLoc", group));
+      if (table == "overconfident") md << row("single frame", metrics("single frame", group));
       for (const auto& c : all) {
         if (c.table == table) md << row(c.name, metrics(c.name, group));
         if (c.table == table || (table == "ablation" && c.name == "SeqLoc")) {
@@ -203,37 +268,76 @@ int main(int argc, char** argv) {
     }
   }
 
-  // 6. Entropy analysis: single-frame error against the frame's normalized entropy.
-  md << "\n## 6. Entropy analysis (single frames)\n\n![error against entropy](entropy_scatter.png)\n\n"
-     << "| region | frames | mean entropy | R@5m, entropy < 0.5 | R@5m, entropy >= 0.5 | share with entropy >= 0.5 |\n"
-        "|---|---:|---:|---:|---:|---:|\n";
-  std::vector<pipeline::Series> scatter;
+  // 7. Does entropy predict error? Single frames per region: recall per entropy tercile and the
+  // rank correlation of entropy with error (the paper's supplementary scatter).
+  md << "\n## 7. Entropy against error (single frames)\n\n"
+     << "| region | frames | median entropy | R@5m, flattest third | R@5m, middle third | R@5m, sharpest third | "
+        "Spearman(entropy, error) |\n|---|---:|---:|---:|---:|---:|---:|\n";
+  std::ostringstream pictures;
   for (const auto& [region, group] : regions) {
-    pipeline::Series s{region, {}, {}, true};
-    double sum = 0;
-    std::size_t low = 0, low_hit = 0, high = 0, high_hit = 0;
+    std::vector<std::pair<double, double>> points;  // (entropy, error)
     for (const auto& p : single_by_region[region]) {
-      if (!p.position_error_m) continue;
-      s.x.push_back(p.entropy);
-      s.y.push_back(*p.position_error_m);
-      sum += p.entropy;
-      const bool hit = *p.position_error_m < 5;
-      if (p.entropy < 0.5) low++, low_hit += hit;
-      else high++, high_hit += hit;
+      if (p.position_error_m) points.emplace_back(p.entropy, *p.position_error_m);
     }
-    const auto n = static_cast<double>(s.x.size());
-    char b[256];
-    std::snprintf(b, sizeof b, "| %s | %zu | %.3f | %.1f | %.1f | %.1f%% |\n", region.c_str(), s.x.size(), sum / n,
-                  low ? 100.0 * static_cast<double>(low_hit) / static_cast<double>(low) : 0.0,
-                  high ? 100.0 * static_cast<double>(high_hit) / static_cast<double>(high) : 0.0,
-                  100.0 * static_cast<double>(high) / n);
+    if (points.size() < 3) continue;
+    std::sort(points.begin(), points.end());
+    const std::size_t n = points.size();
+    auto recall = [&](std::size_t b, std::size_t e) {
+      std::size_t hit = 0;
+      for (std::size_t i = b; i < e; ++i) hit += points[i].second < 5;
+      return 100.0 * static_cast<double>(hit) / static_cast<double>(e - b);
+    };
+    const double rho = spearman(points);
+    char b[320];
+    std::snprintf(b, sizeof b, "| %s | %zu | %.3f | %.1f | %.1f | %.1f | %.2f |\n", region.c_str(), n, points[n / 2].first,
+                  recall(2 * n / 3, n), recall(n / 3, 2 * n / 3), recall(0, n / 3), rho);
     md << b;
-    results["entropy"][region] = {{"mean", sum / n}, {"share_high", static_cast<double>(high) / n}};
-    scatter.push_back(std::move(s));
+    results["entropy"][region] = {{"median", points[n / 2].first},
+                                  {"r5m_by_tercile_sharpest_first", {recall(0, n / 3), recall(n / 3, 2 * n / 3), recall(2 * n / 3, n)}},
+                                  {"spearman_entropy_error", rho}};
+    pipeline::Series series{region, {}, {}, true};
+    for (const auto& [h, e] : points) {
+      series.x.push_back(h);
+      series.y.push_back(e);
+    }
+    const std::string picture = "entropy_scatter_" + region + ".png";
+    pipeline::write_picture(out / picture, pipeline::plot({series}, region + ": single-frame error against entropy",
+                                                          "normalized entropy of the frame's likelihood", "error (m)", 60));
+    pictures << "![" << region << "](" << picture << ")\n";
   }
-  pipeline::write_picture(out / "entropy_scatter.png",
-                          pipeline::plot(scatter, "single-frame position error against normalized entropy",
-                                         "normalized entropy of the frame's likelihood", "error (m)", 60));
+  md << "\n" << pictures.str();
+
+  // 8. The simulator against the paper's failure mode: ridges along the road where the map is
+  // sparse, peaks where it is dense.
+  md << "\n## 8. Likelihood shape (ridge or peak; pipeline::volume_shape)\n\n"
+     << "| region | frames | median elongation | ridges: elongation >= 2 along the heading (+-30°) | "
+        "elongated across the heading | median major / minor sigma (m) |\n|---|---:|---:|---:|---:|---:|\n";
+  for (const auto& [region, group] : regions) {
+    auto& v = shapes[region];
+    if (v.empty()) continue;
+    std::vector<double> elongation, major, minor;
+    std::size_t ridge = 0, across = 0;
+    for (const auto& sh : v) {
+      elongation.push_back(sh.elongation);
+      major.push_back(sh.major_sigma_m);
+      minor.push_back(sh.minor_sigma_m);
+      if (sh.elongation >= 2 && sh.axis_to_heading_deg <= 30) ridge++;
+      if (sh.elongation >= 2 && sh.axis_to_heading_deg >= 60) across++;
+    }
+    auto median = [](std::vector<double> x) {
+      std::nth_element(x.begin(), x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2), x.end());
+      return x[x.size() / 2];
+    };
+    const auto n = static_cast<double>(v.size());
+    char b[320];
+    std::snprintf(b, sizeof b, "| %s (%s) | %zu | %.2f | %.1f%% | %.1f%% | %.1f / %.1f |\n", region.c_str(), group.c_str(),
+                  v.size(), median(elongation), 100.0 * static_cast<double>(ridge) / n,
+                  100.0 * static_cast<double>(across) / n, median(major), median(minor));
+    md << b;
+    results["shape"][region] = {{"median_elongation", median(elongation)},
+                                {"ridge_share", static_cast<double>(ridge) / n},
+                                {"across_share", static_cast<double>(across) / n}};
+  }
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   md << "\nRun time " << static_cast<int>(seconds) << " s; the matcher took " << static_cast<int>(matcher_seconds) << " s for "
      << frames_matched << " frames.\n";

@@ -56,6 +56,56 @@ double wrap_degrees(double d) {
   return d < 0 ? d + 360.0 : d;
 }
 
+/// Log-softmax of f.log_prob in place (max: its largest value), with the normalized entropy and
+/// the argmax; `chunks` workers.
+void normalize(PreparedFrame& f, float max, int chunks) {
+  const std::size_t slice = static_cast<std::size_t>(f.height) * static_cast<std::size_t>(f.width);
+  const std::size_t cells = f.log_prob.size();
+  const int W = f.width;
+  // log-softmax over all cells and the normalized entropy, in blocks (float within a block,
+  // double across): with e = exp(x - max), S = sum e, lse = max + log S,
+  // H = -sum (e / S)(x - lse) = lse - sum(e x) / S.
+  constexpr Eigen::Index kBlock = 4096;
+  std::vector<double> chunk_sum(static_cast<std::size_t>(chunks)), chunk_ex(static_cast<std::size_t>(chunks));
+  const auto blocks = static_cast<int>((static_cast<Eigen::Index>(cells) + kBlock - 1) / kBlock);
+  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int t) {
+    Eigen::ArrayXf e(kBlock);
+    double s_sum = 0, s_ex = 0;
+    for (int block = b0; block < b1; ++block) {
+      const Eigen::Index start = block * kBlock;
+      const Eigen::Index len = std::min<Eigen::Index>(kBlock, static_cast<Eigen::Index>(cells) - start);
+      ConstArrayMap x(f.log_prob.data() + start, len);
+      auto eb = e.head(len);
+      eb = (x > kLogZero).select((x - max).exp(), 0.0f);
+      s_sum += eb.sum();
+      s_ex += (eb * (x > kLogZero).select(x, 0.0f)).sum();
+    }
+    chunk_sum[static_cast<std::size_t>(t)] = s_sum;
+    chunk_ex[static_cast<std::size_t>(t)] = s_ex;
+  });
+  double sum = 0, ex = 0;
+  for (int t = 0; t < chunks; ++t) {
+    sum += chunk_sum[static_cast<std::size_t>(t)];
+    ex += chunk_ex[static_cast<std::size_t>(t)];
+  }
+  const double lse = max + std::log(sum);
+  f.entropy = std::clamp((lse - ex / sum) / f.log_cells, 0.0, 1.0);
+  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int) {
+    const Eigen::Index start = b0 * kBlock;
+    const Eigen::Index stop = std::min<Eigen::Index>(static_cast<Eigen::Index>(b1) * kBlock, static_cast<Eigen::Index>(cells));
+    ArrayMap x(f.log_prob.data() + start, stop - start);
+    x = (x > kLogZero).select(x - static_cast<float>(lse), kLogZero);
+  });
+  // The argmax, first in heading-major order: its value is max - lse exactly.
+  const float top = max - static_cast<float>(lse);  // computed as in the pass above
+  f.max_log_prob = top;
+  const std::size_t best = static_cast<std::size_t>(std::find(f.log_prob.begin(), f.log_prob.end(), top) - f.log_prob.begin());
+  f.argmax_bin = static_cast<int>(static_cast<std::size_t>(best) / slice);
+  f.argmax_v = static_cast<int>(static_cast<std::size_t>(best) % slice / static_cast<std::size_t>(W));
+  f.argmax_u = static_cast<int>(static_cast<std::size_t>(best) % static_cast<std::size_t>(W));
+}
+
+
 }  // namespace
 
 namespace detail {
@@ -154,49 +204,23 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
         }
   }
   if (max <= kLogZero) throw FilterError(where.str() + ": no probability mass (every cell is zero)");
-  // log-softmax over all cells and the normalized entropy, in blocks (float within a block,
-  // double across): with e = exp(x - max), S = sum e, lse = max + log S,
-  // H = -sum (e / S)(x - lse) = lse - sum(e x) / S.
-  constexpr Eigen::Index kBlock = 4096;
-  std::vector<double> chunk_sum(static_cast<std::size_t>(chunks)), chunk_ex(static_cast<std::size_t>(chunks));
-  const auto blocks = static_cast<int>((static_cast<Eigen::Index>(cells) + kBlock - 1) / kBlock);
-  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int t) {
-    Eigen::ArrayXf e(kBlock);
-    double s_sum = 0, s_ex = 0;
-    for (int block = b0; block < b1; ++block) {
-      const Eigen::Index start = block * kBlock;
-      const Eigen::Index len = std::min<Eigen::Index>(kBlock, static_cast<Eigen::Index>(cells) - start);
-      ConstArrayMap x(f.log_prob.data() + start, len);
-      auto eb = e.head(len);
-      eb = (x > kLogZero).select((x - max).exp(), 0.0f);
-      s_sum += eb.sum();
-      s_ex += (eb * (x > kLogZero).select(x, 0.0f)).sum();
-    }
-    chunk_sum[static_cast<std::size_t>(t)] = s_sum;
-    chunk_ex[static_cast<std::size_t>(t)] = s_ex;
-  });
-  double sum = 0, ex = 0;
-  for (int t = 0; t < chunks; ++t) {
-    sum += chunk_sum[static_cast<std::size_t>(t)];
-    ex += chunk_ex[static_cast<std::size_t>(t)];
-  }
-  const double lse = max + std::log(sum);
-  f.entropy = std::clamp((lse - ex / sum) / f.log_cells, 0.0, 1.0);
-  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int) {
-    const Eigen::Index start = b0 * kBlock;
-    const Eigen::Index stop = std::min<Eigen::Index>(static_cast<Eigen::Index>(b1) * kBlock, static_cast<Eigen::Index>(cells));
-    ArrayMap x(f.log_prob.data() + start, stop - start);
-    x = (x > kLogZero).select(x - static_cast<float>(lse), kLogZero);
-  });
-  // The argmax, first in heading-major order: its value is max - lse exactly.
-  const float top = max - static_cast<float>(lse);  // computed as in the pass above
-  f.max_log_prob = top;
-  const std::size_t best = static_cast<std::size_t>(std::find(f.log_prob.begin(), f.log_prob.end(), top) - f.log_prob.begin());
-  f.argmax_bin = static_cast<int>(static_cast<std::size_t>(best) / slice);
-  f.argmax_v = static_cast<int>(static_cast<std::size_t>(best) % slice / static_cast<std::size_t>(W));
-  f.argmax_u = static_cast<int>(static_cast<std::size_t>(best) % static_cast<std::size_t>(W));
+  normalize(f, max, chunks);
   return f;
 }
+
+PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
+  if (!(power > 0) || !std::isfinite(power)) {
+    throw FilterError("temper_frame: the power must be finite and > 0, not " + std::to_string(power));
+  }
+  if (power == 1.0) return frame;
+  ArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
+  // Zero cells stay zero; the peak's value is log p* scaled, and the log-softmax shifts it back.
+  x = (x > kLogZero).select(x * static_cast<float>(power), kLogZero);
+  const float max = x.maxCoeff();
+  normalize(frame, max, std::max(1, std::min(threads, frame.bins)));
+  return frame;
+}
+
 
 Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {
   // Inverse of the sampling map in SeqLocFilter::Impl::sample_frame.

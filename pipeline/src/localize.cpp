@@ -105,14 +105,19 @@ std::vector<float> match_frame(const RouteFrame& f, raster::CacheReader& cache, 
 FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
   auto matcher = std::make_shared<const BevMatcher>(options.matcher);
   const int headings = options.filter.headings, threads = options.filter.threads;
-  return [&route, &cache, matcher, headings, threads](std::size_t i) {
+  const double power = 1.0 / options.volume_temperature;
+  auto prepared = [power, threads](filter::PreparedFrame frame) {
+    if (power != 1.0) frame = filter::temper_frame(std::move(frame), power, threads);
+    return std::make_shared<const filter::PreparedFrame>(std::move(frame));
+  };
+  return [&route, &cache, matcher, headings, threads, prepared](std::size_t i) {
     const RouteFrame& f = route.frames[i];
     if (f.observation.empty()) {
       const NpyVolume npy(f.volume);
       std::vector<unsigned char> transposed;
       const filter::FrameVolume volume = volume_view(route, f, npy, transposed);
       try {
-        return std::make_shared<const filter::PreparedFrame>(filter::prepare_frame(volume, headings, threads));
+        return prepared(filter::prepare_frame(volume, headings, threads));
       } catch (const filter::FilterError& e) {
         // The filter checks the values (NaN, infinities, negative probabilities); the user needs
         // to know which file holds them.
@@ -127,7 +132,7 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
     }
     const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
                                      size, size, matcher->config().headings, kCellM};
-    return std::make_shared<const filter::PreparedFrame>(filter::prepare_frame(volume, headings, threads));
+    return prepared(filter::prepare_frame(volume, headings, threads));
   };
 }
 
@@ -148,6 +153,11 @@ const char* mode_name(Mode mode) {
 void LocalizeOptions::validate() const {
   filter.validate();
   matcher.validate();
+  if (!(volume_temperature > 0) || !std::isfinite(volume_temperature)) {
+    std::ostringstream s;
+    s << "localize options: volume_temperature = " << volume_temperature << ": must be finite and > 0";
+    throw filter::FilterError(s.str());
+  }
   if (!(max_crop_outside_m >= 0)) {
     std::ostringstream s;
     s << "localize options: max_crop_outside_m = " << max_crop_outside_m << ": must be >= 0";

@@ -2,6 +2,7 @@
 // random inputs, the analytic cases of conventions.md section 6, and robust intake.
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -268,6 +269,33 @@ TEST(Analytic, EtuWeightOfUniformAndDelta) {
   EXPECT_EQ(d.max_log_prob, 0.0f) << "all the mass in one cell";
   EXPECT_NEAR(d.entropy, 0.0, 1e-9);
   EXPECT_DOUBLE_EQ(etu_weight(d.entropy), 1.0);
+}
+
+TEST(Analytic, TemperingIsThePoweredVolumeRenormalized) {
+  // Reference: the volume raised to k in the file's own terms (k log p), prepared from scratch.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> logit(-6.0f, 0.0f);
+  Volume raw;
+  raw.values.resize(9 * 11 * 16);
+  for (auto& x : raw.values) x = logit(rng);
+  raw.values[5] = -std::numeric_limits<float>::infinity();  // a zero stays a zero
+  const auto base = prepare_frame(raw.view(9, 11, 16), 16);
+  for (const double k : {0.25, 1.0, 4.0}) {
+    Volume powered = raw;
+    for (auto& x : powered.values) x = static_cast<float>(k * x);
+    const auto expected = prepare_frame(powered.view(9, 11, 16), 16);
+    const auto got = temper_frame(base, k, 2);
+    ASSERT_EQ(got.log_prob.size(), expected.log_prob.size());
+    for (std::size_t i = 0; i < got.log_prob.size(); ++i) ASSERT_NEAR(got.log_prob[i], expected.log_prob[i], 2e-4) << i;
+    EXPECT_NEAR(got.entropy, expected.entropy, 1e-5) << k;
+    EXPECT_EQ(got.argmax_v, expected.argmax_v);
+    EXPECT_EQ(got.argmax_u, expected.argmax_u);
+    EXPECT_EQ(got.argmax_bin, expected.argmax_bin);
+  }
+  EXPECT_LT(temper_frame(base, 4.0).entropy, base.entropy) << "sharper";
+  EXPECT_GT(temper_frame(base, 0.25).entropy, base.entropy) << "flatter";
+  EXPECT_THROW((void)temper_frame(base, 0.0), FilterError);
+  EXPECT_THROW((void)temper_frame(base, std::numeric_limits<double>::infinity()), FilterError);
 }
 
 TEST(Analytic, MgrKeepsEverySuppressedCellAtLeastEpsQ) {

@@ -106,6 +106,34 @@ TEST(Localize, DeltaAtTheTruthGivesZeroErrorInEveryMode) {
   }
 }
 
+TEST(Localize, VolumeTemperatureTempersEveryFrameBeforeTheFilter) {
+  const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  test::ScratchDir dir;
+  const Route route = straight_route(dir, cache.metadata().projection(), -40.25, 4);
+  // Replace the shared delta by a spread volume peaking at the truth.
+  std::vector<float> values(kSide * kSide * kBins);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> noise(-2.0f, 0.0f);
+  for (auto& x : values) x = noise(rng);
+  values[static_cast<std::size_t>((7 * kSide + 7) * kBins + 16)] = 3.0f;
+  test::write_npy_float32(dir / "v.npy", kSide, kSide, kBins, values);
+  LocalizeOptions options = small_options();
+  const RouteResult plain = localize_route(route, cache, options, Mode::single);
+  options.volume_temperature = 0.25;  // p^4
+  const RouteResult sharp = localize_route(route, cache, options, Mode::single);
+  options.volume_temperature = 4.0;  // p^(1/4)
+  const RouteResult flat = localize_route(route, cache, options, Mode::single);
+  for (std::size_t t = 0; t < plain.poses.size(); ++t) {
+    EXPECT_LT(sharp.poses[t].entropy, plain.poses[t].entropy - 0.05);
+    EXPECT_GT(flat.poses[t].entropy, plain.poses[t].entropy + 0.005);
+    EXPECT_LT(*sharp.poses[t].position_error_m, 1e-3) << "tempering keeps the argmax";
+    EXPECT_LT(*flat.poses[t].position_error_m, 1e-3);
+  }
+  options.volume_temperature = 0;
+  EXPECT_THROW(options.validate(), filter::FilterError);
+}
+
 // A delta route the way a backbone would write one: lat/lon crops centred on the truth (so off the
 // cell lattice), moves of 1.3 m and turns of one heading bin, each volume a single cell at the
 // truth. Every mode must find it; offline once lost it (a constant 90 m error) because bilinear

@@ -47,6 +47,12 @@ struct PreparedFrame {
 /// index in (H, W, N) order); a -inf log-probability is a valid zero.
 [[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1);
 
+/// The frame's volume raised to `power` and renormalized: p^k / sum p^k, i.e. its log-probabilities
+/// divided by a temperature T = 1 / k. k > 1 sharpens (a backbone more confident than it should
+/// be), k < 1 flattens; entropy and argmax are recomputed. Throws FilterError unless k is finite
+/// and > 0.
+[[nodiscard]] PreparedFrame temper_frame(PreparedFrame frame, double power, int threads = 1);
+
 /// ETU weight of a frame (conventions.md section 6, step 2): w = max(1 - H, 1e-3). With a
 /// reference entropy H_ref > 0 (ours, FilterConfig::etu_reference_entropy) the weight is relative
 /// to a typical frame: w = clamp((1 - H) / (1 - H_ref), 1e-3, 1), so frames as sharp as H_ref or

@@ -31,6 +31,10 @@ struct LocalizeOptions {
   int offline_half_window = 10;
   /// The built-in matcher, for frames with an observation instead of a volume.
   MatcherConfig matcher;
+  /// Every frame's volume (a backbone's or the matcher's) is tempered before filtering: its
+  /// log-probabilities divided by T and renormalized (filter::temper_frame with power 1 / T).
+  /// T > 1 flattens an overconfident backbone; T < 1 sharpens. 1: as given.
+  double volume_temperature = 1.0;
   /// Largest distance between consecutive crop centres (m) before the route is refused as
   /// implausible; 0: the belief window's size (a larger jump leaves the window anyway).
   double max_crop_jump_m = 0;
