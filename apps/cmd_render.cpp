@@ -20,7 +20,10 @@ class RenderCommand : public Command {
     app.add_option("--localized", localized_,
                    "An output folder of seqloc localize for this route (its modes' poses are drawn); without it, "
                    "single and seqloc are run here");
-    app.add_option("--frame", options_.frame, "Frame of the likelihood figure (index from 0)")->default_val(0);
+    app.add_option("--frame", frame_,
+                   "Frame of the likelihood figure (index from 0), or 'sharpest': the frame after the first whose own "
+                   "likelihood has the lowest entropy (where the belief collapses)")
+        ->default_val("0");
     app.add_option("--window", window_, "Belief window, cells")->default_val(256);
     app.add_option("--threads", options_.localize.filter.threads, "Threads")->default_val(2);
     app.footer("Writes likelihood_K.png (the frame's own likelihood and the SeqLoc belief over the map, the ground\n"
@@ -52,12 +55,31 @@ class RenderCommand : public Command {
         poses.emplace_back(pipeline::mode_name(mode), pipeline::localize_route(route, cache, options_.localize, mode).poses);
       }
     }
+    options_.frame = frame_ == "sharpest" ? sharpest_frame(poses) : parse_frame(frame_);
     for (const auto& file : pipeline::render_route(cache, route, poses, options_, out_)) std::printf("wrote %s\n", file.c_str());
     return kExitOk;
   }
 
  private:
+  static std::size_t parse_frame(const std::string& text) {
+    const auto v = parse_numbers<std::size_t>(text, ',', 1);
+    if (!v) throw pipeline::UsageError("--frame '" + text + "': expected a frame index or 'sharpest'");
+    return (*v)[0];
+  }
+
+  // The frame (after the first) whose own likelihood is sharpest, from any mode's poses.
+  static std::size_t sharpest_frame(const std::vector<std::pair<std::string, std::vector<pipeline::FramePose>>>& poses) {
+    if (poses.empty() || poses.front().second.size() < 2) return 0;
+    const auto& p = poses.front().second;
+    std::size_t best = 1;
+    for (std::size_t i = 2; i < p.size(); ++i) {
+      if (p[i].entropy < p[best].entropy) best = i;
+    }
+    return best;
+  }
+
   fs::path cache_path_, route_dir_, out_, localized_;
+  std::string frame_;
   pipeline::RenderOptions options_;
   int window_ = 256;
 };

@@ -209,11 +209,25 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
   {
     Route head = route;
     head.frames.resize(options.frame + 1);
-    std::vector<double> frame_mass, belief_mass;
-    std::int64_t ou = 0, ov = 0;
+    std::vector<double> frame_mass, belief_mass, before_mass;
+    std::int64_t ou = 0, ov = 0, before_ou = 0, before_ov = 0;
     int bw = 0, bh = 0;
     double entropy = 0;
+    auto marginal = [](const filter::BeliefVolume& b) {
+      std::vector<double> mass(b.slice_cells(), 0.0);
+      for (int k = 0; k < b.headings(); ++k) {
+        const float* s = b.slice(k);
+        for (std::size_t i = 0; i < b.slice_cells(); ++i) mass[i] += s[i];
+      }
+      return mass;
+    };
     const auto result = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
+      if (options.frame > 0 && in.index + 1 == options.frame) {  // the belief the frame arrives on
+        before_mass = marginal(*in.belief);
+        before_ou = in.origin_u;
+        before_ov = in.origin_v;
+        return;
+      }
       if (in.index != options.frame) return;
       const auto& b = *in.belief;
       bw = b.width();
@@ -221,11 +235,7 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       ou = in.origin_u;
       ov = in.origin_v;
       entropy = in.frame->entropy;
-      belief_mass.assign(b.slice_cells(), 0.0);
-      for (int k = 0; k < b.headings(); ++k) {
-        const float* s = b.slice(k);
-        for (std::size_t i = 0; i < b.slice_cells(); ++i) belief_mass[i] += s[i];
-      }
+      belief_mass = marginal(b);
       // The frame's own likelihood, placed by its crop into the window.
       frame_mass.assign(b.slice_cells(), 0.0);
       const auto& f = *in.frame;
@@ -244,34 +254,51 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
         }
       }
     });
-    std::vector<std::uint8_t> classes;
-    cache.read_classes(ou, ov, bw, bh, classes, /*fill_outside=*/true);
     const int factor = bw <= 400 ? 2 : 1;
-    auto panel = [&](const std::vector<double>& mass, const std::string& title) {
+    // A panel of the window at (ou, ov) with `mass` over the map and frame `index`'s truth.
+    auto panel = [&](const std::vector<double>& mass, const std::string& title, std::int64_t at_u, std::int64_t at_v,
+                     std::size_t index) {
+      std::vector<std::uint8_t> classes;
+      cache.read_classes(at_u, at_v, bw, bh, classes, /*fill_outside=*/true);
       Picture base = map_picture(classes, bw, bh);
       cv::Mat m = to_mat(base).clone();
       overlay_mass(m, mass);
       m = upscale(m, factor);
-      const auto& f = route.frames[options.frame];
+      const auto& f = route.frames[index];
       if (f.truth) {
         const auto g = projection.forward(f.truth->where);
         const auto p = pixel_of(g.x_m, g.y_m);
-        star(m, {(p.x - static_cast<double>(ou) + 0.5) * factor, (p.y - static_cast<double>(ov) + 0.5) * factor}, 11);
+        star(m, {(p.x - static_cast<double>(at_u) + 0.5) * factor, (p.y - static_cast<double>(at_v) + 0.5) * factor}, 11);
       }
       cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
       m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
       text(framed, title, cv::Point(6, 20), 0.5);
       return framed;
     };
-    const auto& last = result.poses.back();
-    std::string err = last.position_error_m ? ", error " + fmt(*last.position_error_m, 1) + " m" : "";
-    cv::Mat a = panel(frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")");
-    cv::Mat b = panel(belief_mass, "SeqLoc belief" + err);
-    cv::Mat both(a.rows, a.cols + b.cols + 10, CV_8UC3, rgb(255, 255, 255));
-    a.copyTo(both(cv::Rect(0, 0, a.cols, a.rows)));
-    b.copyTo(both(cv::Rect(a.cols + 10, 0, b.cols, b.rows)));
+    auto error_text = [](const FramePose& p) {
+      return p.position_error_m ? ", error " + fmt(*p.position_error_m, 1) + " m" : std::string();
+    };
+    // Before (the belief frame K arrives on, when K > 0), the frame's own likelihood, after.
+    std::vector<cv::Mat> panels;
+    if (!before_mass.empty()) {
+      panels.push_back(panel(before_mass, "SeqLoc belief after frame " + std::to_string(options.frame - 1) +
+                                              error_text(result.poses[options.frame - 1]),
+                             before_ou, before_ov, options.frame - 1));
+    }
+    panels.push_back(panel(frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")",
+                           ou, ov, options.frame));
+    panels.push_back(panel(belief_mass, "SeqLoc belief after frame " + std::to_string(options.frame) + error_text(result.poses.back()),
+                           ou, ov, options.frame));
+    int width = 0;
+    for (const auto& p : panels) width += p.cols + 10;
+    cv::Mat row(panels.front().rows, width - 10, CV_8UC3, rgb(255, 255, 255));
+    int x = 0;
+    for (const auto& p : panels) {
+      p.copyTo(row(cv::Rect(x, 0, p.cols, p.rows)));
+      x += p.cols + 10;
+    }
     written.push_back(out_dir / ("likelihood_" + std::to_string(options.frame) + ".png"));
-    write_picture(written.back(), from_mat(both));
+    write_picture(written.back(), from_mat(row));
   }
 
   // 2. The route coloured by the normalized entropy of each frame (SeqLoc's run, else any).

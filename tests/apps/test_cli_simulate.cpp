@@ -1,7 +1,11 @@
 // seqloc simulate, localize on observation routes, and render, from the command line on the
 // sample region (the demo's path); and the errors a user can make on the way.
 
+#include <algorithm>
 #include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -11,6 +15,13 @@ namespace seqloc {
 namespace {
 
 using test::run_seqloc;
+
+std::vector<std::string> split(const std::string& text, char separator) {
+  std::vector<std::string> parts;
+  std::stringstream in(text);
+  for (std::string part; std::getline(in, part, separator);) parts.push_back(part);
+  return parts;
+}
 
 TEST(CliSimulate, SampleRegionToTableAndPictures) {
   test::ScratchDir dir;
@@ -45,6 +56,29 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   r = run_seqloc({"render", cache, routes + "/route_001", "-o", (dir / "figures").string(), "--frame", "10"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("frame 10"), std::string::npos) << r.err;
+  r = run_seqloc({"render", cache, routes + "/route_001", "-o", (dir / "figures").string(), "--frame", "ten"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("sharpest"), std::string::npos) << r.err;
+  // 'sharpest': the frame after the first with the lowest entropy, read here from poses.csv.
+  std::ifstream poses(dir / "localized/route_001/seqloc/poses.csv");
+  std::string line;
+  std::getline(poses, line);
+  const auto header = split(line, ',');
+  const auto column = static_cast<std::size_t>(std::find(header.begin(), header.end(), "entropy") - header.begin());
+  ASSERT_LT(column, header.size());
+  std::size_t sharpest = 0, index = 0;
+  double lowest = 2;
+  while (std::getline(poses, line)) {
+    const double entropy = std::stod(split(line, ',').at(column));
+    if (index > 0 && entropy < lowest) lowest = entropy, sharpest = index;
+    ++index;
+  }
+  ASSERT_GT(sharpest, 0u);
+  const auto sharp_dir = dir / "sharpest";
+  r = run_seqloc({"render", cache, routes + "/route_001", "--localized", out, "-o", sharp_dir.string(), "--frame",
+                  "sharpest", "--window", "192"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(std::filesystem::exists(sharp_dir / ("likelihood_" + std::to_string(sharpest) + ".png"))) << r.out;
 }
 
 TEST(CliSimulate, ABadObservationStopsLocalizeWithNothingWritten) {
