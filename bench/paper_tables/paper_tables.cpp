@@ -91,7 +91,7 @@ const char* kHeader =
     "| configuration | frames | R@1m | R@3m | R@5m | R@1° | R@3° | R@5° | mean m | mean ° |\n"
     "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
 
-// Spearman's rank correlation of (x, y) pairs sorted by x (ties in y get their mean rank).
+// Spearman's rank correlation of (x, y) pairs (tied values get their mean rank).
 double spearman(const std::vector<std::pair<double, double>>& points) {
   const std::size_t n = points.size();
   auto ranks = [n](const std::vector<double>& x) {

@@ -105,7 +105,6 @@ void normalize(PreparedFrame& f, float max, int chunks) {
   f.argmax_u = static_cast<int>(static_cast<std::size_t>(best) % static_cast<std::size_t>(W));
 }
 
-
 }  // namespace
 
 namespace detail {
@@ -220,7 +219,6 @@ PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
   normalize(frame, max, std::max(1, std::min(threads, frame.bins)));
   return frame;
 }
-
 
 Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {
   // Inverse of the sampling map in SeqLocFilter::Impl::sample_frame.

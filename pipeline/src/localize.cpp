@@ -106,9 +106,8 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
   auto matcher = std::make_shared<const BevMatcher>(options.matcher);
   const int headings = options.filter.headings, threads = options.filter.threads;
   const double power = 1.0 / options.volume_temperature;
-  auto prepared = [power, threads](filter::PreparedFrame frame) {
-    if (power != 1.0) frame = filter::temper_frame(std::move(frame), power, threads);
-    return std::make_shared<const filter::PreparedFrame>(std::move(frame));
+  auto prepared = [power, threads](filter::PreparedFrame frame) {  // temper_frame passes power 1 through
+    return std::make_shared<const filter::PreparedFrame>(filter::temper_frame(std::move(frame), power, threads));
   };
   return [&route, &cache, matcher, headings, threads, prepared](std::size_t i) {
     const RouteFrame& f = route.frames[i];

@@ -14,6 +14,7 @@
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/volume_shape.hpp"
 #include "seqloc/raster/png_codec.hpp"
 #include "flat_index.hpp"
 
@@ -242,11 +243,10 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       const double cu = grid.region_u(in.crop.x) - static_cast<double>(ou);
       const double cv_ = grid.region_v(in.crop.y) - static_cast<double>(ov);
       const double rot = in.crop.rotation_deg * M_PI / 180.0, scale = f.cell_m / kCellM;
-      const std::size_t plane = static_cast<std::size_t>(f.height) * static_cast<std::size_t>(f.width);
+      const std::vector<double> own = position_marginal(f);
       for (int v = 0; v < f.height; ++v) {
         for (int u = 0; u < f.width; ++u) {
-          double m = 0;
-          for (int k = 0; k < f.bins; ++k) m += std::exp(f.log_prob[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(v * f.width + u)]);
+          const double m = own[detail::flat(v, u, f.width)];
           const double du = (u - (f.width - 1) / 2.0) * scale, dv = (v - (f.height - 1) / 2.0) * scale;
           const auto wu = std::lround(cu + du * std::cos(rot) - dv * std::sin(rot));
           const auto wv = std::lround(cv_ + du * std::sin(rot) + dv * std::cos(rot));
@@ -255,13 +255,17 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       }
     });
     const int factor = bw <= 400 ? 2 : 1;
-    // A panel of the window at (ou, ov) with `mass` over the map and frame `index`'s truth.
-    auto panel = [&](const std::vector<double>& mass, const std::string& title, std::int64_t at_u, std::int64_t at_v,
-                     std::size_t index) {
+    // The map of the window whose corner is (at_u, at_v), read once per window.
+    auto window_map = [&](std::int64_t at_u, std::int64_t at_v) {
       std::vector<std::uint8_t> classes;
       cache.read_classes(at_u, at_v, bw, bh, classes, /*fill_outside=*/true);
       Picture base = map_picture(classes, bw, bh);
-      cv::Mat m = to_mat(base).clone();
+      return to_mat(base).clone();
+    };
+    // A panel: `mass` over that map, and frame `index`'s truth.
+    auto panel = [&](const cv::Mat& map, const std::vector<double>& mass, const std::string& title, std::int64_t at_u,
+                     std::int64_t at_v, std::size_t index) {
+      cv::Mat m = map.clone();
       overlay_mass(m, mass);
       m = upscale(m, factor);
       const auto& f = route.frames[index];
@@ -279,15 +283,18 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       return p.position_error_m ? ", error " + fmt(*p.position_error_m, 1) + " m" : std::string();
     };
     // Before (the belief frame K arrives on, when K > 0), the frame's own likelihood, after.
+    const cv::Mat map = window_map(ou, ov);
     std::vector<cv::Mat> panels;
     if (!before_mass.empty()) {
-      panels.push_back(panel(before_mass, "SeqLoc belief after frame " + std::to_string(options.frame - 1) +
-                                              error_text(result.poses[options.frame - 1]),
+      const bool moved = before_ou != ou || before_ov != ov;  // the window re-centred for frame K
+      panels.push_back(panel(moved ? window_map(before_ou, before_ov) : map, before_mass,
+                             "SeqLoc belief after frame " + std::to_string(options.frame - 1) +
+                                 error_text(result.poses[options.frame - 1]),
                              before_ou, before_ov, options.frame - 1));
     }
-    panels.push_back(panel(frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")",
+    panels.push_back(panel(map, frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")",
                            ou, ov, options.frame));
-    panels.push_back(panel(belief_mass, "SeqLoc belief after frame " + std::to_string(options.frame) + error_text(result.poses.back()),
+    panels.push_back(panel(map, belief_mass, "SeqLoc belief after frame " + std::to_string(options.frame) + error_text(result.poses.back()),
                            ou, ov, options.frame));
     int width = 0;
     for (const auto& p : panels) width += p.cols + 10;

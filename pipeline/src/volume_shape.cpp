@@ -4,15 +4,23 @@
 #include <cmath>
 #include <vector>
 
+#include "flat_index.hpp"
+
 namespace seqloc::pipeline {
 
-VolumeShape volume_shape(const filter::PreparedFrame& frame, double heading_deg) {
+std::vector<double> position_marginal(const filter::PreparedFrame& frame) {
   const std::size_t slice = static_cast<std::size_t>(frame.height) * static_cast<std::size_t>(frame.width);
   std::vector<double> marginal(slice, 0.0);
   for (int k = 0; k < frame.bins; ++k) {
     const float* s = frame.log_prob.data() + static_cast<std::size_t>(k) * slice;
     for (std::size_t i = 0; i < slice; ++i) marginal[i] += std::exp(static_cast<double>(s[i]));
   }
+  return marginal;
+}
+
+VolumeShape volume_shape(const filter::PreparedFrame& frame, double heading_deg) {
+  const std::vector<double> marginal = position_marginal(frame);
+  const std::size_t slice = marginal.size();
   std::vector<double> sorted = marginal;
   const auto tenth = sorted.begin() + static_cast<std::ptrdiff_t>(slice / 10);
   std::nth_element(sorted.begin(), tenth, sorted.end());
@@ -21,7 +29,7 @@ VolumeShape volume_shape(const filter::PreparedFrame& frame, double heading_deg)
   double w_sum = 0, e_sum = 0, n_sum = 0, ee = 0, nn = 0, en = 0;
   for (int v = 0; v < frame.height; ++v) {
     for (int u = 0; u < frame.width; ++u) {
-      const double w = marginal[static_cast<std::size_t>(v) * static_cast<std::size_t>(frame.width) + static_cast<std::size_t>(u)] - base;
+      const double w = marginal[detail::flat(v, u, frame.width)] - base;
       if (w <= 0) continue;
       const double e = u * frame.cell_m, n = -v * frame.cell_m;
       w_sum += w;

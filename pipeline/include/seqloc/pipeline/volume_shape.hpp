@@ -3,6 +3,8 @@
 // failure mode is the ridge (a rural frame pins the vehicle across the road but not along it);
 // this measures it so the simulator can be checked against it (docs/simulate.md).
 
+#include <vector>
+
 #include "seqloc/filter/seqloc_filter.hpp"
 
 namespace seqloc::pipeline {
@@ -16,6 +18,9 @@ struct VolumeShape {
   double axis_to_heading_deg = 0;
   double major_sigma_m = 0, minor_sigma_m = 0;  ///< sqrt(l1), sqrt(l2)
 };
+
+/// The frame's probability per position, summed over headings: height x width, row-major (v, u).
+[[nodiscard]] std::vector<double> position_marginal(const filter::PreparedFrame& frame);
 
 /// The shape of the frame's position marginal (summed over headings). Only the mass above the
 /// marginal's 10th percentile counts, so a uniform floor (a calibrated volume's "no information"
