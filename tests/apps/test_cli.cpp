@@ -45,8 +45,14 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(simulate.find(option), std::string::npos) << option;
   }
   const auto render = run_seqloc({"render", "--help"}).out;
-  for (const char* option : {"--localized", "--frame", "-o"}) EXPECT_NE(render.find(option), std::string::npos) << option;
-  EXPECT_NE(run_seqloc({"localize", "--help"}).out.find("--matcher-temperature"), std::string::npos);
+  for (const char* option : {"--localized", "--frame", "sharpest", "-o"}) {
+    EXPECT_NE(render.find(option), std::string::npos) << option;
+  }
+  const auto localize = run_seqloc({"localize", "--help"}).out;
+  for (const char* option : {"--matcher-temperature", "--volume-temperature", "--etu-reference", "--outside-crop-nats",
+                             "--matcher-floor"}) {
+    EXPECT_NE(localize.find(option), std::string::npos) << option;
+  }
   const auto serve = run_seqloc({"serve", "--help"}).out;
   for (const char* option : {"--bind", "--port", "--threads", "--max-pending", "--timeout", "--max-crop-m", "--web"}) {
     EXPECT_NE(serve.find(option), std::string::npos) << option;
