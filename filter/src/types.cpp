@@ -30,6 +30,29 @@ float half_to_float(std::uint16_t h) {
   return out;
 }
 
+std::uint16_t float_to_half(float f) {
+  std::uint32_t bits = 0;
+  std::memcpy(&bits, &f, 4);
+  const auto sign = static_cast<std::uint16_t>((bits >> 16) & 0x8000u);
+  const std::uint32_t magnitude = bits & 0x7FFFFFFFu;
+  // Rounds `value` to nearest, ties to even, after dropping its `dropped` low bits.
+  auto round_off = [](std::uint32_t value, int dropped) {
+    const std::uint32_t kept = value >> dropped, rest = value & ((1u << dropped) - 1), half = 1u << (dropped - 1);
+    return kept + ((rest > half || (rest == half && (kept & 1u))) ? 1u : 0u);
+  };
+  if (magnitude > 0x7F800000u) return static_cast<std::uint16_t>(sign | 0x7E00u);  // NaN, quiet
+  if (magnitude >= 0x477FF000u) return static_cast<std::uint16_t>(sign | 0x7C00u);  // >= 65520: infinity
+  if (magnitude >= 0x38800000u) {  // a normal half (>= 2^-14): rebias the exponent, keep 10 mantissa bits;
+    // a carry out of the mantissa correctly moves to the next exponent.
+    return static_cast<std::uint16_t>(sign | round_off(magnitude - (112u << 23), 13));
+  }
+  if (magnitude <= 0x33000000u) return sign;  // <= 2^-25 (a tie at 2^-25 goes to the even 0)
+  // A subnormal half counts units of 2^-24: the float's 24-bit significand shifted right.
+  const auto exponent = static_cast<int>(magnitude >> 23);  // 102 ... 112
+  const std::uint32_t significand = (magnitude & 0x7FFFFFu) | 0x800000u;
+  return static_cast<std::uint16_t>(sign | round_off(significand, 126 - exponent));  // 2^-14 rounds up to 0x0400
+}
+
 void FilterConfig::validate() const {
   auto fail = [](const std::string& field, double value, const std::string& constraint) {
     std::ostringstream s;

@@ -2,6 +2,8 @@
 // random inputs, the analytic cases of conventions.md section 6, and robust intake.
 
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -415,6 +417,50 @@ TEST(Intake, Float16EqualsFloat32AndProbEqualsLogProb) {
   for (std::size_t i = 0; i < probs.size(); ++i) EXPECT_NEAR(from_prob.log_prob[i], from_log.log_prob[i], 1e-5);
   EXPECT_EQ(half_to_float(0x7C00), std::numeric_limits<float>::infinity());
   EXPECT_EQ(half_to_float(0x0001), std::ldexp(1.0f, -24));
+}
+
+// float_to_half against a brute-force reference: the nearest of all finite halves (their bit
+// patterns are ordered like their values for a given sign), ties to the even pattern.
+TEST(Half, FloatToHalfIsTheNearestHalfTiesToEven) {
+  for (std::uint32_t h = 0; h < 0x7C00; ++h) {  // every finite half comes back as itself
+    ASSERT_EQ(float_to_half(half_to_float(static_cast<std::uint16_t>(h))), h) << h;
+    ASSERT_EQ(float_to_half(-half_to_float(static_cast<std::uint16_t>(h))), h | 0x8000u) << h;
+  }
+  auto reference = [](float f) -> std::uint16_t {
+    const auto sign = static_cast<std::uint16_t>(std::signbit(f) ? 0x8000 : 0);
+    const double a = std::abs(static_cast<double>(f));
+    if (a >= 65520.0) return sign | 0x7C00;
+    std::uint32_t lo = 0, hi = 0x7BFF;  // the largest half <= a
+    while (lo < hi) {
+      const std::uint32_t mid = (lo + hi + 1) / 2;
+      if (half_to_float(static_cast<std::uint16_t>(mid)) <= a) lo = mid; else hi = mid - 1;
+    }
+    if (lo == 0x7BFF) return static_cast<std::uint16_t>(sign | lo);
+    const double below = half_to_float(static_cast<std::uint16_t>(lo)), above = half_to_float(static_cast<std::uint16_t>(lo + 1));
+    const std::uint32_t h = (a - below < above - a || (a - below == above - a && (lo & 1u) == 0)) ? lo : lo + 1;
+    return static_cast<std::uint16_t>(sign | h);
+  };
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<std::uint32_t> any_bits;
+  for (int i = 0; i < 200000; ++i) {
+    std::uint32_t bits = any_bits(rng);
+    if ((bits & 0x7F800000u) == 0x7F800000u) continue;  // inf and NaN below
+    if (i % 2 == 0) bits = (bits & 0x80FFFFFFu) | ((100u + bits % 45u) << 23);  // exponents near the half's range
+    float f = 0;
+    std::memcpy(&f, &bits, 4);
+    ASSERT_EQ(float_to_half(f), reference(f)) << f;
+  }
+  // Exact ties: halfway between neighbours goes to the even one, in normal and subnormal range.
+  for (std::uint16_t h : {std::uint16_t{0x0001}, std::uint16_t{0x0002}, std::uint16_t{0x03FF}, std::uint16_t{0x3C00},
+                          std::uint16_t{0x3C01}, std::uint16_t{0x7BFE}}) {
+    const float mid = (half_to_float(h) + half_to_float(static_cast<std::uint16_t>(h + 1))) / 2;
+    EXPECT_EQ(float_to_half(mid), (h & 1) ? h + 1 : h) << h;
+  }
+  EXPECT_EQ(float_to_half(std::ldexp(1.0f, -25)), 0);
+  EXPECT_EQ(float_to_half(65519.0f), 0x7BFF);
+  EXPECT_EQ(float_to_half(65520.0f), 0x7C00);
+  EXPECT_EQ(float_to_half(-std::numeric_limits<float>::infinity()), 0xFC00);
+  EXPECT_TRUE(std::isnan(half_to_float(float_to_half(std::numeric_limits<float>::quiet_NaN()))));
 }
 
 TEST(Config, ValidateNamesTheField) {

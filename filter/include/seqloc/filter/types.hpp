@@ -60,4 +60,8 @@ struct CropPose {
 /// 16-bit IEEE half to float (NumPy float16), exact.
 float half_to_float(std::uint16_t h);
 
+/// Float to the nearest 16-bit IEEE half, ties to even (as NumPy's astype(float16)): magnitudes
+/// from 65520 up become infinity, below 2^-25 zero (keeping the sign); NaN stays NaN.
+std::uint16_t float_to_half(float f);
+
 }  // namespace seqloc::filter
