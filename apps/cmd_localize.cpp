@@ -1,5 +1,6 @@
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <exception>
 #include <mutex>
@@ -87,6 +88,12 @@ class LocalizeCommand : public Command {
     app.add_option("--matcher-floor", m.calibration.floor,
                    "Built-in matcher calibration: share of each volume spread uniformly")
         ->default_val(m.calibration.floor);
+    app.add_option("--shard", shard_,
+                   "Localize only shard I of N (I/N, 0-based: every N-th route in sorted order from the I-th), e.g. "
+                   "--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; merge the outputs with `seqloc evaluate`");
+    app.add_option("--frame-memory", options_.frame_memory_mb,
+                   "Memory for the frames a route's modes share, MB (float16; beyond it they go to a temporary file)")
+        ->default_val(options_.frame_memory_mb);
     app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
     app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
     app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"
@@ -131,19 +138,36 @@ class LocalizeCommand : public Command {
       modes = {pipeline::Mode::seqloc};
     }
 
-    // Everything is read and checked before any work.
+    int shard_index = 0, shard_count = 1;
+    if (!shard_.empty()) {
+      const auto v = parse_numbers<int>(shard_, '/', 2);
+      if (!v || (*v)[1] < 1 || (*v)[0] < 0 || (*v)[0] >= (*v)[1]) {
+        throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N with 0 <= I < N, e.g. 0/4");
+      }
+      shard_index = (*v)[0];
+      shard_count = (*v)[1];
+    }
+
+    // Everything is read and checked before any work, the other shards' routes too (a shard's
+    // route names do not depend on which shard runs).
     raster::CacheReader cache(cache_path_, 256);
+    std::vector<fs::path> dirs = route_dirs_;
+    std::sort(dirs.begin(), dirs.end());
     std::vector<pipeline::Route> routes;
     std::set<std::string> names;
     long long total_frames = 0;
-    for (const auto& dir : route_dirs_) {
-      routes.push_back(pipeline::read_route(dir, limits_));
-      auto& route = routes.back();
+    for (std::size_t k = 0; k < dirs.size(); ++k) {
+      auto route = pipeline::read_route(dirs[k], limits_);
       pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
-      if (!names.insert(route.name).second) route.name += "-" + std::to_string(routes.size());
+      if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
       names.insert(route.name);
+      if (static_cast<int>(k % static_cast<std::size_t>(shard_count)) != shard_index) continue;
       if (noise_t > 0 || noise_r > 0) pipeline::perturb_odometry(route, noise_t, noise_r, seed_);
       total_frames += static_cast<long long>(route.frames.size() * modes.size());
+      routes.push_back(std::move(route));
+    }
+    if (shard_count > 1) {
+      log("shard %d/%d: %zu of %zu routes", shard_index, shard_count, routes.size(), dirs.size());
     }
     log("localize %zu routes, %lld frames in all", routes.size(), total_frames);
 
@@ -151,58 +175,26 @@ class LocalizeCommand : public Command {
     fs::create_directories(temp);
     try {
       ProgressBar bar(progress_wanted(progress_), "frames");
-      // Several routes run side by side, one filter thread each; a single route gets them all.
-      struct Job {
-        std::size_t route;
-        pipeline::Mode mode;
-      };
-      std::vector<Job> jobs;
-      for (std::size_t r = 0; r < routes.size(); ++r) {
-        for (const auto mode : modes) jobs.push_back({r, mode});
-      }
-      const int threads = options_.filter.threads;
-      const int workers = std::max(1, std::min(threads, static_cast<int>(jobs.size())));
-      pipeline::LocalizeOptions job_options = options_;
-      if (workers > 1) job_options.filter.threads = std::max(1, threads / workers);
-      job_options.matcher.threads = job_options.filter.threads;
-      std::vector<pipeline::RouteResult> results(jobs.size());
-      std::atomic<std::size_t> next_job{0};
       std::atomic<long long> done{0};
-      std::mutex progress_mutex, error_mutex;
-      std::exception_ptr error;
-      std::atomic<bool> failed{false};
-      auto work = [&] {
-        try {
-          for (std::size_t j = next_job++; j < jobs.size() && !failed; j = next_job++) {
-            results[j] = pipeline::localize_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, [&] {
-              const long long d = ++done;
-              std::lock_guard lock(progress_mutex);
-              bar.update(d, total_frames);
-            });
-          }
-        } catch (...) {
-          std::lock_guard lock(error_mutex);
-          if (!error) error = std::current_exception();
-          failed = true;
-        }
-      };
-      {
-        std::vector<std::jthread> pool;
-        for (int w = 1; w < workers; ++w) pool.emplace_back(work);
-        work();
-      }
-      if (error) std::rethrow_exception(error);
+      std::mutex progress_mutex;
+      const auto batch = pipeline::localize_routes(routes, cache, options_, modes, [&] {
+        const long long d = ++done;
+        std::lock_guard lock(progress_mutex);
+        bar.update(d, total_frames);
+      });
       bar.done();
+      log("%zu volumes scored or read once for %zu modes; %zu spilled to a temporary file; at most %.0f MB per route",
+          batch.frames_made, modes.size(), batch.frames_spilled,
+          static_cast<double>(batch.peak_frame_memory_bytes) / (1 << 20));
       std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
       std::vector<std::string> route_names;
       route_names.reserve(routes.size());
       for (const auto& route : routes) route_names.push_back(route.name);
-      for (std::size_t j = 0; j < jobs.size(); ++j) {
-        const auto& result = results[j];
-        const fs::path dir = temp / routes[jobs[j].route].name / pipeline::mode_name(jobs[j].mode);
+      for (const auto& result : batch.results) {
+        const fs::path dir = temp / result.route / pipeline::mode_name(result.mode);
         fs::create_directories(dir);
         pipeline::write_route_outputs(dir, result);
-        auto& all = by_mode[pipeline::mode_name(jobs[j].mode)];
+        auto& all = by_mode[pipeline::mode_name(result.mode)];
         all.insert(all.end(), result.poses.begin(), result.poses.end());
       }
       pipeline::MetricsByMode metrics;
@@ -236,6 +228,7 @@ class LocalizeCommand : public Command {
   pipeline::LocalizeOptions options_;
   int window_ = 256;
   std::string noise_;
+  std::string shard_;
   std::uint64_t seed_ = 1;
   pipeline::RouteLimits limits_;
   bool overwrite_ = false;

@@ -1,12 +1,15 @@
 #include "seqloc/pipeline/localize.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <chrono>
 #include <cstring>
 #include <future>
 #include <iomanip>
 #include <map>
+#include <mutex>
+#include <thread>
 #include <random>
 #include <sstream>
 
@@ -15,6 +18,7 @@
 #include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/pipeline/calibration.hpp"
+#include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/observation.hpp"
 
@@ -424,6 +428,78 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
     if (on_frame) on_frame();
   }
   return result;
+}
+
+BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
+                            const LocalizeOptions& options, const std::vector<Mode>& modes,
+                            const std::function<void()>& on_frame) {
+  options.validate();
+  struct Job {
+    std::size_t route;
+    Mode mode;
+  };
+  std::vector<Job> jobs;
+  for (std::size_t r = 0; r < routes.size(); ++r) {
+    for (const auto mode : modes) jobs.push_back({r, mode});
+  }
+  const int threads = options.filter.threads;
+  const int workers = std::max(1, std::min(threads, static_cast<int>(jobs.size())));
+  LocalizeOptions job_options = options;
+  if (workers > 1) job_options.filter.threads = std::max(1, threads / workers);
+  job_options.matcher.threads = job_options.filter.threads;
+  const std::size_t budget = options.frame_memory_mb * (std::size_t{1} << 20) / static_cast<std::size_t>(workers);
+
+  // A route's store lives from its first job's start to its last job's end.
+  struct Shared {
+    std::shared_ptr<FrameStore> store;
+    std::size_t jobs_left = 0;
+  };
+  std::vector<Shared> shared(routes.size());
+  for (auto& s : shared) s.jobs_left = modes.size();
+  BatchResult batch;
+  batch.results.resize(jobs.size());
+  std::mutex mutex;  // guards shared, batch's counters and error
+  auto store_for = [&](std::size_t r) {
+    std::lock_guard lock(mutex);
+    if (!shared[r].store) {
+      shared[r].store = std::make_shared<FrameStore>(route_frames(routes[r], cache, job_options), routes[r].frames.size(),
+                                                     static_cast<int>(modes.size()), budget, options.spill_dir);
+    }
+    return shared[r].store;
+  };
+  auto done_with = [&](std::size_t r) {
+    std::lock_guard lock(mutex);
+    if (--shared[r].jobs_left > 0) return;
+    const auto stats = shared[r].store->stats();
+    batch.frames_made += stats.made;
+    batch.frames_spilled += stats.spilled;
+    batch.peak_frame_memory_bytes = std::max(batch.peak_frame_memory_bytes, stats.peak_memory_bytes);
+    shared[r].store.reset();
+  };
+  std::atomic<std::size_t> next_job{0};
+  std::exception_ptr error;
+  std::atomic<bool> failed{false};
+  auto work = [&] {
+    try {
+      for (std::size_t j = next_job++; j < jobs.size() && !failed; j = next_job++) {
+        const auto store = store_for(jobs[j].route);
+        batch.results[j] =
+            localize_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, on_frame, store->source());
+        done_with(jobs[j].route);
+      }
+    } catch (...) {
+      std::lock_guard lock(mutex);
+      if (!error) error = std::current_exception();
+      failed = true;
+    }
+  };
+  {
+    std::vector<std::jthread> pool;
+    for (int w = 1; w < workers; ++w) pool.emplace_back(work);
+    work();
+  }
+  if (error) std::rethrow_exception(error);
+  return batch;
 }
 
 void perturb_odometry(Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed) {

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <map>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -112,6 +113,42 @@ TEST(CliLocalize, RoutesSideBySideGiveTheSameFiles) {
     }
   }
   EXPECT_EQ(test::read_file(parallel / "summary.json"), test::read_file(serial / "summary.json"));
+}
+
+// --shard I/N takes every N-th route (in sorted order) from the I-th; the shards' folders are the
+// one run's, file for file, and `evaluate` over the shards prints the one run's table.
+TEST(CliLocalize, ShardsMergedEqualOneRun) {
+  Fixture f;
+  const std::vector<std::string> three{"localize", f.cache.string(), f.route.string(), f.route.string(),
+                                       f.route.string(), "--window", "64", "--headings", "64", "--mode", "all"};
+  auto run = [&](const std::filesystem::path& out, std::vector<std::string> extra) {
+    auto a = three;
+    a.insert(a.end(), {"-o", out.string()});
+    a.insert(a.end(), extra.begin(), extra.end());
+    return run_seqloc(a);
+  };
+  const auto whole = f.dir / "whole", s0 = f.dir / "s0", s1 = f.dir / "s1";
+  const auto w = run(whole, {});
+  ASSERT_EQ(w.exit_code, 0) << w.err;
+  ASSERT_EQ(run(s0, {"--shard", "0/2"}).exit_code, 0);
+  ASSERT_EQ(run(s1, {"--shard", "1/2"}).exit_code, 0);
+  const std::map<std::string, std::filesystem::path> owner{{"east", s0}, {"east-2", s1}, {"east-3", s0}};
+  for (const auto& [route, shard] : owner) {
+    const auto other = shard == s0 ? s1 : s0;
+    EXPECT_FALSE(std::filesystem::exists(other / route)) << route;
+    for (const char* mode : {"seqloc", "online", "single", "offline"}) {
+      EXPECT_EQ(test::read_file(shard / route / mode / "poses.csv"), test::read_file(whole / route / mode / "poses.csv"))
+          << route << "/" << mode;
+    }
+  }
+  const auto merged = run_seqloc({"evaluate", s0.string(), s1.string()});
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  EXPECT_EQ(merged.out, w.out.substr(0, w.out.find("wrote ")));
+  for (const char* bad : {"2/2", "1", "-1/2", "0/0", "a/b"}) {
+    const auto r = run(f.dir / "bad", {"--shard", bad});
+    EXPECT_EQ(r.exit_code, 2) << bad;
+    EXPECT_NE(r.err.find("--shard"), std::string::npos) << r.err;
+  }
 }
 
 TEST(CliLocalize, BadVolumeStopsTheRunWithNothingWritten) {

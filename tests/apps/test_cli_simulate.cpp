@@ -47,6 +47,24 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
     EXPECT_NE(r.out.find(std::string("\n") + mode), std::string::npos) << r.out;
     EXPECT_TRUE(std::filesystem::exists(dir / "localized/route_000" / mode / "poses.csv")) << mode;
   }
+  // The modes share each route's volumes, scored once: a mode alone gives the same poses, and so
+  // do frames spilled to the temporary file (--frame-memory 0) instead of kept in memory.
+  const auto alone = (dir / "alone").string(), spilled = (dir / "spilled").string();
+  r = run_seqloc({"localize", cache, routes + "/route_001", "-o", alone, "--mode", "seqloc", "--window", "192"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(test::read_file(dir / "alone/route_001/seqloc/poses.csv"),
+            test::read_file(dir / "localized/route_001/seqloc/poses.csv"));
+  r = run_seqloc({"-v", "localize", cache, routes + "/route_000", routes + "/route_001", "-o", spilled, "--mode", "all",
+                  "--window", "192", "--threads", "2", "--frame-memory", "0"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("20 volumes scored or read once for 4 modes; 20 spilled"), std::string::npos) << r.err;
+  for (const char* route : {"route_000", "route_001"}) {
+    for (const char* mode : {"single", "offline", "online", "seqloc"}) {
+      EXPECT_EQ(test::read_file(dir / "spilled" / route / mode / "poses.csv"),
+                test::read_file(dir / "localized" / route / mode / "poses.csv"))
+          << route << "/" << mode;
+    }
+  }
   r = run_seqloc({"render", cache, routes + "/route_001", "--localized", out, "-o", (dir / "figures").string(), "--frame",
                   "4", "--window", "192"});
   ASSERT_EQ(r.exit_code, 0) << r.err;

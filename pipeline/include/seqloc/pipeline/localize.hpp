@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -41,6 +42,10 @@ struct LocalizeOptions {
   /// How far beyond the region's edge a crop centre may lie (m). 0: crops must be in the region
   /// (a route that drives off the map has nothing to be localized against there).
   double max_crop_outside_m = 0;
+  /// localize_routes: memory for the frames the modes of a route share (float16, MB, all routes in
+  /// flight together); frames beyond it go to an unlinked temporary file in `spill_dir`.
+  std::size_t frame_memory_mb = 1024;
+  std::filesystem::path spill_dir;  ///< empty: the system's temporary directory
 
   [[nodiscard]] double crop_jump_limit_m() const {
     return max_crop_jump_m > 0 ? max_crop_jump_m : std::max(filter.width, filter.height) * raster::kCellM;
@@ -121,6 +126,24 @@ using FrameInspector = std::function<void(const FrameInspection&)>;
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                                          Mode mode, const std::function<void()>& on_frame = {},
                                          FrameSource source = {}, const FrameInspector& inspect = {});
+
+/// What localize_routes did: one result per (route, mode), route-major and the modes in the
+/// order given; and how the routes' shared frames were held.
+struct BatchResult {
+  std::vector<RouteResult> results;
+  std::size_t frames_made = 0;     ///< volumes scored or read and prepared (once per frame and route)
+  std::size_t frames_spilled = 0;  ///< of those, frames held in the temporary file
+  std::size_t peak_frame_memory_bytes = 0;  ///< the largest float16 memory one route's frames took
+};
+
+/// Runs every mode on every route: (route, mode) jobs side by side on options.filter.threads
+/// threads (one filter thread each when there are several jobs, all of them for a single job).
+/// The modes of a route share its frames through a FrameStore, so each volume is scored or read
+/// once. `on_frame` (optional) is called after each frame of each job, from the worker threads.
+/// The first error of any job stops the others from starting and is rethrown.
+[[nodiscard]] BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
+                                          const LocalizeOptions& options, const std::vector<Mode>& modes,
+                                          const std::function<void()>& on_frame = {});
 
 /// Zero-mean Gaussian noise on each odometry increment in the KITTI convention: translation sigma
 /// `translation_pct` % of the step length (on forward and left), heading sigma
