@@ -8,6 +8,12 @@
 
 namespace seqloc::filter::detail {
 
+/// dst(u, v) = src sampled bilinearly at (u + ou, v + ov) for a dw x dh destination from a sw x sh
+/// source; `fill` where that point lies outside the source [0, sw - 1] x [0, sh - 1]. At the
+/// last column or row the missing neighbour has weight 0 and is read clamped. A NaN neighbour
+/// makes the result NaN even at weight 0.
+void translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill);
+
 /// Samples a heading-major frame array (`values`: bins x vh x vw, e.g. log-probabilities, or
 /// tempered probabilities) at every window cell for one window heading, into `out` (width x
 /// height): linear in heading, bilinear in space; `fill` where the cell's centre is outside the

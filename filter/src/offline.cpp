@@ -1,12 +1,17 @@
 #include "seqloc/filter/offline.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <map>
+#include <utility>
 
 #include <Eigen/Core>
 
 #include "internal.hpp"
+#include "parallel.hpp"
 
 namespace seqloc::filter {
 
@@ -33,35 +38,14 @@ namespace {
 using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 
+constexpr double kCellM = 0.5;
+
 // Frames are placed and warped as probabilities relative to their peak, and only then turned
 // into log-likelihoods to add up. Bilinear interpolation of probabilities moves mass between
 // cells; of log-probabilities it turns a peak beside log(0) into log(0), so a route of sharp
 // volumes off the cell lattice lost every observed cell and its sum peaked where no frame looked.
 // A relative probability below the floor (69 nats under the frame's peak) counts as the floor.
 constexpr float kRelativeFloor = 1e-30f;
-
-// Frame s's relative probabilities placed in the window, in its own pose space; NaN where its
-// crop does not reach (NaN survives interpolation, so a cell half outside stays unobserved).
-void place(const OfflineFrame& f, BeliefVolume& out, std::vector<float>& relative, std::vector<float>& blend) {
-  const auto& log_prob = f.frame->log_prob;
-  relative.resize(log_prob.size());
-  ArrayMap(relative.data(), static_cast<Eigen::Index>(relative.size())) =
-      (ConstArrayMap(log_prob.data(), static_cast<Eigen::Index>(log_prob.size())) - f.frame->max_log_prob).exp();
-  const float unobserved = std::numeric_limits<float>::quiet_NaN();
-  for (int k = 0; k < out.headings(); ++k) {
-    detail::sample_slice(relative.data(), f.frame->bins, f.frame->height, f.frame->width, f.frame->cell_m, f.crop,
-                         out.bin_heading_deg(k), out.width(), out.height(), unobserved, blend, out.slice(k));
-  }
-}
-
-// Adds frame s's log-likelihood (placed, and warped when s != t) to the sum: its own where it
-// observed the cell, log(1/M) - outside_crop_nats where it did not (conventions.md section 6 step 3).
-void accumulate(const BeliefVolume& relative, const PreparedFrame& frame, double outside_nats, BeliefVolume& sum) {
-  const auto n = static_cast<Eigen::Index>(sum.size());
-  const ConstArrayMap p(relative.data(), n);
-  const auto no_info = static_cast<float>(-frame.log_cells - outside_nats);
-  ArrayMap(sum.data(), n) += p.isNaN().select(no_info, p.max(kRelativeFloor).log() + frame.max_log_prob);
-}
 
 // Motion from frame s to frame t: the increments in between, inverted when s is later.
 Odometry motion_between(const std::vector<OfflineFrame>& frames, std::size_t s, std::size_t t) {
@@ -71,87 +55,208 @@ Odometry motion_between(const std::vector<OfflineFrame>& frames, std::size_t s, 
   return s > t ? invert(m) : m;
 }
 
-// The argmax of the sum over the cells frame t itself observed: its crop is where its pose is
-// sought, and elsewhere the sum is made of "no information" terms.
-Pose argmax_pose(const BeliefVolume& sum, const BeliefVolume& own) {
-  const auto cells = static_cast<std::ptrdiff_t>(sum.slice_cells());
-  std::ptrdiff_t best = -1;
-  float top = -std::numeric_limits<float>::infinity();
-  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(sum.size()); ++i) {
-    if (!std::isnan(own.data()[i]) && (best < 0 || sum.data()[i] > top)) {
-      best = i;
-      top = sum.data()[i];
-    }
-  }
-  if (best < 0) best = std::max_element(sum.data(), sum.data() + sum.size()) - sum.data();  // no cell observed
-  const int k = static_cast<int>(best / cells);
-  const auto rest = best % cells;
-  const auto u = rest % sum.width(), v = rest / sum.width();  // whole cells
-  return {static_cast<double>(u), static_cast<double>(v), sum.bin_heading_deg(k)};
-}
-
-// The pose of frame t from the placed frames [s0, s1] (placed(s) gives frame s's placement).
-template <class Placed>
-Pose pose_from(const std::vector<OfflineFrame>& frames, std::size_t t, std::size_t s0, std::size_t s1, Placed&& placed,
-               BeliefVolume& sum, BeliefVolume& warped, const FilterConfig& config) {
-  std::fill(sum.data(), sum.data() + sum.size(), 0.0f);
-  const float unobserved = std::numeric_limits<float>::quiet_NaN();
-  for (std::size_t s = s0; s <= s1; ++s) {
-    const BeliefVolume& own = placed(s);
-    if (s == t) {
-      accumulate(own, *frames[s].frame, config.outside_crop_nats, sum);
-    } else {
-      detail::warp_volume(own, warped, motion_between(frames, s, t), unobserved, config.threads);
-      accumulate(warped, *frames[s].frame, config.outside_crop_nats, sum);
-    }
-  }
-  return argmax_pose(sum, placed(t));
-}
+bool whole(double x) { return std::abs(x - std::round(x)) < 1e-9; }
 
 }  // namespace
 
-Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,
-                     int half_window) {
-  config.validate();
-  const int W = config.width, H = config.height, R = config.headings;
-  const std::size_t n = frames.size();
-  const auto k = static_cast<std::size_t>(half_window);
-  const std::size_t s0 = half_window < 0 ? 0 : (t > k ? t - k : 0);
-  const std::size_t s1 = half_window < 0 ? n - 1 : std::min(n - 1, t + k);
-  BeliefVolume sum(W, H, R), warped(W, H, R), own(W, H, R), other(W, H, R);
+// A frame's relative probabilities p / p_max resampled at every window heading, on a canvas
+// that covers its crop's footprint with a margin; NaN where the crop does not reach (NaN
+// survives interpolation, so a cell half outside stays unobserved). Canvas cell (0, 0) is window
+// cell (u0, v0) of the window in which the crop centre was (centre_u, centre_v).
+struct OfflineAggregator::Canvas {
+  const PreparedFrame* frame = nullptr;
+  CropPose crop;
+  int u0 = 0, v0 = 0;
+  BeliefVolume values;
+};
+
+struct OfflineAggregator::Impl {
+  std::map<std::int64_t, Canvas> kept;  // by OfflineFrame::key
   std::vector<float> relative, blend;
-  place(frames[t], own, relative, blend);
-  return pose_from(
-      frames, t, s0, s1,
-      [&](std::size_t s) -> const BeliefVolume& {
-        if (s == t) return own;
-        place(frames[s], other, relative, blend);
-        return other;
-      },
-      sum, warped, config);
+};
+
+OfflineAggregator::OfflineAggregator(const FilterConfig& config)
+    : config_((config.validate(), config)), impl_(std::make_unique<Impl>()) {}
+
+OfflineAggregator::~OfflineAggregator() = default;
+OfflineAggregator::OfflineAggregator(OfflineAggregator&&) noexcept = default;
+OfflineAggregator& OfflineAggregator::operator=(OfflineAggregator&&) noexcept = default;
+
+OfflineAggregator::Canvas OfflineAggregator::place(const OfflineFrame& f) {
+  const PreparedFrame& p = *f.frame;
+  // The footprint: the crop's rectangle (window cells) turned by its rotation.
+  const double scale = p.cell_m / kCellM, r = f.crop.rotation_deg * M_PI / 180.0;
+  const double half_w = p.width * scale / 2, half_h = p.height * scale / 2;
+  const double c = std::abs(std::cos(r)), s = std::abs(std::sin(r));
+  const double extent_u = half_w * c + half_h * s, extent_v = half_w * s + half_h * c;
+  const int u0 = static_cast<int>(std::floor(f.crop.centre_u - extent_u)) - 1;
+  const int v0 = static_cast<int>(std::floor(f.crop.centre_v - extent_v)) - 1;
+  const int u1 = static_cast<int>(std::ceil(f.crop.centre_u + extent_u)) + 1;
+  const int v1 = static_cast<int>(std::ceil(f.crop.centre_v + extent_v)) + 1;
+  Canvas canvas{&p, f.crop, u0, v0, BeliefVolume(u1 - u0 + 1, v1 - v0 + 1, config_.headings)};
+  auto& relative = impl_->relative;
+  relative.resize(p.log_prob.size());
+  ArrayMap(relative.data(), static_cast<Eigen::Index>(relative.size())) =
+      (ConstArrayMap(p.log_prob.data(), static_cast<Eigen::Index>(p.log_prob.size())) - p.max_log_prob).exp();
+  const CropPose local{f.crop.centre_u - u0, f.crop.centre_v - v0, f.crop.rotation_deg};
+  auto& values = canvas.values;
+  for (int k = 0; k < values.headings(); ++k) {
+    detail::sample_slice(relative.data(), p.bins, p.height, p.width, p.cell_m, local, values.bin_heading_deg(k),
+                         values.width(), values.height(), std::numeric_limits<float>::quiet_NaN(), impl_->blend,
+                         values.slice(k));
+  }
+  return canvas;
 }
 
-std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const FilterConfig& config, int half_window) {
-  config.validate();
-  const int n = static_cast<int>(frames.size());
-  const int W = config.width, H = config.height, R = config.headings;
-  // Each frame placed once, shared by every t.
-  std::vector<BeliefVolume> placed;
-  placed.reserve(frames.size());
-  std::vector<float> relative, blend;
-  for (const auto& f : frames) {
-    placed.emplace_back(W, H, R);
-    place(f, placed.back(), relative, blend);
+Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, int half_window) {
+  const int W = config_.width, H = config_.height, R = config_.headings;
+  const std::size_t n = frames.size();
+  const auto k_half = static_cast<std::size_t>(half_window);
+  const std::size_t s0 = half_window < 0 ? 0 : (t > k_half ? t - k_half : 0);
+  const std::size_t s1 = half_window < 0 ? n - 1 : std::min(n - 1, t + k_half);
+
+  // Each frame's canvas, and where its cell (0, 0) lies in this window. A kept canvas serves
+  // again when its crop moved by whole cells (a window re-centred on another frame).
+  std::map<std::size_t, Canvas> local;
+  std::vector<std::pair<const Canvas*, std::array<int, 2>>> placed;
+  for (std::size_t s = s0; s <= s1; ++s) {
+    const OfflineFrame& f = frames[s];
+    const Canvas* canvas = nullptr;
+    if (f.key >= 0) {
+      auto it = impl_->kept.find(f.key);
+      if (it != impl_->kept.end()) {
+        const Canvas& k = it->second;
+        const double du = f.crop.centre_u - k.crop.centre_u, dv = f.crop.centre_v - k.crop.centre_v;
+        if (k.frame != f.frame || k.crop.rotation_deg != f.crop.rotation_deg || !whole(du) || !whole(dv)) {
+          impl_->kept.erase(it);
+          it = impl_->kept.end();
+        }
+      }
+      if (it == impl_->kept.end()) it = impl_->kept.emplace(f.key, place(f)).first;
+      canvas = &it->second;
+    } else {
+      canvas = &local.emplace(s, place(f)).first->second;
+    }
+    const int u0 = canvas->u0 + static_cast<int>(std::lround(f.crop.centre_u - canvas->crop.centre_u));
+    const int v0 = canvas->v0 + static_cast<int>(std::lround(f.crop.centre_v - canvas->crop.centre_v));
+    placed.push_back({canvas, {u0, v0}});
   }
+  // Canvases of frames no longer in range are dropped.
+  for (auto it = impl_->kept.begin(); it != impl_->kept.end();) {
+    const bool used = std::any_of(placed.begin(), placed.end(), [&](const auto& p) { return p.first == &it->second; });
+    it = used ? std::next(it) : impl_->kept.erase(it);
+  }
+
+  // The sum is needed only where frame t observes: the box of its canvas within the window.
+  const auto& [own, own_origin] = placed[t - s0];
+  int bu0 = std::max(0, own_origin[0]), bv0 = std::max(0, own_origin[1]);
+  int bu1 = std::min(W - 1, own_origin[0] + own->values.width() - 1);
+  int bv1 = std::min(H - 1, own_origin[1] + own->values.height() - 1);
+  if (bu0 > bu1 || bv0 > bv1) bu0 = 0, bv0 = 0, bu1 = W - 1, bv1 = H - 1;  // frame t's crop outside the window
+  const int bw = bu1 - bu0 + 1, bh = bv1 - bv0 + 1;
+  const auto box = static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh);
+  std::vector<float> sum(box * static_cast<std::size_t>(R), 0.0f), own_box(sum.size());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+
+  for (std::size_t s = s0; s <= s1; ++s) {
+    const auto& [canvas, origin] = placed[s - s0];
+    const BeliefVolume& values = canvas->values;
+    const PreparedFrame& frame = *frames[s].frame;
+    const auto no_info = static_cast<float>(-frame.log_cells - config_.outside_crop_nats);
+    const float max_log_prob = frame.max_log_prob;
+    // sum += log-likelihood of frame s: its own where it observed the cell, log(1/M) -
+    // outside_crop_nats where not (conventions.md section 6 step 3).
+    auto accumulate = [&](const float* relative, int k) {
+      const ConstArrayMap p(relative, static_cast<Eigen::Index>(box));
+      ArrayMap(sum.data() + static_cast<std::size_t>(k) * box, static_cast<Eigen::Index>(box)) +=
+          p.isNaN().select(no_info, p.max(kRelativeFloor).log() + max_log_prob);
+    };
+    const double ou = bu0 - origin[0], ov = bv0 - origin[1];  // box cell -> canvas cell
+    if (s == t) {
+      detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
+        for (int k = k0; k < k1; ++k) {
+          float* dst = own_box.data() + static_cast<std::size_t>(k) * box;
+          detail::translate(values.slice(k), values.width(), values.height(), dst, bw, bh, ou, ov, nan);
+          accumulate(dst, k);
+        }
+      });
+      continue;
+    }
+    // Frame s warped to t: box bin k takes canvas bins k + shift and k + shift + 1 (heading
+    // k * 360 / R + yaw), weights 1 - a and a, each moved back by the motion at its heading.
+    const Odometry motion = motion_between(frames, s, t);
+    const double p = motion.yaw_deg * R / 360.0, floor_p = std::floor(p);
+    const auto a = static_cast<float>(p - floor_p);
+    const int shift = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
+    // As when frames were placed in the window itself: a source point outside the window is
+    // unobserved, whatever the canvas holds there.
+    auto translated = [&](int j, float* dst) {
+      double du = 0, dv = 0;
+      detail::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
+      detail::translate(values.slice(j), values.width(), values.height(), dst, bw, bh, ou - du, ov - dv, nan);
+      // Box cell (x, y) reads the window at (x + bu0 - du, y + bv0 - dv).
+      const int x_lo = static_cast<int>(std::ceil(du - bu0)), x_hi = static_cast<int>(std::floor(W - 1 + du - bu0));
+      const int y_lo = static_cast<int>(std::ceil(dv - bv0)), y_hi = static_cast<int>(std::floor(H - 1 + dv - bv0));
+      for (int y = 0; y < bh; ++y) {
+        float* row = dst + static_cast<std::size_t>(y) * bw;
+        if (y < y_lo || y > y_hi) {
+          std::fill(row, row + bw, nan);
+          continue;
+        }
+        std::fill(row, row + std::clamp(x_lo, 0, bw), nan);
+        std::fill(row + std::clamp(x_hi + 1, 0, bw), row + bw, nan);
+      }
+    };
+    detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
+      std::vector<float> buffer_a(box), buffer_b(box), mixed(box);
+      float* current = buffer_a.data();
+      float* next = buffer_b.data();
+      translated((k0 + shift) % R, current);
+      for (int k = k0; k < k1; ++k) {
+        if (a == 0.0f) {
+          accumulate(current, k);
+          if (k + 1 < k1) translated((k + 1 + shift) % R, current);
+          continue;
+        }
+        translated((k + shift + 1) % R, next);
+        for (std::size_t i = 0; i < box; ++i) mixed[i] = (1 - a) * current[i] + a * next[i];
+        accumulate(mixed.data(), k);
+        std::swap(current, next);
+      }
+    });
+  }
+
+  // The argmax among the cells frame t observes (elsewhere the sum is made of "no information"
+  // terms); the whole box when it observes none.
+  std::ptrdiff_t best = -1;
+  float top = -std::numeric_limits<float>::infinity();
+  for (std::size_t i = 0; i < sum.size(); ++i) {
+    if (!std::isnan(own_box[i]) && (best < 0 || sum[i] > top)) {
+      best = static_cast<std::ptrdiff_t>(i);
+      top = sum[i];
+    }
+  }
+  if (best < 0) best = std::max_element(sum.begin(), sum.end()) - sum.begin();
+  const auto k = static_cast<int>(static_cast<std::size_t>(best) / box);
+  const auto rest = static_cast<std::size_t>(best) % box;
+  const auto u = bu0 + static_cast<int>(rest % static_cast<std::size_t>(bw));
+  const auto v = bv0 + static_cast<int>(rest / static_cast<std::size_t>(bw));
+  return {static_cast<double>(u), static_cast<double>(v), k * 360.0 / R};
+}
+
+Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,
+                     int half_window) {
+  OfflineAggregator aggregator(config);
+  return aggregator.pose_at(frames, t, half_window);
+}
+
+std::vector<Pose> offline_poses(std::vector<OfflineFrame> frames, const FilterConfig& config, int half_window) {
+  // One window for every t: each frame placed once.
+  for (std::size_t s = 0; s < frames.size(); ++s) frames[s].key = static_cast<std::int64_t>(s);
+  OfflineAggregator aggregator(config);
   std::vector<Pose> poses;
-  BeliefVolume sum(W, H, R), warped(W, H, R);
-  for (int t = 0; t < n; ++t) {
-    const int s0 = half_window < 0 ? 0 : std::max(0, t - half_window);
-    const int s1 = half_window < 0 ? n - 1 : std::min(n - 1, t + half_window);
-    poses.push_back(pose_from(
-        frames, static_cast<std::size_t>(t), static_cast<std::size_t>(s0), static_cast<std::size_t>(s1),
-        [&](std::size_t s) -> const BeliefVolume& { return placed[s]; }, sum, warped, config));
-  }
+  poses.reserve(frames.size());
+  for (std::size_t t = 0; t < frames.size(); ++t) poses.push_back(aggregator.pose_at(frames, t, half_window));
   return poses;
 }
 

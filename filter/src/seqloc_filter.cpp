@@ -20,37 +20,6 @@ constexpr double kDegToRad = M_PI / 180.0;
 using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 
-/// dst(u, v) = src sampled bilinearly at (u + ou, v + ov); `fill` where that point lies outside
-/// the source [0, sw - 1] x [0, sh - 1]. At the last column or row the missing neighbour has
-/// weight 0 and is read clamped.
-void translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill) {
-  const double fu = std::floor(ou), fv = std::floor(ov);
-  const auto au = static_cast<float>(ou - fu), av = static_cast<float>(ov - fv);
-  const int iu = static_cast<int>(fu), iv = static_cast<int>(fv);
-  // Valid u: 0 <= u + ou <= sw - 1.
-  const int u_lo = std::max(0, static_cast<int>(std::ceil(-ou)));
-  const int u_hi = std::min(dw - 1, static_cast<int>(std::floor(sw - 1 - ou)));
-  const int v_lo = std::max(0, static_cast<int>(std::ceil(-ov)));
-  const int v_hi = std::min(dh - 1, static_cast<int>(std::floor(sh - 1 - ov)));
-  const float w00 = (1 - au) * (1 - av), w01 = au * (1 - av), w10 = (1 - au) * av, w11 = au * av;
-  for (int v = 0; v < dh; ++v) {
-    float* out = dst + static_cast<std::size_t>(v) * dw;
-    if (v < v_lo || v > v_hi || u_lo > u_hi) {
-      std::fill(out, out + dw, fill);
-      continue;
-    }
-    const int r0 = v + iv, r1 = std::min(r0 + 1, sh - 1);
-    const float* a = src + static_cast<std::size_t>(r0) * sw + iu;
-    const float* b = src + static_cast<std::size_t>(r1) * sw + iu;
-    std::fill(out, out + u_lo, fill);
-    // Columns whose right neighbour exists; the last valid one may need the clamp.
-    const int u_inner = std::min(u_hi, sw - 2 - iu);
-    for (int u = u_lo; u <= u_inner; ++u) out[u] = w00 * a[u] + w01 * a[u + 1] + w10 * b[u] + w11 * b[u + 1];
-    for (int u = std::max(u_lo, u_inner + 1); u <= u_hi; ++u) out[u] = w00 * a[u] + w10 * b[u] + w01 * a[u] + w11 * b[u];
-    std::fill(out + u_hi + 1, out + dw, fill);
-  }
-}
-
 double wrap_degrees(double d) {
   d = std::fmod(d, 360.0);
   return d < 0 ? d + 360.0 : d;
@@ -254,6 +223,34 @@ std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int
 
 // ---------------------------------------------------------------------------------------------
 // The filter
+
+void detail::translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill) {
+  const double fu = std::floor(ou), fv = std::floor(ov);
+  const auto au = static_cast<float>(ou - fu), av = static_cast<float>(ov - fv);
+  const int iu = static_cast<int>(fu), iv = static_cast<int>(fv);
+  // Valid u: 0 <= u + ou <= sw - 1.
+  const int u_lo = std::max(0, static_cast<int>(std::ceil(-ou)));
+  const int u_hi = std::min(dw - 1, static_cast<int>(std::floor(sw - 1 - ou)));
+  const int v_lo = std::max(0, static_cast<int>(std::ceil(-ov)));
+  const int v_hi = std::min(dh - 1, static_cast<int>(std::floor(sh - 1 - ov)));
+  const float w00 = (1 - au) * (1 - av), w01 = au * (1 - av), w10 = (1 - au) * av, w11 = au * av;
+  for (int v = 0; v < dh; ++v) {
+    float* out = dst + static_cast<std::size_t>(v) * dw;
+    if (v < v_lo || v > v_hi || u_lo > u_hi) {
+      std::fill(out, out + dw, fill);
+      continue;
+    }
+    const int r0 = v + iv, r1 = std::min(r0 + 1, sh - 1);
+    const float* a = src + static_cast<std::size_t>(r0) * sw + iu;
+    const float* b = src + static_cast<std::size_t>(r1) * sw + iu;
+    std::fill(out, out + u_lo, fill);
+    // Columns whose right neighbour exists; the last valid one may need the clamp.
+    const int u_inner = std::min(u_hi, sw - 2 - iu);
+    for (int u = u_lo; u <= u_inner; ++u) out[u] = w00 * a[u] + w01 * a[u + 1] + w10 * b[u] + w11 * b[u + 1];
+    for (int u = std::max(u_lo, u_inner + 1); u <= u_hi; ++u) out[u] = w00 * a[u] + w10 * b[u] + w01 * a[u] + w11 * b[u];
+    std::fill(out + u_hi + 1, out + dw, fill);
+  }
+}
 
 void detail::sample_slice(const float* values, int bins, int vh, int vw, double cell_m, const CropPose& crop,
                           double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer,

@@ -251,6 +251,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
   result.mode = mode;
 
   std::optional<filter::SeqLocFilter> filter;
+  std::optional<filter::OfflineAggregator> offline;  // keeps each frame's placement while in range
   std::vector<float> road_m(static_cast<std::size_t>(W) * H);
   std::vector<std::uint16_t> road_cm;
   std::int64_t origin_u = 0, origin_v = 0;  // region pixel of window cell (0, 0)
@@ -338,10 +339,12 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
         range.push_back({&prepared(s),
                          {region.pixel_u(c.x) - static_cast<double>(origin_u),
                           region.pixel_v(c.y) - static_cast<double>(origin_v), c.rotation_deg},
-                         route.frames[s].odometry});
+                         route.frames[s].odometry,
+                         static_cast<std::int64_t>(s)});
       }
       const auto t0 = Clock::now();
-      const filter::Pose p = filter::offline_pose_at(range, i - s0, config, -1);
+      if (!offline) offline.emplace(config);
+      const filter::Pose p = offline->pose_at(range, i - s0, -1);
       result.filter_seconds += seconds_since(t0);
       x = region.x_of(p.u + static_cast<double>(origin_u));
       y = region.y_of(p.v + static_cast<double>(origin_v));

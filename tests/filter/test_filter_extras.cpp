@@ -106,6 +106,45 @@ TEST(Baselines, OfflineRecoversAStraightRoute) {
   }
 }
 
+// The aggregator keeps each frame's placement while the frame stays in range and moves it with
+// the window when the window moved by whole cells; every pose must equal a fresh placement's
+// (offline_pose_at places every frame anew), for straight and rotated crops, and a window moved
+// by a fraction of a cell must not reuse a placement.
+TEST(Baselines, OfflineAggregatorReusesPlacementsOnlyWhenExact) {
+  FilterConfig c = config(40, 44, 32);
+  c.threads = 2;
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<double> where(2, 8), bin(0, 16), jitter(-0.45, 0.45);
+  const int n = 9;
+  std::vector<PreparedFrame> frames;
+  frames.reserve(static_cast<std::size_t>(n));
+  std::vector<OfflineFrame> route;  // crops in region cells
+  for (int t = 0; t < n; ++t) {
+    auto vol = bump(11, 11, 16, where(rng), where(rng), bin(rng), 1.5);
+    const auto other = bump(11, 11, 16, where(rng), where(rng), bin(rng), 1.0);
+    for (std::size_t i = 0; i < vol.size(); ++i) vol[i] = std::max(vol[i], other[i] - 0.5f);
+    frames.push_back(prepare_frame(view(vol, 11, 11, 16), 32));
+    const double rotation = t % 3 == 1 ? 7.0 : 0.0;
+    route.push_back({&frames.back(), CropPose{100 + 3.0 * t + jitter(rng), 200 - 2.5 * t + jitter(rng), rotation},
+                     Odometry{t == 0 ? 0.0 : 1.6, 0.1 * t, t % 2 ? 9.0 : -4.0}, t});
+  }
+  for (const double fraction : {0.0, 0.3}) {
+    OfflineAggregator aggregator(c);
+    for (int t = 0; t < n; ++t) {
+      // A window centred on frame t's crop (by whole cells, plus the fraction on odd frames).
+      const double ou = std::round(route[static_cast<std::size_t>(t)].crop.centre_u) - 20 - (t % 2 ? fraction : 0.0);
+      const double ov = std::round(route[static_cast<std::size_t>(t)].crop.centre_v) - 22;
+      std::vector<OfflineFrame> window = route;
+      for (auto& f : window) f.crop.centre_u -= ou, f.crop.centre_v -= ov;
+      const Pose kept = aggregator.pose_at(window, static_cast<std::size_t>(t), 2);
+      const Pose fresh = offline_pose_at(window, static_cast<std::size_t>(t), c, 2);
+      EXPECT_EQ(kept.u, fresh.u) << t << " " << fraction;
+      EXPECT_EQ(kept.v, fresh.v) << t << " " << fraction;
+      EXPECT_EQ(kept.heading_deg, fresh.heading_deg) << t << " " << fraction;
+    }
+  }
+}
+
 TEST(Intake, FewerAndMoreBinsThanTheWindowMapToTheRightHeadings) {
   for (const int bins : {8, 32}) {
     FilterConfig c = config(24, 24, 16);

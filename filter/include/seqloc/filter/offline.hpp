@@ -8,6 +8,8 @@
 // online filter's rule, FilterConfig); the argmax is sought among
 // the cells frame t observes.
 
+#include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "seqloc/filter/config.hpp"
@@ -19,6 +21,9 @@ struct OfflineFrame {
   const PreparedFrame* frame = nullptr;
   CropPose crop;
   Odometry from_previous;  ///< motion from the previous frame (ignored for the first)
+  /// OfflineAggregator keeps the frame's placement under this key (>= 0, e.g. its index in the
+  /// route) from one pose to the next; < 0: placed for one pose only.
+  std::int64_t key = -1;
 };
 
 /// The relative motion from a pose to a later one, composed from the increments in between
@@ -27,6 +32,33 @@ struct OfflineFrame {
 /// The motion that undoes `motion` (expressed in the body frame of its end).
 [[nodiscard]] Odometry invert(const Odometry& motion);
 
+/// The offline poses of a route frame after frame, with each frame placed once (its probabilities
+/// resampled at every window heading on a canvas over its crop) rather than once per frame and
+/// neighbour: a placement is kept under the frame's key while the frame stays in range, and
+/// serves again when the window moved by whole cells. The sum of frame t is formed only over the
+/// cells of t's own crop (where its argmax is sought). The poses are those of placing every frame
+/// in the window and warping it whole, as the method is stated.
+class OfflineAggregator {
+ public:
+  explicit OfflineAggregator(const FilterConfig& config);
+  ~OfflineAggregator();
+  OfflineAggregator(OfflineAggregator&&) noexcept;
+  OfflineAggregator& operator=(OfflineAggregator&&) noexcept;
+  OfflineAggregator(const OfflineAggregator&) = delete;
+  OfflineAggregator& operator=(const OfflineAggregator&) = delete;
+
+  /// The pose of frame t from the frames s with |s - t| <= half_window (all when < 0), their
+  /// crops given in a window of the config (the caller may centre one on frame t).
+  [[nodiscard]] Pose pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, int half_window = -1);
+
+ private:
+  struct Canvas;
+  struct Impl;
+  [[nodiscard]] Canvas place(const OfflineFrame& frame);
+  FilterConfig config_;
+  std::unique_ptr<Impl> impl_;
+};
+
 /// The pose of frame `t` alone: the frames' crops must be given in a window of `config` (the
 /// caller may centre one on frame t); frames s with |s - t| <= half_window (all when < 0) count.
 [[nodiscard]] Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,
@@ -34,7 +66,7 @@ struct OfflineFrame {
 
 /// One pose per frame, in the window of `config` (width, height, headings, threads).
 /// `half_window` < 0 aggregates all frames.
-[[nodiscard]] std::vector<Pose> offline_poses(const std::vector<OfflineFrame>& frames, const FilterConfig& config,
+[[nodiscard]] std::vector<Pose> offline_poses(std::vector<OfflineFrame> frames, const FilterConfig& config,
                                               int half_window = -1);
 
 }  // namespace seqloc::filter
