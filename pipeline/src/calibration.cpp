@@ -53,43 +53,87 @@ void parallel_ranges(std::size_t n, int threads, F&& f) {
   for (auto& t : pool) t.join();
 }
 
+// values[i] = f(values[i]) for an Eigen array expression f, over [0, n) shared among `threads`
+// threads. Eigen computes exp and log differently in a vectorized body and in the scalar head
+// and tail it peels off by address, so each block of values is copied into an aligned buffer of
+// whole packets first: every value takes the same path wherever it lies, and the results are the
+// same bits whatever the buffer's address and the number of threads.
+template <class F>
+void vectorized(float* values, std::size_t n, int threads, F&& f) {
+  constexpr std::size_t kBlock = 4096;
+  const std::size_t blocks = (n + kBlock - 1) / kBlock;
+  parallel_ranges(blocks, threads, [&](std::size_t k0, std::size_t k1) {
+    Eigen::ArrayXf buffer(static_cast<Eigen::Index>(kBlock));  // Eigen aligns its own storage
+    for (std::size_t k = k0; k < k1; ++k) {
+      const std::size_t start = k * kBlock, m = std::min(kBlock, n - start);
+      std::copy(values + start, values + start + m, buffer.data());
+      std::fill(buffer.data() + m, buffer.data() + kBlock, 0.0f);
+      buffer = f(buffer);
+      std::copy(buffer.data(), buffer.data() + m, values + start);
+    }
+  });
+}
+
 // One axis of a blur over `count` blocks of `block` contiguous values: out block i = sum_j taps[j]
 // * in block (i + j - radius), blocks past either end left out, for the values [b0, b1) of each
-// block. Whole runs of a block at a time, so the inner loop runs over contiguous memory.
-void convolve_blocks(double* out, const double* in, int count, std::size_t block, std::size_t b0, std::size_t b1,
-                     const std::vector<double>& taps) {
+// block (`in` holds blocks `in_block` apart). Whole runs of a block at a time, so the inner loop
+// runs over contiguous memory.
+void convolve_blocks(float* out, std::size_t block, const float* in, std::size_t in_block, int count, std::size_t b0,
+                     std::size_t b1, const std::vector<float>& taps) {
   const int radius = static_cast<int>(taps.size() / 2);
   for (int i = 0; i < count; ++i) {
-    double* o = out + static_cast<std::size_t>(i) * block;
-    std::fill(o + b0, o + b1, 0.0);
+    float* o = out + static_cast<std::size_t>(i) * block;
+    std::fill(o + b0, o + b1, 0.0f);
     for (int j = -radius; j <= radius; ++j) {
       const int source = i + j;
       if (source < 0 || source >= count) continue;
-      const double w = tap(taps, j + radius);
-      const double* x = in + static_cast<std::size_t>(source) * block;
+      const float w = taps[static_cast<std::size_t>(j) + static_cast<std::size_t>(radius)];
+      const float* x = in + static_cast<std::size_t>(source) * in_block;
       for (std::size_t b = b0; b < b1; ++b) o[b] += w * x[b];
     }
   }
 }
 
+// The same blur across `count` blocks in place, for the values [b0, b1) of each block, through a
+// copy of a strip of at most 1,024 values per block at a time (a few hundred KB, not the volume).
+void convolve_blocks_in_place(float* data, int count, std::size_t block, std::size_t b0, std::size_t b1,
+                              const std::vector<float>& taps) {
+  constexpr std::size_t kStrip = 1024;
+  std::vector<float> strip;
+  for (std::size_t s0 = b0; s0 < b1; s0 += kStrip) {
+    const std::size_t w = std::min(kStrip, b1 - s0);
+    strip.resize(static_cast<std::size_t>(count) * w);
+    for (int i = 0; i < count; ++i) {
+      const float* from = data + static_cast<std::size_t>(i) * block + s0;
+      std::copy(from, from + w, strip.begin() + static_cast<std::ptrdiff_t>(static_cast<std::size_t>(i) * w));
+    }
+    convolve_blocks(data + s0, block, strip.data(), w, count, 0, w, taps);
+  }
+}
+
 // Convolves each of `lines` contiguous lines of `count` values circularly with `taps` (centred),
 // through a copy of the line padded with its own wrapped ends.
-void convolve_circular(double* data, std::vector<double>& padded, std::size_t lines, int count,
-                       const std::vector<double>& taps) {
+void convolve_circular(float* data, std::vector<float>& padded, std::size_t lines, int count,
+                       const std::vector<float>& taps) {
   const int radius = static_cast<int>(taps.size() / 2);
   padded.resize(static_cast<std::size_t>(count) + taps.size() - 1);  // count + 2 radius
   for (std::size_t line = 0; line < lines; ++line) {
-    double* x = data + line * static_cast<std::size_t>(count);
+    float* x = data + line * static_cast<std::size_t>(count);
     for (int i = 0; i < count + 2 * radius; ++i) padded[static_cast<std::size_t>(i)] = x[((i - radius) % count + count) % count];
     // Tap by tap over the whole line (the same sum, in the same order, per value; the inner loop
     // runs over contiguous memory).
-    std::fill(x, x + count, 0.0);
+    std::fill(x, x + count, 0.0f);
     for (int j = 0; j <= 2 * radius; ++j) {
-      const double w = tap(taps, j);
-      const double* in = padded.data() + j;
+      const float w = taps[static_cast<std::size_t>(j)];
+      const float* in = padded.data() + j;
       for (int i = 0; i < count; ++i) x[i] += w * in[i];
     }
   }
+}
+
+std::vector<float> float_taps(double sigma) {
+  const auto taps = gaussian_taps(sigma);
+  return {taps.begin(), taps.end()};
 }
 
 }  // namespace
@@ -128,43 +172,53 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
     throw std::invalid_argument("calibrate_volume: the volume's size is not height * width * bins");
   }
   const float top = *std::max_element(volume.begin(), volume.end());
-  std::vector<double> p(cells);
-  parallel_ranges(cells, threads, [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) p[i] = std::exp(static_cast<double>(volume[i] - top));
-  });
+  const double a = c.floor;
+  if (a == 0 && c.blur_bins == 0 && c.blur_cells == 0) {  // a log-softmax, exact in the log domain
+    const double lse = log_sum_exp(volume, top, 1.0);
+    for (float& v : volume) v = static_cast<float>(static_cast<double>(v) - lse);
+    return;
+  }
+  // In place and in float: p = exp(v - top), blurred, mixed with the floor, back to logs. The
+  // volume is the only large buffer (a 128 x 128 x 256 one is 16 MB). Scores more than 40 nats
+  // under the top count as 40 under it: e^-40 times the smallest tap of three blurs (sigma <= 64)
+  // stays a normal float, so no denormal arises (its arithmetic is two orders of magnitude slower,
+  // and threads that flush denormals to zero, as OpenCV's callers may, would give other bits); a
+  // probability of e^-40 relative to the peak is nothing beside any floor.
+  float* p = volume.data();
+  vectorized(p, cells, threads, [top](const Eigen::ArrayXf& x) { return ((x - top).max(-40.0f)).exp().eval(); });
   const auto H = static_cast<std::size_t>(height), W = static_cast<std::size_t>(width), N = static_cast<std::size_t>(bins);
   if (c.blur_bins > 0) {
-    const auto taps = gaussian_taps(c.blur_bins);
+    const auto taps = float_taps(c.blur_bins);
     parallel_ranges(H * W, threads, [&](std::size_t l0, std::size_t l1) {
-      std::vector<double> padded;
-      convolve_circular(p.data() + l0 * N, padded, l1 - l0, bins, taps);
+      std::vector<float> padded;
+      convolve_circular(p + l0 * N, padded, l1 - l0, bins, taps);
     });
   }
   if (c.blur_cells > 0) {
-    const auto taps = gaussian_taps(c.blur_cells);
+    const auto taps = float_taps(c.blur_cells);
     // Along u: each row is `width` blocks of N headings (rows shared among threads).
     parallel_ranges(H, threads, [&](std::size_t r0, std::size_t r1) {
-      std::vector<double> row(W * N);
+      std::vector<float> row(W * N);
       for (std::size_t r = r0; r < r1; ++r) {
-        double* out = p.data() + r * W * N;
+        float* out = p + r * W * N;
         std::copy(out, out + W * N, row.begin());
-        convolve_blocks(out, row.data(), width, N, 0, N, taps);
+        convolve_blocks(out, N, row.data(), N, width, 0, N, taps);
       }
     });
     // Along v: `height` blocks of whole rows (runs of each row shared among threads).
-    const std::vector<double> copy = p;
     parallel_ranges(W * N, threads, [&](std::size_t b0, std::size_t b1) {
-      convolve_blocks(p.data(), copy.data(), height, W * N, b0, b1, taps);
+      convolve_blocks_in_place(p, height, W * N, b0, b1, taps);
     });
   }
   double sum = 0;
-  for (double v : p) sum += v;
-  const double a = c.floor, uniform = a / static_cast<double>(cells);
-  parallel_ranges(cells, threads, [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) {
-      const double q = (1 - a) * p[i] / sum + uniform;
-      volume[i] = static_cast<float>(std::log(std::max(q, std::numeric_limits<double>::min())));
-    }
+  constexpr std::size_t kBlock = 1 << 14;
+  for (std::size_t start = 0; start < cells; start += kBlock) {
+    const auto n = static_cast<Eigen::Index>(std::min(kBlock, cells - start));
+    sum += static_cast<double>(ConstArrayMap(p + start, n).sum());
+  }
+  const auto scale = static_cast<float>((1 - a) / sum), uniform = static_cast<float>(a / static_cast<double>(cells));
+  vectorized(p, cells, threads, [scale, uniform](const Eigen::ArrayXf& x) {
+    return (x * scale + uniform).max(std::numeric_limits<float>::min()).log().eval();
   });
 }
 

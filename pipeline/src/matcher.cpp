@@ -210,29 +210,49 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
   std::vector<float> volume(static_cast<std::size_t>(s) * static_cast<std::size_t>(s) * static_cast<std::size_t>(n_bins));
   const int quarter = n_bins / 4;
   const auto scale = static_cast<float>(1.0 / config_.temperature);
+  const auto plane = static_cast<std::size_t>(s) * static_cast<std::size_t>(s);
+  // Slices go to the (H, W, N) volume a batch of consecutive headings at a time, so that each
+  // cell's run of bins is written whole (one slice at a time would touch every cache line of
+  // the volume once per heading).
+  constexpr int kBatch = 16;
   auto work = [&](int j0, int j1) {
     std::array<cv::Mat, 4> acc;
+    for (auto& a : acc) a.create(n, n, CV_32F);
     cv::Mat product, correlation;
-    for (int j = j0; j < j1; ++j) {
-      for (auto& a : acc) a = cv::Mat::zeros(n, n, CV_32F);
-      const double heading = j * 360.0 / n_bins;
-      for (std::size_t o = 0; o < codes.size(); ++o) {
-        auto tmpl = rotated_template(observation, codes[o][0], codes[o][1], heading);
-        const cv::Mat fa = spectrum(cv::Mat(t, t, CV_32F, tmpl.data()), n);
-        for (std::size_t q = 0; q < 4; ++q) {
-          cv::mulSpectrums(map_spectra[o][q], fa, product, 0, /*conjB=*/true);
-          acc[q] += product;
+    std::vector<float> batch(static_cast<std::size_t>(4 * kBatch) * plane);  // [q][heading - jb][v][u]
+    for (int jb = j0; jb < j1; jb += kBatch) {
+      const int je = std::min(j1, jb + kBatch);
+      for (int j = jb; j < je; ++j) {
+        for (auto& a : acc) a.setTo(0);
+        const double heading = j * 360.0 / n_bins;
+        for (std::size_t o = 0; o < codes.size(); ++o) {
+          auto tmpl = rotated_template(observation, codes[o][0], codes[o][1], heading);
+          const cv::Mat fa = spectrum(cv::Mat(t, t, CV_32F, tmpl.data()), n);
+          for (std::size_t q = 0; q < 4; ++q) {
+            cv::mulSpectrums(map_spectra[o][q], fa, product, 0, /*conjB=*/true);
+            acc[q] += product;
+          }
+        }
+        // corr(R_q A, M) = R_q corr(A, R_q^-1 M): heading + q quarter turns from one template.
+        // Only the first s rows of the correlation are wanted.
+        for (int q = 0; q < 4; ++q) {
+          cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE,
+                  s);
+          const cv::Mat slice = rotate_cw(correlation(cv::Rect(0, 0, s, s)), q);
+          float* dst = batch.data() + (static_cast<std::size_t>(q) * kBatch + static_cast<std::size_t>(j - jb)) * plane;
+          for (int v = 0; v < s; ++v) {
+            const auto* row = slice.ptr<float>(v);
+            std::copy(row, row + s, dst + static_cast<std::size_t>(v) * static_cast<std::size_t>(s));
+          }
         }
       }
-      // corr(R_q A, M) = R_q corr(A, R_q^-1 M): heading + q quarter turns from one template.
-      for (int q = 0; q < 4; ++q) {
-        cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE);
-        const cv::Mat slice = rotate_cw(correlation(cv::Rect(0, 0, s, s)), q);
-        const std::size_t bin = flat(q, j, quarter);  // heading bin j + q quarter turns
-        for (int v = 0; v < s; ++v) {
-          const auto* row = slice.ptr<float>(v);
-          float* out = volume.data() + static_cast<std::size_t>(v) * static_cast<std::size_t>(s) * static_cast<std::size_t>(n_bins) + bin;
-          for (int u = 0; u < s; ++u) out[static_cast<std::size_t>(u) * static_cast<std::size_t>(n_bins)] = row[u] * scale;
+      const auto count = static_cast<std::size_t>(je - jb);
+      for (std::size_t cell = 0; cell < plane; ++cell) {
+        float* out = volume.data() + cell * static_cast<std::size_t>(n_bins);
+        for (std::size_t q = 0; q < 4; ++q) {
+          float* run = out + flat(static_cast<int>(q), jb, quarter);  // bins jb .. je - 1 of quarter q
+          const float* src = batch.data() + q * kBatch * plane + cell;
+          for (std::size_t k = 0; k < count; ++k) run[k] = src[k * plane] * scale;
         }
       }
     }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <random>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -38,15 +39,17 @@ std::vector<std::uint8_t> random_map(int side, std::uint32_t seed) {
 }
 
 TEST(Matcher, FftCorrelationEqualsDirectSum) {
-  for (int headings : {8, 16}) {
+  // FFT sizes 16, 18 and 27 (odd), and 80 headings (batches of 16 headings written to the volume,
+  // across two threads).
+  for (const auto& [size, headings] : {std::pair{10, 8}, std::pair{10, 16}, std::pair{20, 16}, std::pair{12, 80}}) {
     MatcherConfig config;
-    config.size = 10;
+    config.size = size;
     config.headings = headings;
     config.temperature = 3.0;
     config.threads = 2;
     const BevMatcher matcher(config);
     const int t = 7, side = matcher.map_side(t);
-    const auto map = random_map(side, 11u + static_cast<std::uint32_t>(headings));
+    const auto map = random_map(side, 11u + static_cast<std::uint32_t>(headings + size));
     Observation obs(t);
     std::mt19937 rng(5);
     for (std::size_t i = 0; i < obs.cells(); ++i) {
@@ -85,8 +88,9 @@ TEST(Matcher, FftCorrelationEqualsDirectSum) {
         }
       }
     }
-    // float32 FFTs of size 16: errors of a few 1e-6 of the largest score.
-    EXPECT_LT(worst, 1e-4 * largest) << headings << " headings: worst " << worst << " of " << largest;
+    // float32 FFTs of size 16-27: errors of a few 1e-6 of the largest score.
+    EXPECT_LT(worst, 1e-4 * largest) << size << " cells, " << headings << " headings: worst " << worst << " of "
+                                     << largest;
     EXPECT_GT(largest, 1.0);
   }
 }
