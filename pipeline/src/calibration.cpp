@@ -210,12 +210,9 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
       convolve_blocks_in_place(p, height, W * N, b0, b1, taps);
     });
   }
+  // A plain loop: a vectorized reduction would group the terms by the buffer's address.
   double sum = 0;
-  constexpr std::size_t kBlock = 1 << 14;
-  for (std::size_t start = 0; start < cells; start += kBlock) {
-    const auto n = static_cast<Eigen::Index>(std::min(kBlock, cells - start));
-    sum += static_cast<double>(ConstArrayMap(p + start, n).sum());
-  }
+  for (std::size_t i = 0; i < cells; ++i) sum += static_cast<double>(p[i]);
   const auto scale = static_cast<float>((1 - a) / sum), uniform = static_cast<float>(a / static_cast<double>(cells));
   vectorized(p, cells, threads, [scale, uniform](const Eigen::ArrayXf& x) {
     return (x * scale + uniform).max(std::numeric_limits<float>::min()).log().eval();
