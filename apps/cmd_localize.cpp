@@ -94,6 +94,9 @@ class LocalizeCommand : public Command {
     app.add_option("--frame-memory", options_.frame_memory_mb,
                    "Memory for the frames a route's modes share, MB (float16; beyond it they go to a temporary file)")
         ->default_val(options_.frame_memory_mb);
+    app.add_flag("--beliefs", options_.keep_beliefs,
+                 "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings) and beliefs.csv "
+                 "(their windows), which seqloc render then draws without running the filter again");
     app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
     app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
     app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"

@@ -18,8 +18,9 @@ class RenderCommand : public Command {
     app.add_option("route", route_dir_, "Route folder (route.json + frames.csv)")->required();
     app.add_option("-o,--output", out_, "Folder for the PNG figures (created)")->required();
     app.add_option("--localized", localized_,
-                   "An output folder of seqloc localize for this route (its modes' poses are drawn); without it, "
-                   "single and seqloc are run here");
+                   "An output folder of seqloc localize for this route (its modes' poses are drawn, and the SeqLoc "
+                   "beliefs it kept with --beliefs, without running the filter again); without it, single and seqloc "
+                   "are run here");
     app.add_option("--frame", frame_,
                    "Frame of the likelihood figure (index from 0), or 'sharpest': the frame after the first whose own "
                    "likelihood has the lowest entropy (where the belief collapses)")
@@ -50,6 +51,7 @@ class RenderCommand : public Command {
       for (const char* mode : {"single", "offline", "online", "seqloc"}) {
         if (fs::exists(dir / mode / "poses.csv")) poses.emplace_back(mode, pipeline::read_poses_csv(dir / mode / "poses.csv"));
       }
+      options_.beliefs_dir = dir / "seqloc";  // used when localize kept the beliefs (--beliefs)
     } else {
       for (const auto mode : {pipeline::Mode::single, pipeline::Mode::seqloc}) {
         poses.emplace_back(pipeline::mode_name(mode), pipeline::localize_route(route, cache, options_.localize, mode).poses);

@@ -85,12 +85,12 @@ std::string observation_routes(const fs::path& work) {
   std::string json;
   char field[160];
   for (const auto& [mode, r] : alone) {
-    std::snprintf(field, sizeof field, ", \"obs_%s_frames_per_s\": %.2f, \"obs_%s_peak_mb\": %.0f", mode.c_str(),
+    std::snprintf(field, sizeof field, R"(, "obs_%s_frames_per_s": %.2f, "obs_%s_peak_mb": %.0f)", mode.c_str(),
                   frames / r.first, mode.c_str(), r.second);
     json += field;
   }
-  std::snprintf(field, sizeof field, ", \"obs_all_s\": %.1f, \"obs_alone_sum_s\": %.1f, \"obs_all_over_alone\": %.3f, "
-                "\"obs_all_peak_mb\": %.0f", all.first, sum, all.first / sum, all.second);
+  std::snprintf(field, sizeof field, R"(, "obs_all_s": %.1f, "obs_alone_sum_s": %.1f, "obs_all_over_alone": %.3f, )"
+                R"("obs_all_peak_mb": %.0f)", all.first, sum, all.first / sum, all.second);
   return json + field;
 }
 

@@ -139,6 +139,15 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
   };
 }
 
+std::vector<float> belief_marginal(const filter::BeliefVolume& belief) {
+  std::vector<double> mass(belief.slice_cells(), 0.0);
+  for (int k = 0; k < belief.headings(); ++k) {
+    const float* slice = belief.slice(k);
+    for (std::size_t i = 0; i < mass.size(); ++i) mass[i] += slice[i];
+  }
+  return {mass.begin(), mass.end()};
+}
+
 const char* mode_name(Mode mode) {
   switch (mode) {
     case Mode::seqloc:
@@ -240,7 +249,11 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
                            const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   options.validate();
   check_crops(route, cache.grid(), cache.metadata().projection(), options);
-  if (!source) source = route_frames(route, cache, options);
+  if (!source) {  // the route's frames with the values localize_routes gives every mode (float16)
+    auto store = std::make_shared<FrameStore>(route_frames(route, cache, options), route.frames.size(), 1,
+                                              options.frame_memory_mb << 20, options.spill_dir);
+    source = [store](std::size_t i) { return store->take(i); };
+  }
   const RegionFrame region{cache.grid(), cache.metadata().projection()};
   filter::FilterConfig config = options.filter;
   if (mode == Mode::online) config.etu = config.mgr = config.pas = false;
@@ -395,6 +408,13 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
       const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data(), fix ? &*fix : nullptr);
       result.filter_seconds += seconds_since(t0);
       if (inspect) inspect({i, &frame, crop, &filter->belief(), origin_u, origin_v});
+      if (options.keep_beliefs) {
+        const auto marginal = belief_marginal(filter->belief());
+        result.belief_width = W;
+        result.belief_height = H;
+        result.beliefs.insert(result.beliefs.end(), marginal.begin(), marginal.end());
+        result.belief_origins.push_back({origin_u, origin_v});
+      }
       kept.erase(i);
       x = region.x_of(r.pose.u + static_cast<double>(origin_u));
       y = region.y_of(r.pose.v + static_cast<double>(origin_v));

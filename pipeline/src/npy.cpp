@@ -250,4 +250,20 @@ NpyVolume& NpyVolume::operator=(NpyVolume&& o) noexcept {
   return *this;
 }
 
+std::string encode_npy_float32(int d0, int d1, int d2, const float* data) {
+  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + std::to_string(d0) + ", " +
+                       std::to_string(d1) + ", " + std::to_string(d2) + "), }";
+  // Magic (6), version (2), header length (2) and the header padded with spaces to a multiple of
+  // 64 bytes, ended by a newline.
+  header.append((64 - (10 + header.size() + 1) % 64) % 64, ' ');
+  header.push_back('\n');
+  std::string out("\x93NUMPY\x01\x00", 8);
+  out.push_back(static_cast<char>(header.size() & 0xff));
+  out.push_back(static_cast<char>(header.size() >> 8));
+  out += header;
+  const std::size_t bytes = static_cast<std::size_t>(d0) * static_cast<std::size_t>(d1) * static_cast<std::size_t>(d2) * 4;
+  out.append(reinterpret_cast<const char*>(data), bytes);  // little-endian hosts only, as the reader
+  return out;
+}
+
 }  // namespace seqloc::pipeline

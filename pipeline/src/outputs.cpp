@@ -154,6 +154,17 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   metrics.update(metrics_json(compute_metrics(all)));
   write_file(dir / "metrics.json", metrics.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
+
+  if (!r.beliefs.empty()) {
+    const auto frames = static_cast<int>(r.belief_origins.size());
+    write_file(dir / "beliefs.npy", encode_npy_float32(frames, r.belief_height, r.belief_width, r.beliefs.data()));
+    std::string origins = "frame,origin_u,origin_v\n";
+    for (std::size_t i = 0; i < r.belief_origins.size(); ++i) {
+      origins += r.poses.at(i).frame + "," + std::to_string(r.belief_origins[i][0]) + "," +
+                 std::to_string(r.belief_origins[i][1]) + "\n";
+    }
+    write_file(dir / "beliefs.csv", origins);
+  }
 }
 
 std::string format_table(const MetricsByMode& metrics) {

@@ -1,16 +1,20 @@
 #include "seqloc/pipeline/render.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "seqloc/osm/classes.hpp"
+#include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
@@ -22,6 +26,52 @@ namespace seqloc::pipeline {
 namespace {
 
 constexpr double kCellM = raster::kCellM;
+
+// What `localize --beliefs` kept for a route and mode: beliefs.npy, (frames, height, width)
+// float32, and each frame window's origin in beliefs.csv. Throws DataError naming the file when
+// they do not match the route.
+class KeptBeliefs {
+ public:
+  KeptBeliefs(const std::filesystem::path& dir, std::size_t frames) : npy_(dir / "beliefs.npy") {
+    if (npy_.type() != filter::VolumeType::float32 || static_cast<std::size_t>(npy_.height()) != frames) {
+      throw DataError((dir / "beliefs.npy").string() + ": expected float32 beliefs of " + std::to_string(frames) +
+                      " frames (the route's), found " + std::to_string(npy_.height()));
+    }
+    const auto csv = dir / "beliefs.csv";
+    std::ifstream in(csv);
+    std::string line;
+    int number = 1;
+    if (!in || !std::getline(in, line) || line != "frame,origin_u,origin_v") {
+      throw DataError(csv.string() + ": missing, or not a beliefs.csv (header frame,origin_u,origin_v)");
+    }
+    while (std::getline(in, line)) {
+      ++number;
+      const auto a = line.find(','), b = line.rfind(',');
+      try {
+        if (a == std::string::npos || a == b) throw std::invalid_argument("fields");
+        origins_.push_back({std::stoll(line.substr(a + 1, b - a - 1)), std::stoll(line.substr(b + 1))});
+      } catch (const std::exception&) {
+        throw DataError(csv.string() + ":" + std::to_string(number) + ": expected frame,origin_u,origin_v");
+      }
+    }
+    if (origins_.size() != frames) {
+      throw DataError(csv.string() + ": " + std::to_string(origins_.size()) + " rows for a route of " +
+                      std::to_string(frames) + " frames");
+    }
+  }
+  [[nodiscard]] int width() const { return npy_.bins(); }
+  [[nodiscard]] int height() const { return npy_.width(); }
+  [[nodiscard]] std::vector<double> marginal(std::size_t frame) const {
+    const std::size_t cells = static_cast<std::size_t>(width()) * static_cast<std::size_t>(height());
+    const float* p = static_cast<const float*>(npy_.data()) + frame * cells;
+    return {p, p + cells};
+  }
+  [[nodiscard]] const std::array<std::int64_t, 2>& origin(std::size_t frame) const { return origins_.at(frame); }
+
+ private:
+  NpyVolume npy_;
+  std::vector<std::array<std::int64_t, 2>> origins_;
+};
 using Rgb = cv::Vec3b;
 
 // Colours (RGB) per class code, in the spirit of OpenStreetMap's carto style.
@@ -206,43 +256,23 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
     truth.push_back(pixel_of(g.x_m, g.y_m));
   }
 
-  // 1. The qualitative figure: run SeqLoc up to the frame, keep its likelihood and the belief.
+  // 1. The qualitative figure: the SeqLoc belief before and after the frame, from what localize
+  // kept (beliefs.npy) or by running SeqLoc up to the frame, and the frame's own likelihood.
   {
-    Route head = route;
-    head.frames.resize(options.frame + 1);
     std::vector<double> frame_mass, belief_mass, before_mass;
     std::int64_t ou = 0, ov = 0, before_ou = 0, before_ov = 0;
     int bw = 0, bh = 0;
     double entropy = 0;
-    auto marginal = [](const filter::BeliefVolume& b) {
-      std::vector<double> mass(b.slice_cells(), 0.0);
-      for (int k = 0; k < b.headings(); ++k) {
-        const float* s = b.slice(k);
-        for (std::size_t i = 0; i < b.slice_cells(); ++i) mass[i] += s[i];
-      }
-      return mass;
-    };
-    const auto result = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
-      if (options.frame > 0 && in.index + 1 == options.frame) {  // the belief the frame arrives on
-        before_mass = marginal(*in.belief);
-        before_ou = in.origin_u;
-        before_ov = in.origin_v;
-        return;
-      }
-      if (in.index != options.frame) return;
-      const auto& b = *in.belief;
-      bw = b.width();
-      bh = b.height();
-      ou = in.origin_u;
-      ov = in.origin_v;
-      entropy = in.frame->entropy;
-      belief_mass = marginal(b);
-      // The frame's own likelihood, placed by its crop into the window.
-      frame_mass.assign(b.slice_cells(), 0.0);
-      const auto& f = *in.frame;
-      const double cu = grid.region_u(in.crop.x) - static_cast<double>(ou);
-      const double cv_ = grid.region_v(in.crop.y) - static_cast<double>(ov);
-      const double rot = in.crop.rotation_deg * M_PI / 180.0, scale = f.cell_m / kCellM;
+    std::vector<FramePose> run_poses;
+    const std::vector<FramePose>* poses_shown = nullptr;
+    auto as_double = [](const std::vector<float>& v) { return std::vector<double>(v.begin(), v.end()); };
+    // The frame's own likelihood, placed by its crop into the window (ou, ov, bw, bh set).
+    auto place_frame = [&](const filter::PreparedFrame& f, const GridCrop& crop) {
+      entropy = f.entropy;
+      frame_mass.assign(static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh), 0.0);
+      const double cu = grid.region_u(crop.x) - static_cast<double>(ou);
+      const double cv_ = grid.region_v(crop.y) - static_cast<double>(ov);
+      const double rot = crop.rotation_deg * M_PI / 180.0, scale = f.cell_m / kCellM;
       const std::vector<double> own = position_marginal(f);
       for (int v = 0; v < f.height; ++v) {
         for (int u = 0; u < f.width; ++u) {
@@ -253,7 +283,47 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
           if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) frame_mass[static_cast<std::size_t>(wv * bw + wu)] += m;
         }
       }
-    });
+    };
+    const auto kept = options.beliefs_dir / "beliefs.npy";
+    if (!options.beliefs_dir.empty() && std::filesystem::exists(kept)) {
+      const KeptBeliefs beliefs(options.beliefs_dir, route.frames.size());
+      bw = beliefs.width();
+      bh = beliefs.height();
+      belief_mass = beliefs.marginal(options.frame);
+      ou = beliefs.origin(options.frame)[0];
+      ov = beliefs.origin(options.frame)[1];
+      if (options.frame > 0) {
+        before_mass = beliefs.marginal(options.frame - 1);
+        before_ou = beliefs.origin(options.frame - 1)[0];
+        before_ov = beliefs.origin(options.frame - 1)[1];
+      }
+      // The frame as localize saw it: through a FrameStore (float16 values).
+      FrameStore store(route_frames(route, cache, options.localize), route.frames.size(), 1, std::size_t{1} << 30);
+      const auto frame = store.take(options.frame);
+      place_frame(*frame, frame_crop(route.frames[options.frame], grid, projection));
+      for (const auto& [mode, p] : poses_by_mode) {
+        if (mode == "seqloc" && p.size() == route.frames.size()) poses_shown = &p;
+      }
+    } else {
+      Route head = route;
+      head.frames.resize(options.frame + 1);
+      run_poses = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
+                    if (options.frame > 0 && in.index + 1 == options.frame) {  // the belief the frame arrives on
+                      before_mass = as_double(belief_marginal(*in.belief));
+                      before_ou = in.origin_u;
+                      before_ov = in.origin_v;
+                      return;
+                    }
+                    if (in.index != options.frame) return;
+                    bw = in.belief->width();
+                    bh = in.belief->height();
+                    ou = in.origin_u;
+                    ov = in.origin_v;
+                    belief_mass = as_double(belief_marginal(*in.belief));
+                    place_frame(*in.frame, in.crop);
+                  }).poses;
+      poses_shown = &run_poses;
+    }
     const int factor = bw <= 400 ? 2 : 1;
     // The map of the window whose corner is (at_u, at_v), read once per window.
     auto window_map = [&](std::int64_t at_u, std::int64_t at_v) {
@@ -279,7 +349,9 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       text(framed, title, cv::Point(6, 20), 0.5);
       return framed;
     };
-    auto error_text = [](const FramePose& p) {
+    auto error_text = [&](std::size_t index) {
+      if (!poses_shown) return std::string();
+      const FramePose& p = poses_shown->at(index);
       return p.position_error_m ? ", error " + fmt(*p.position_error_m, 1) + " m" : std::string();
     };
     // Before (the belief frame K arrives on, when K > 0), the frame's own likelihood, after.
@@ -289,12 +361,12 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       const bool moved = before_ou != ou || before_ov != ov;  // the window re-centred for frame K
       panels.push_back(panel(moved ? window_map(before_ou, before_ov) : map, before_mass,
                              "SeqLoc belief after frame " + std::to_string(options.frame - 1) +
-                                 error_text(result.poses[options.frame - 1]),
+                                 error_text(options.frame - 1),
                              before_ou, before_ov, options.frame - 1));
     }
     panels.push_back(panel(map, frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")",
                            ou, ov, options.frame));
-    panels.push_back(panel(map, belief_mass, "SeqLoc belief after frame " + std::to_string(options.frame) + error_text(result.poses.back()),
+    panels.push_back(panel(map, belief_mass, "SeqLoc belief after frame " + std::to_string(options.frame) + error_text(options.frame),
                            ou, ov, options.frame));
     int width = 0;
     for (const auto& p : panels) width += p.cols + 10;

@@ -55,7 +55,7 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   EXPECT_EQ(test::read_file(dir / "alone/route_001/seqloc/poses.csv"),
             test::read_file(dir / "localized/route_001/seqloc/poses.csv"));
   r = run_seqloc({"-v", "localize", cache, routes + "/route_000", routes + "/route_001", "-o", spilled, "--mode", "all",
-                  "--window", "192", "--threads", "2", "--frame-memory", "0"});
+                  "--window", "192", "--threads", "2", "--frame-memory", "0", "--beliefs"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("20 volumes scored or read once for 4 modes; 20 spilled"), std::string::npos) << r.err;
   for (const char* route : {"route_000", "route_001"}) {
@@ -71,6 +71,20 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   for (const char* file : {"likelihood_4.png", "entropy_route.png", "error_over_time.png"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "figures" / file)) << file;
   }
+  // With the beliefs localize kept (--beliefs), render draws them instead of running the filter
+  // again: the same picture, byte for byte.
+  EXPECT_TRUE(std::filesystem::exists(dir / "spilled/route_001/seqloc/beliefs.npy"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "spilled/route_001/single/beliefs.npy"));
+  r = run_seqloc({"render", cache, routes + "/route_001", "--localized", spilled, "-o", (dir / "kept").string(),
+                  "--frame", "4", "--window", "192"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(test::read_file(dir / "kept/likelihood_4.png"), test::read_file(dir / "figures/likelihood_4.png"));
+  // Beliefs that do not belong to the route: one clear error naming the file.
+  std::ofstream(dir / "spilled/route_001/seqloc/beliefs.csv") << "frame,origin_u,origin_v\n0,1,2\n";
+  r = run_seqloc({"render", cache, routes + "/route_001", "--localized", spilled, "-o", (dir / "kept").string(),
+                  "--frame", "4", "--window", "192"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("beliefs.csv: 1 rows for a route of 10 frames"), std::string::npos) << r.err;
   r = run_seqloc({"render", cache, routes + "/route_001", "-o", (dir / "figures").string(), "--frame", "10"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("frame 10"), std::string::npos) << r.err;

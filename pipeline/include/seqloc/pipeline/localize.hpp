@@ -4,6 +4,7 @@
 // every pose crosses the interface in the conventions' terms (conventions.md sections 1 and 7).
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -45,6 +46,9 @@ struct LocalizeOptions {
   /// localize_routes: memory for the frames the modes of a route share (float16, MB, all routes in
   /// flight together); frames beyond it go to an unlinked temporary file in `spill_dir`.
   std::size_t frame_memory_mb = 1024;
+  /// Online and seqloc modes: keep each frame's belief summed over headings in RouteResult::beliefs
+  /// (frames x window cells x 4 bytes per route and mode), for pictures drawn later.
+  bool keep_beliefs = false;
   std::filesystem::path spill_dir;  ///< empty: the system's temporary directory
 
   [[nodiscard]] double crop_jump_limit_m() const {
@@ -76,7 +80,17 @@ struct RouteResult {
   double prepare_seconds = 0;
   double filter_seconds = 0;
   double wait_seconds = 0;
+  /// With LocalizeOptions::keep_beliefs (online and seqloc): after each frame, belief_marginal of
+  /// the belief, (frames, belief_height, belief_width) row-major, and the region pixel of each
+  /// frame's window cell (0, 0).
+  int belief_width = 0, belief_height = 0;
+  std::vector<float> beliefs;
+  std::vector<std::array<std::int64_t, 2>> belief_origins;
 };
+
+/// A belief's position marginal: the sum over headings of each cell's probability (summed in
+/// double), row-major over the window.
+[[nodiscard]] std::vector<float> belief_marginal(const filter::BeliefVolume& belief);
 
 /// Where frame i's prepared (normalized) volume comes from. Called from a background task as
 /// well as from the calling thread, never twice at once.
@@ -120,8 +134,9 @@ struct FrameInspection {
 using FrameInspector = std::function<void(const FrameInspection&)>;
 
 /// Runs one route; `on_frame` (optional) is called after each frame, from the calling thread.
-/// `source` defaults to route_frames(route, cache, options); a caller running several modes on
-/// one route may share one that keeps the frames. Throws DataError (volumes), filter::FilterError
+/// `source` defaults to route_frames(route, cache, options) through a FrameStore, so that the
+/// frames have the float16 values localize_routes gives every mode; a caller running several
+/// modes on one route may share one that keeps the frames. Throws DataError (volumes), filter::FilterError
 /// or raster::CacheError. Routes may run in parallel threads on one CacheReader.
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                                          Mode mode, const std::function<void()>& on_frame = {},

@@ -56,6 +56,10 @@ class NpyVolume {
   filter::VolumeType type_ = filter::VolumeType::float32;
 };
 
+/// A C-order float32 array of shape (d0, d1, d2) as the bytes of a .npy file (format 1.0), which
+/// NpyVolume reads back.
+[[nodiscard]] std::string encode_npy_float32(int d0, int d1, int d2, const float* data);
+
 /// Largest volume accepted: 2^31 cells (8 GB of float32), far beyond any backbone's output.
 inline constexpr std::uint64_t kMaxVolumeCells = 1ull << 31;
 

@@ -40,12 +40,16 @@ struct Series {
 struct RenderOptions {
   std::size_t frame = 0;  ///< the frame of the likelihood figure
   LocalizeOptions localize;
+  /// A localize output folder of the route's seqloc mode (OUT/<route>/seqloc): when it holds
+  /// beliefs.npy (localize --beliefs), the likelihood figure draws the beliefs kept there and
+  /// scores the one frame, instead of running the filter up to the frame.
+  std::filesystem::path beliefs_dir;
 };
 
 /// Writes likelihood_FRAME.png, entropy_route.png and error_over_time.png for `route` into
 /// `out_dir` (created). `poses_by_mode` are localize's results for the same route (any modes;
 /// "seqloc" gives the entropy colours); the likelihood figure runs the filter itself up to the
-/// frame. Returns the files written.
+/// frame unless options.beliefs_dir has what localize kept. Returns the files written.
 std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, const Route& route,
                                                 const std::vector<std::pair<std::string, std::vector<FramePose>>>& poses_by_mode,
                                                 const RenderOptions& options, const std::filesystem::path& out_dir);
