@@ -20,6 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/render.hpp"
@@ -172,9 +173,11 @@ int main(int argc, char** argv) {
       options.matcher.miss_rate = miss_rate;
       // The route's volumes, once.
       const auto t0 = Clock::now();
-      auto source = pipeline::route_frames(route, cache, options);
+      // Through a FrameStore, so that the frames have the float16 values `seqloc localize` gives.
+      pipeline::FrameStore store(pipeline::route_frames(route, cache, options), route.frames.size(), 1,
+                                 std::size_t{1} << 30);
       std::vector<std::shared_ptr<const filter::PreparedFrame>> frames(route.frames.size());
-      for (std::size_t i = 0; i < frames.size(); ++i) frames[i] = source(i);
+      for (std::size_t i = 0; i < frames.size(); ++i) frames[i] = store.take(i);
       matcher_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
       frames_matched += frames.size();
       const pipeline::FrameSource shared = [&frames](std::size_t i) { return frames[i]; };
