@@ -20,7 +20,6 @@
 
 #include <nlohmann/json.hpp>
 
-#include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/render.hpp"
@@ -173,11 +172,10 @@ int main(int argc, char** argv) {
       options.matcher.miss_rate = miss_rate;
       // The route's volumes, once.
       const auto t0 = Clock::now();
-      // Through a FrameStore, so that the frames have the float16 values `seqloc localize` gives.
-      pipeline::FrameStore store(pipeline::route_frames(route, cache, options), route.frames.size(), 1,
-                                 std::size_t{1} << 30);
+      // The float16 values `seqloc localize` gives.
+      const auto source = pipeline::stored_route_frames(route, cache, options);
       std::vector<std::shared_ptr<const filter::PreparedFrame>> frames(route.frames.size());
-      for (std::size_t i = 0; i < frames.size(); ++i) frames[i] = store.take(i);
+      for (std::size_t i = 0; i < frames.size(); ++i) frames[i] = source(i);
       matcher_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
       frames_matched += frames.size();
       const pipeline::FrameSource shared = [&frames](std::size_t i) { return frames[i]; };

@@ -139,6 +139,12 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
   };
 }
 
+FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
+  auto store = std::make_shared<FrameStore>(route_frames(route, cache, options), route.frames.size(), 1,
+                                            options.frame_memory_mb << 20, options.spill_dir);
+  return [store](std::size_t i) { return store->take(i); };
+}
+
 std::vector<float> belief_marginal(const filter::BeliefVolume& belief) {
   std::vector<double> mass(belief.slice_cells(), 0.0);
   for (int k = 0; k < belief.headings(); ++k) {
@@ -249,11 +255,7 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
                            const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   options.validate();
   check_crops(route, cache.grid(), cache.metadata().projection(), options);
-  if (!source) {  // the route's frames with the values localize_routes gives every mode (float16)
-    auto store = std::make_shared<FrameStore>(route_frames(route, cache, options), route.frames.size(), 1,
-                                              options.frame_memory_mb << 20, options.spill_dir);
-    source = [store](std::size_t i) { return store->take(i); };
-  }
+  if (!source) source = stored_route_frames(route, cache, options);
   const RegionFrame region{cache.grid(), cache.metadata().projection()};
   filter::FilterConfig config = options.filter;
   if (mode == Mode::online) config.etu = config.mgr = config.pas = false;

@@ -14,7 +14,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include "seqloc/osm/classes.hpp"
-#include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
@@ -297,9 +296,7 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
         before_ou = beliefs.origin(options.frame - 1)[0];
         before_ov = beliefs.origin(options.frame - 1)[1];
       }
-      // The frame as localize saw it: through a FrameStore (float16 values).
-      FrameStore store(route_frames(route, cache, options.localize), route.frames.size(), 1, std::size_t{1} << 30);
-      const auto frame = store.take(options.frame);
+      const auto frame = stored_route_frames(route, cache, options.localize)(options.frame);  // as localize saw it
       place_frame(*frame, frame_crop(route.frames[options.frame], grid, projection));
       for (const auto& [mode, p] : poses_by_mode) {
         if (mode == "seqloc" && p.size() == route.frames.size()) poses_shown = &p;

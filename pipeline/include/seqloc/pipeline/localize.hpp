@@ -100,6 +100,12 @@ using FrameSource = std::function<std::shared_ptr<const filter::PreparedFrame>(s
 /// against the cache's class raster. Throws DataError naming the file.
 [[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
 
+/// route_frames through a FrameStore with one reader: each frame with the float16 values that
+/// localize_routes gives every mode, held only until it is taken. localize_route's default, and
+/// what render and the benchmark use to see the frames as localize saw them.
+[[nodiscard]] FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache,
+                                              const LocalizeOptions& options);
+
 /// The built-in matcher's raw volume for an observation frame: (size, size, headings) float32
 /// log-likelihood scores over the frame's crop (before any calibration). Throws DataError for an
 /// unreadable observation.
@@ -134,8 +140,7 @@ struct FrameInspection {
 using FrameInspector = std::function<void(const FrameInspection&)>;
 
 /// Runs one route; `on_frame` (optional) is called after each frame, from the calling thread.
-/// `source` defaults to route_frames(route, cache, options) through a FrameStore, so that the
-/// frames have the float16 values localize_routes gives every mode; a caller running several
+/// `source` defaults to stored_route_frames(route, cache, options); a caller running several
 /// modes on one route may share one that keeps the frames. Throws DataError (volumes), filter::FilterError
 /// or raster::CacheError. Routes may run in parallel threads on one CacheReader.
 [[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
