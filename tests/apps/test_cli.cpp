@@ -50,7 +50,7 @@ TEST(Cli, HelpOnEverySubcommand) {
   }
   const auto localize = run_seqloc({"localize", "--help"}).out;
   for (const char* option : {"--matcher-temperature", "--volume-temperature", "--etu-reference", "--outside-crop-nats",
-                             "--matcher-floor"}) {
+                             "--matcher-floor", "--shard", "--frame-memory", "--beliefs"}) {
     EXPECT_NE(localize.find(option), std::string::npos) << option;
   }
   const auto serve = run_seqloc({"serve", "--help"}).out;
