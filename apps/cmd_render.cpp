@@ -22,8 +22,9 @@ class RenderCommand : public Command {
                    "beliefs it kept with --beliefs, without running the filter again); without it, single and seqloc "
                    "are run here");
     app.add_option("--frame", frame_,
-                   "Frame of the likelihood figure (index from 0), or 'sharpest': the frame after the first whose own "
-                   "likelihood has the lowest entropy (where the belief collapses)")
+                   "Frame of the likelihood figure (index from 0); 'collapse': the frame on which the SeqLoc belief "
+                   "kept by localize --beliefs shrinks most (needs --localized); 'sharpest': the frame after the first "
+                   "whose own likelihood has the lowest entropy")
         ->default_val("0");
     app.add_option("--window", window_, "Belief window, cells")->default_val(256);
     app.add_option("--threads", options_.localize.filter.threads, "Threads")->default_val(2);
@@ -57,7 +58,14 @@ class RenderCommand : public Command {
         poses.emplace_back(pipeline::mode_name(mode), pipeline::localize_route(route, cache, options_.localize, mode).poses);
       }
     }
-    options_.frame = frame_ == "sharpest" ? sharpest_frame(poses) : parse_frame(frame_);
+    if (frame_ == "collapse") {
+      if (localized_.empty() || !fs::exists(options_.beliefs_dir / "beliefs.npy")) {
+        throw pipeline::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
+      }
+      options_.frame = pipeline::collapse_frame(options_.beliefs_dir, route.frames.size());
+    } else {
+      options_.frame = frame_ == "sharpest" ? sharpest_frame(poses) : parse_frame(frame_);
+    }
     for (const auto& file : pipeline::render_route(cache, route, poses, options_, out_)) std::printf("wrote %s\n", file.c_str());
     return kExitOk;
   }
@@ -65,7 +73,7 @@ class RenderCommand : public Command {
  private:
   static std::size_t parse_frame(const std::string& text) {
     const auto v = parse_numbers<std::size_t>(text, ',', 1);
-    if (!v) throw pipeline::UsageError("--frame '" + text + "': expected a frame index or 'sharpest'");
+    if (!v) throw pipeline::UsageError("--frame '" + text + "': expected a frame index, 'collapse' or 'sharpest'");
     return (*v)[0];
   }
 

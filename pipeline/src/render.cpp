@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -234,6 +235,30 @@ Picture plot(const std::vector<Series>& series, const std::string& title, const 
   text(m, x_label, cv::Point((w - right) / 2, h - 15));
   text(m, y_label, cv::Point(5, 25), 0.4);
   return from_mat(m);
+}
+
+std::size_t spread_cells(std::span<const double> marginal, double mass) {
+  std::vector<double> sorted(marginal.begin(), marginal.end());
+  std::sort(sorted.begin(), sorted.end(), std::greater<>());
+  double total = 0;
+  for (const double m : sorted) total += m;
+  double held = 0;
+  std::size_t cells = 0;
+  while (cells < sorted.size() && held < mass * total) held += sorted[cells++];
+  return std::max<std::size_t>(cells, 1);
+}
+
+std::size_t collapse_frame(const std::filesystem::path& beliefs_dir, std::size_t frames) {
+  const KeptBeliefs beliefs(beliefs_dir, frames);
+  std::size_t best = 0;
+  double best_ratio = 0;
+  auto before = static_cast<double>(spread_cells(beliefs.marginal(0)));
+  for (std::size_t t = 1; t < frames; ++t) {
+    const auto after = static_cast<double>(spread_cells(beliefs.marginal(t)));
+    if (before / after > best_ratio) best_ratio = before / after, best = t;
+    before = after;
+  }
+  return best;
 }
 
 std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, const Route& route,

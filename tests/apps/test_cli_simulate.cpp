@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "seqloc/pipeline/render.hpp"
+
 #include "support/test_support.hpp"
 
 namespace seqloc {
@@ -111,6 +113,16 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
                   "sharpest", "--window", "192"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(sharp_dir / ("likelihood_" + std::to_string(sharpest) + ".png"))) << r.out;
+  // 'collapse': where the kept SeqLoc belief shrinks most; without kept beliefs, a usage error.
+  const auto collapse = pipeline::collapse_frame(dir / "spilled/route_000/seqloc", 10);
+  r = run_seqloc({"render", cache, routes + "/route_000", "--localized", spilled, "-o", (dir / "collapse").string(),
+                  "--frame", "collapse", "--window", "192"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(std::filesystem::exists(dir / "collapse" / ("likelihood_" + std::to_string(collapse) + ".png"))) << r.out;
+  r = run_seqloc({"render", cache, routes + "/route_000", "--localized", out, "-o", (dir / "collapse").string(),
+                  "--frame", "collapse", "--window", "192"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--beliefs"), std::string::npos) << r.err;
 }
 
 TEST(CliSimulate, ABadObservationStopsLocalizeWithNothingWritten) {

@@ -46,6 +46,16 @@ struct RenderOptions {
   std::filesystem::path beliefs_dir;
 };
 
+/// Cells of the smallest set holding `mass` of a (non-negative) belief marginal: the area the
+/// belief is spread over, whatever its shape.
+[[nodiscard]] std::size_t spread_cells(std::span<const double> marginal, double mass = 0.9);
+
+/// The frame (after the first) on which the belief localize kept in `beliefs_dir` (beliefs.npy,
+/// beliefs.csv of `localize --beliefs`) collapses most: the largest ratio of spread_cells before
+/// the frame to spread_cells after it. Throws DataError naming the file when the beliefs are
+/// missing or are not the route's (`frames` frames).
+[[nodiscard]] std::size_t collapse_frame(const std::filesystem::path& beliefs_dir, std::size_t frames);
+
 /// Writes likelihood_FRAME.png, entropy_route.png and error_over_time.png for `route` into
 /// `out_dir` (created). `poses_by_mode` are localize's results for the same route (any modes;
 /// "seqloc" gives the entropy colours); the likelihood figure runs the filter itself up to the
