@@ -72,7 +72,8 @@ struct OfflineAggregator::Canvas {
 
 struct OfflineAggregator::Impl {
   std::map<std::int64_t, Canvas> kept;  // by OfflineFrame::key
-  std::vector<float> relative, blend;
+  AlignedVector<float> relative;
+  std::vector<float> blend;
 };
 
 OfflineAggregator::OfflineAggregator(const FilterConfig& config)
@@ -155,7 +156,8 @@ Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::si
   if (bu0 > bu1 || bv0 > bv1) bu0 = 0, bv0 = 0, bu1 = W - 1, bv1 = H - 1;  // frame t's crop outside the window
   const int bw = bu1 - bu0 + 1, bh = bv1 - bv0 + 1;
   const auto box = static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh);
-  std::vector<float> sum(box * static_cast<std::size_t>(R), 0.0f), own_box(sum.size());
+  AlignedVector<float> sum(box * static_cast<std::size_t>(R), 0.0f);
+  std::vector<float> own_box(sum.size());
   const float nan = std::numeric_limits<float>::quiet_NaN();
 
   for (std::size_t s = s0; s <= s1; ++s) {

@@ -352,7 +352,7 @@ Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, 
 
 struct SeqLocFilter::Impl {
   BeliefVolume scratch;          // the other buffer of predict
-  std::vector<float> tempered;   // the frame's p^w / max, heading-major
+  AlignedVector<float> tempered;  // the frame's p^w / max, heading-major
   struct Worker {
     std::vector<float> sample, blend;
   };

@@ -52,7 +52,7 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   // The modes share each route's volumes, scored once: a mode alone gives the same poses, and so
   // do frames spilled to the temporary file (--frame-memory 0) instead of kept in memory.
   const auto alone = (dir / "alone").string(), spilled = (dir / "spilled").string();
-  r = run_seqloc({"localize", cache, routes + "/route_001", "-o", alone, "--mode", "seqloc", "--window", "192"});
+  r = run_seqloc({"localize", cache, routes + "/route_001", "-o", alone, "--mode", "seqloc", "--window", "192", "--beliefs"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(test::read_file(dir / "alone/route_001/seqloc/poses.csv"),
             test::read_file(dir / "localized/route_001/seqloc/poses.csv"));
@@ -66,6 +66,12 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
                 test::read_file(dir / "localized" / route / mode / "poses.csv"))
           << route << "/" << mode;
     }
+  }
+  // To the last bit: a mode run beside others on other threads (and other heap addresses) keeps
+  // the beliefs and the full-precision metrics of the same mode alone.
+  for (const char* file : {"beliefs.npy", "metrics.json"}) {
+    EXPECT_EQ(test::read_file(dir / "alone/route_001/seqloc" / file), test::read_file(dir / "spilled/route_001/seqloc" / file))
+        << file;
   }
   r = run_seqloc({"render", cache, routes + "/route_001", "--localized", out, "-o", (dir / "figures").string(), "--frame",
                   "4", "--window", "192"});

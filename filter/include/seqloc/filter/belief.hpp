@@ -12,6 +12,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "seqloc/filter/aligned.hpp"
+
 namespace seqloc::filter {
 
 class BeliefVolume {
@@ -57,7 +59,7 @@ class BeliefVolume {
 
  private:
   int width_, height_, headings_;
-  std::vector<float> data_;
+  AlignedVector<float> data_;
 };
 
 }  // namespace seqloc::filter

@@ -35,7 +35,7 @@ inline constexpr float kLogZero = -1e30f;
 struct PreparedFrame {
   int height = 0, width = 0, bins = 0;
   double cell_m = 0.5;
-  std::vector<float> log_prob;  ///< [bin][v][u]
+  AlignedVector<float> log_prob;  ///< [bin][v][u]
   double log_cells = 0;         ///< log M
   double entropy = 0;           ///< H_hat = -sum p log p / log M, in [0, 1]
   float max_log_prob = 0;       ///< the largest normalized log-probability
