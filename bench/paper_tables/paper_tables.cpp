@@ -223,9 +223,7 @@ int main(int argc, char** argv) {
   }
 
   auto metrics = [&](const std::string& config, const std::string& group) {
-    std::vector<const pipeline::FramePose*> p;
-    for (const auto& f : poses[config][group]) p.push_back(&f);
-    return pipeline::compute_metrics(p);
+    return pipeline::compute_metrics(poses[config][group]);
   };
   std::ostringstream md;
   nlohmann::ordered_json results;

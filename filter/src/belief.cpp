@@ -41,8 +41,6 @@ void BeliefVolume::set_gaussian(double u0, double v0, double sigma_cells) {
 
 void BeliefVolume::recentre(int du, int dv) {
   if (du == 0 && dv == 0) return;
-  origin_u += du;
-  origin_v += dv;
   const float fill = min_value();
   std::vector<float> copy(slice_cells());
   for (int k = 0; k < headings_; ++k) {

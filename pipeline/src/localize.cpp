@@ -3,11 +3,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <chrono>
 #include <cstring>
-#include <future>
 #include <iomanip>
-#include <map>
 #include <mutex>
 #include <thread>
 #include <random>
@@ -15,10 +12,10 @@
 
 #include <GeographicLib/Geodesic.hpp>
 
-#include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/frame_store.hpp"
+#include "seqloc/pipeline/modes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/observation.hpp"
 
@@ -31,17 +28,6 @@ double wrap360(double d) {
   d = std::fmod(d, 360.0);
   return d < 0 ? d + 360.0 : d;
 }
-
-// The region's raster geometry: grid metres <-> region pixels (continuous, integral at centres).
-struct RegionFrame {
-  raster::RegionGrid grid;
-  osm::RegionProjection projection;
-
-  [[nodiscard]] double pixel_u(double x) const { return grid.region_u(x); }
-  [[nodiscard]] double pixel_v(double y) const { return grid.region_v(y); }
-  [[nodiscard]] double x_of(double u) const { return grid.min_x() + (u + 0.5) * kCellM; }
-  [[nodiscard]] double y_of(double v) const { return grid.max_y() - (v + 0.5) * kCellM; }
-};
 
 // A frame's .npy volume as the filter takes it, (H, W, N). An NHW volume is transposed into
 // `buffer`; an undeclared layout whose shape reads better as (N, H, W) is refused, since reading
@@ -251,207 +237,60 @@ double heading_difference_deg(double a, double b) {
   return std::min(d, 360.0 - d);
 }
 
+namespace {
+
+// The pose a mode estimated, in every form the outputs take, with its errors against ground truth.
+FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::RegionProjection& projection) {
+  FramePose pose;
+  pose.entropy = e.entropy;
+  pose.etu_weight = e.etu_weight;
+  pose.relocalized = e.relocalized;
+  double gamma = 0;
+  const osm::GeoPoint geo = projection.reverse({e.x_m, e.y_m}, gamma);
+  pose.frame = f.frame;
+  pose.timestamp_s = f.timestamp_s;
+  pose.x_m = e.x_m;
+  pose.y_m = e.y_m;
+  pose.lat_deg = geo.lat_deg;
+  pose.lon_deg = geo.lon_deg;
+  pose.compass_heading_deg = wrap360(e.grid_heading_deg + gamma);  // compass = grid + gamma
+  pose.grid_heading_deg = wrap360(e.grid_heading_deg);
+  if (f.truth) {
+    double gamma_true = 0;
+    const auto t = projection.forward(f.truth->where, gamma_true);
+    const double ex = e.x_m - t.x_m, ey = e.y_m - t.y_m;
+    pose.position_error_m = std::hypot(ex, ey);
+    if (f.truth->heading_deg) {
+      pose.heading_error_deg = heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
+      const double h = (*f.truth->heading_deg - gamma_true) * M_PI / 180.0;  // true grid heading
+      pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);
+      pose.lateral_error_m = -ex * std::cos(h) + ey * std::sin(h);
+    }
+  }
+  return pose;
+}
+
+}  // namespace
+
 RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                            const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   options.validate();
-  check_crops(route, cache.grid(), cache.metadata().projection(), options);
+  const auto& projection = cache.metadata().projection();
+  check_crops(route, cache.grid(), projection, options);
   if (!source) source = stored_route_frames(route, cache, options);
-  const RegionFrame region{cache.grid(), cache.metadata().projection()};
-  filter::FilterConfig config = options.filter;
-  if (mode == Mode::online) config.etu = config.mgr = config.pas = false;
-  const int W = config.width, H = config.height;
-
+  const auto estimator = make_mode(mode, {route, cache, options, inspect});
+  FramePrefetcher frames(std::move(source), route.frames.size(), estimator->lookahead());
   RouteResult result;
   result.route = route.name;
   result.mode = mode;
-
-  std::optional<filter::SeqLocFilter> filter;
-  std::optional<filter::OfflineAggregator> offline;  // keeps each frame's placement while in range
-  std::vector<float> road_m(static_cast<std::size_t>(W) * H);
-  std::vector<std::uint16_t> road_cm;
-  std::int64_t origin_u = 0, origin_v = 0;  // region pixel of window cell (0, 0)
-  auto load_road = [&] {
-    cache.read_road_distance(origin_u, origin_v, W, H, road_cm, /*fill_outside=*/true);
-    for (std::size_t i = 0; i < road_m.size(); ++i) road_m[i] = static_cast<float>(road_cm[i] * 0.01);
-  };
-  auto centre_on = [&](double region_u, double region_v) {
-    origin_u = static_cast<std::int64_t>(std::lround(region_u)) - W / 2;
-    origin_v = static_cast<std::int64_t>(std::lround(region_v)) - H / 2;
-  };
-
-  // Re-centres the window by whole cells on window position (u, v) when it lies within the
-  // margin of an edge (or outside).
-  auto keep_in_window = [&](double u, double v) {
-    const double mu = options.recentre_margin * W, mv = options.recentre_margin * H;
-    if (u >= mu && u <= W - 1 - mu && v >= mv && v <= H - 1 - mv) return;
-    const auto du = static_cast<int>(std::lround(u)) - W / 2, dv = static_cast<int>(std::lround(v)) - H / 2;
-    filter->recentre(du, dv);
-    origin_u += du;
-    origin_v += dv;
-    load_road();
-    ++result.recentres;
-  };
-
-  using Clock = std::chrono::steady_clock;
-  auto seconds_since = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
-  // Reading and preparing a volume (run ahead of the filter on a background task).
-  auto load = [&source](std::size_t s, double* seconds) {
-    const auto t0 = Clock::now();
-    auto frame = source(s);
-    *seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    return frame;
-  };
-  // The prepared frames in use: for offline the sliding range [t - K, t + K], else frame t.
-  using Frame = std::shared_ptr<const filter::PreparedFrame>;
-  std::map<std::size_t, Frame> kept;
-  std::future<Frame> next;  // frame kept.size() ahead, being prepared
-  std::size_t next_index = 0;
-  double next_seconds = 0;
-  auto prepared = [&](std::size_t s) -> const filter::PreparedFrame& {
-    auto it = kept.find(s);
-    if (it == kept.end()) {
-      Frame frame;
-      if (next.valid() && next_index == s) {
-        const auto t0 = Clock::now();
-        frame = next.get();  // rethrows the volume's error, in frame order
-        result.wait_seconds += seconds_since(t0);
-        result.prepare_seconds += next_seconds;
-      } else {
-        double seconds = 0;
-        frame = load(s, &seconds);
-        result.prepare_seconds += seconds;
-      }
-      it = kept.emplace(s, std::move(frame)).first;
-    }
-    // Start on the following frame while the caller works on this one.
-    if (mode != Mode::offline && s + 1 < route.frames.size() && !(next.valid() && next_index == s + 1)) {
-      next_index = s + 1;
-      next = std::async(std::launch::async, load, s + 1, &next_seconds);
-    }
-    return *it->second;
-  };
-
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
-    const RouteFrame& f = route.frames[i];
-    const filter::PreparedFrame& frame = prepared(i);
-    const GridCrop crop = frame_crop(f, region.grid, region.projection);
-
-    double x = 0, y = 0, grid_heading = 0;
-    FramePose pose;
-    pose.entropy = frame.entropy;
-    pose.etu_weight = filter::etu_weight(frame.entropy, config.etu_reference_entropy);
-    if (mode == Mode::offline) {
-      // A window centred on frame t's crop; every frame of the range placed by its own crop and
-      // warped to t by the relative motion.
-      const std::size_t k = options.offline_half_window < 0 ? route.frames.size()
-                                                             : static_cast<std::size_t>(options.offline_half_window);
-      const std::size_t s0 = i > k ? i - k : 0, s1 = std::min(route.frames.size() - 1, i + k);
-      while (!kept.empty() && kept.begin()->first < s0) kept.erase(kept.begin());
-      centre_on(region.pixel_u(crop.x), region.pixel_v(crop.y));
-      std::vector<filter::OfflineFrame> range;
-      for (std::size_t s = s0; s <= s1; ++s) {
-        const GridCrop c = frame_crop(route.frames[s], region.grid, region.projection);
-        range.push_back({&prepared(s),
-                         {region.pixel_u(c.x) - static_cast<double>(origin_u),
-                          region.pixel_v(c.y) - static_cast<double>(origin_v), c.rotation_deg},
-                         route.frames[s].odometry,
-                         static_cast<std::int64_t>(s)});
-      }
-      const auto t0 = Clock::now();
-      if (!offline) offline.emplace(config);
-      const filter::Pose p = offline->pose_at(range, i - s0, -1);
-      result.filter_seconds += seconds_since(t0);
-      x = region.x_of(p.u + static_cast<double>(origin_u));
-      y = region.y_of(p.v + static_cast<double>(origin_v));
-      grid_heading = p.heading_deg;
-    } else if (mode == Mode::single) {
-      // The volume's own argmax, relative to its crop centre.
-      const filter::Pose p = filter::single_frame_pose(frame, {0, 0, crop.rotation_deg});
-      x = crop.x + p.u * kCellM;
-      y = crop.y - p.v * kCellM;
-      grid_heading = p.heading_deg;
-      if (inspect) inspect({i, &frame, crop, nullptr});
-      kept.erase(i);
-    } else {
-      if (!filter) {
-        filter.emplace(config);
-        // Centred on the GPS fix when the first frame has one (its Gaussian is the prior), else
-        // on the first crop with a uniform prior.
-        double cx = crop.x, cy = crop.y;
-        if (f.gps) {
-          const auto g = region.projection.forward(f.gps->where);
-          cx = g.x_m;
-          cy = g.y_m;
-        }
-        centre_on(region.pixel_u(cx), region.pixel_v(cy));
-        filter->belief().origin_u = origin_u;
-        filter->belief().origin_v = origin_v;
-        if (f.gps) {
-          filter->reset_gaussian(region.pixel_u(cx) - static_cast<double>(origin_u),
-                                 region.pixel_v(cy) - static_cast<double>(origin_v), f.gps->sigma_m);
-        } else {
-          filter->reset_uniform();
-        }
-        load_road();
-      }
-      // A crop far from the window (the estimate wandered off while the frames' evidence stayed
-      // around the GPS-like crops) brings the window to it: evidence outside the window is lost.
-      keep_in_window(region.pixel_u(crop.x) - static_cast<double>(origin_u),
-                     region.pixel_v(crop.y) - static_cast<double>(origin_v));
-      const filter::CropPose window_crop{region.pixel_u(crop.x) - static_cast<double>(origin_u),
-                                         region.pixel_v(crop.y) - static_cast<double>(origin_v), crop.rotation_deg};
-      std::optional<filter::GpsFix> fix;
-      if (config.gps_prior && f.gps) {
-        const auto g = region.projection.forward(f.gps->where);
-        fix = filter::GpsFix{region.pixel_u(g.x_m) - static_cast<double>(origin_u),
-                             region.pixel_v(g.y_m) - static_cast<double>(origin_v), f.gps->sigma_m};
-      }
-      const auto t0 = Clock::now();
-      const filter::FrameResult r = filter->step(frame, window_crop, f.odometry, road_m.data(), fix ? &*fix : nullptr);
-      result.filter_seconds += seconds_since(t0);
-      if (inspect) inspect({i, &frame, crop, &filter->belief(), origin_u, origin_v});
-      if (options.keep_beliefs) {
-        const auto marginal = belief_marginal(filter->belief());
-        result.belief_width = W;
-        result.belief_height = H;
-        result.beliefs.insert(result.beliefs.end(), marginal.begin(), marginal.end());
-        result.belief_origins.push_back({origin_u, origin_v});
-      }
-      kept.erase(i);
-      x = region.x_of(r.pose.u + static_cast<double>(origin_u));
-      y = region.y_of(r.pose.v + static_cast<double>(origin_v));
-      grid_heading = r.pose.heading_deg;
-      pose.entropy = r.frame_entropy;
-      pose.etu_weight = r.etu_weight;
-      pose.relocalized = r.relocalized;
-      // Keep the window on the vehicle.
-      keep_in_window(r.pose.u, r.pose.v);
-    }
-    double gamma = 0;
-    const osm::GeoPoint geo = region.projection.reverse({x, y}, gamma);
-    pose.frame = f.frame;
-    pose.timestamp_s = f.timestamp_s;
-    pose.x_m = x;
-    pose.y_m = y;
-    pose.lat_deg = geo.lat_deg;
-    pose.lon_deg = geo.lon_deg;
-    pose.compass_heading_deg = wrap360(grid_heading + gamma);  // compass = grid + gamma
-    pose.grid_heading_deg = wrap360(grid_heading);
-    if (f.truth) {
-      double gamma_true = 0;
-      const auto t = region.projection.forward(f.truth->where, gamma_true);
-      const double ex = x - t.x_m, ey = y - t.y_m;
-      pose.position_error_m = std::hypot(ex, ey);
-      if (f.truth->heading_deg) {
-        pose.heading_error_deg = heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
-        const double h = (*f.truth->heading_deg - gamma_true) * M_PI / 180.0;  // true grid heading
-        pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);
-        pose.lateral_error_m = -ex * std::cos(h) + ey * std::sin(h);
-      }
-    }
-    result.poses.push_back(std::move(pose));
+    const GridCrop crop = frame_crop(route.frames[i], cache.grid(), projection);
+    result.poses.push_back(frame_pose(route.frames[i], estimator->estimate(i, crop, frames), projection));
     if (on_frame) on_frame();
   }
+  estimator->finish(result);
+  result.prepare_seconds = frames.prepare_seconds();
+  result.wait_seconds = frames.wait_seconds();
   return result;
 }
 
@@ -540,18 +379,18 @@ void perturb_odometry(Route& route, double translation_pct, double rotation_deg_
   }
 }
 
-Metrics compute_metrics(const std::vector<const FramePose*>& poses) {
+Metrics compute_metrics(std::span<const FramePose> poses) {
   Metrics m;
   std::vector<double> position, heading;
   double lateral = 0, longitudinal = 0;
   std::size_t body = 0;
-  for (const FramePose* p : poses) {
-    if (!p->position_error_m) continue;
-    position.push_back(*p->position_error_m);
-    if (p->heading_error_deg) heading.push_back(*p->heading_error_deg);
-    if (p->lateral_error_m) {
-      lateral += std::abs(*p->lateral_error_m);
-      longitudinal += std::abs(*p->longitudinal_error_m);
+  for (const FramePose& p : poses) {
+    if (!p.position_error_m) continue;
+    position.push_back(*p.position_error_m);
+    if (p.heading_error_deg) heading.push_back(*p.heading_error_deg);
+    if (p.lateral_error_m) {
+      lateral += std::abs(*p.lateral_error_m);
+      longitudinal += std::abs(*p.longitudinal_error_m);
       ++body;
     }
   }

@@ -149,10 +149,8 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
   const nlohmann::ordered_json track = {{"type", "FeatureCollection"}, {"features", features}};
   write_file(dir / "track.geojson", track.dump(-1, ' ', false, kReplaceInvalidUtf8) + "\n");
 
-  std::vector<const FramePose*> all;
-  for (const auto& p : r.poses) all.push_back(&p);
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
-  metrics.update(metrics_json(compute_metrics(all)));
+  metrics.update(metrics_json(compute_metrics(r.poses)));
   write_file(dir / "metrics.json", metrics.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
 
   if (!r.beliefs.empty()) {

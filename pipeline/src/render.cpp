@@ -19,6 +19,7 @@
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/pipeline/volume_shape.hpp"
+#include "seqloc/raster/palette.hpp"
 #include "seqloc/raster/png_codec.hpp"
 #include "flat_index.hpp"
 
@@ -73,19 +74,6 @@ class KeptBeliefs {
   std::vector<std::array<std::int64_t, 2>> origins_;
 };
 using Rgb = cv::Vec3b;
-
-// Colours (RGB) per class code, in the spirit of OpenStreetMap's carto style.
-Rgb area_colour(int code) {
-  static const Rgb colours[] = {{255, 255, 255}, {196, 182, 171}, {238, 238, 238}, {223, 252, 226},
-                                {205, 235, 176}, {200, 250, 204}, {173, 209, 158}, {170, 211, 223}};
-  return colours[std::clamp(code, 0, 7)];
-}
-Rgb way_colour(int code) {
-  static const Rgb colours[] = {{0, 0, 0},       {140, 120, 100}, {150, 150, 150}, {110, 160, 90},  {160, 160, 160},
-                                {140, 140, 140}, {60, 60, 230},   {200, 120, 80},  {70, 70, 70},    {200, 60, 200},
-                                {90, 140, 70}};
-  return colours[std::clamp(code, 0, 10)];
-}
 
 cv::Mat to_mat(Picture& p) { return {p.height, p.width, CV_8UC3, p.rgb.data()}; }
 
@@ -175,15 +163,8 @@ void write_picture(const std::filesystem::path& path, const Picture& picture) {
 }
 
 Picture map_picture(std::span<const std::uint8_t> classes_rgb, int width, int height) {
-  Picture p{width, height, std::vector<std::uint8_t>(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 3)};
-  for (std::size_t i = 0; i < static_cast<std::size_t>(width) * static_cast<std::size_t>(height); ++i) {
-    const std::uint8_t* c = classes_rgb.data() + 3 * i;
-    Rgb colour = area_colour(c[0]);
-    if (c[1]) colour = way_colour(c[1]);
-    if (c[2]) colour = c[2] == 1 ? Rgb(40, 130, 40) : Rgb(200, 80, 40);  // trees green, other nodes orange
-    std::copy_n(&colour[0], 3, p.rgb.data() + 3 * i);
-  }
-  return p;
+  return {width, height,
+          raster::class_colours(classes_rgb.first(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 3))};
 }
 
 Picture plot(const std::vector<Series>& series, const std::string& title, const std::string& x_label,
@@ -294,17 +275,17 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
     auto place_frame = [&](const filter::PreparedFrame& f, const GridCrop& crop) {
       entropy = f.entropy;
       frame_mass.assign(static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh), 0.0);
-      const double cu = grid.region_u(crop.x) - static_cast<double>(ou);
-      const double cv_ = grid.region_v(crop.y) - static_cast<double>(ov);
-      const double rot = crop.rotation_deg * M_PI / 180.0, scale = f.cell_m / kCellM;
+      // The filter's own map from a volume cell to the window.
+      const filter::CropPose where{grid.region_u(crop.x) - static_cast<double>(ou),
+                                   grid.region_v(crop.y) - static_cast<double>(ov), crop.rotation_deg};
       const std::vector<double> own = position_marginal(f);
       for (int v = 0; v < f.height; ++v) {
         for (int u = 0; u < f.width; ++u) {
-          const double m = own[detail::flat(v, u, f.width)];
-          const double du = (u - (f.width - 1) / 2.0) * scale, dv = (v - (f.height - 1) / 2.0) * scale;
-          const auto wu = std::lround(cu + du * std::cos(rot) - dv * std::sin(rot));
-          const auto wv = std::lround(cv_ + du * std::sin(rot) + dv * std::cos(rot));
-          if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) frame_mass[static_cast<std::size_t>(wv * bw + wu)] += m;
+          const filter::Pose cell = filter::volume_cell_pose(f, where, v, u, 0);
+          const auto wu = std::lround(cell.u), wv = std::lround(cell.v);
+          if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) {
+            frame_mass[static_cast<std::size_t>(wv * bw + wu)] += own[detail::flat(v, u, f.width)];
+          }
         }
       }
     };

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <random>
 #include <set>
 
@@ -15,6 +16,7 @@
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/region_window.hpp"
 #include "support/test_support.hpp"
 
 namespace seqloc::pipeline {
@@ -250,9 +252,8 @@ TEST(Metrics, RecallsMeansMediansAndBodyFrameErrors) {
     poses[static_cast<std::size_t>(i)].lateral_error_m = -position[i] / 2;
     poses[static_cast<std::size_t>(i)].longitudinal_error_m = position[i];
   }
-  FramePose no_truth;
-  std::vector<const FramePose*> all{&poses[0], &poses[1], &poses[2], &poses[3], &no_truth};
-  const Metrics m = compute_metrics(all);
+  poses.emplace_back();  // no ground truth: not counted
+  const Metrics m = compute_metrics(poses);
   EXPECT_EQ(m.frames, 4u);
   EXPECT_DOUBLE_EQ(m.position_recall[0], 25);
   EXPECT_DOUBLE_EQ(m.position_recall[1], 50);
@@ -493,6 +494,88 @@ TEST(Crops, OutsideTheRegionOrJumpingAreRefusedNamingTheLine) {
   auto wider = options;
   wider.max_crop_jump_m = 50;
   EXPECT_NO_THROW(check_crops(jump, cache.grid(), projection, wider));
+}
+
+// The window's conversions against the grid's own: a window cell is the region pixel moved by the
+// origin, metres round-trip, centring puts the nearest pixel at (W/2, H/2), a shift moves the
+// origin, and the road distance is the cache's own window in metres.
+TEST(RegionWindow, ConvertsCentresShiftsAndReadsTheRoadOfItsCells) {
+  const auto region = make_region(47.5, 10.5, -200, 200, 0.004, 0.002);
+  raster::CacheReader cache(region->cache);
+  const auto& grid = cache.grid();
+  RegionWindow window(cache, 64, 48);
+  window.centre_on(10.3, 0.2);
+  const auto cu = std::lround(grid.region_u(10.3)), cv = std::lround(grid.region_v(0.2));
+  EXPECT_EQ(window.origin_u(), cu - 32);
+  EXPECT_EQ(window.origin_v(), cv - 24);
+  EXPECT_DOUBLE_EQ(window.u_of(10.3), grid.region_u(10.3) - static_cast<double>(cu - 32));
+  EXPECT_NEAR(window.x_of(window.u_of(10.3)), 10.3, 1e-9);
+  EXPECT_NEAR(window.y_of(window.v_of(-7.7)), -7.7, 1e-9);
+  EXPECT_NEAR(window.x_of(1.0) - window.x_of(0.0), raster::kCellM, 1e-12);
+  EXPECT_NEAR(window.y_of(1.0) - window.y_of(0.0), -raster::kCellM, 1e-12) << "v runs south";
+  const auto crop = window.crop_pose({10.3, 0.2, -1.5});
+  EXPECT_NEAR(crop.centre_u, 32, 0.5);
+  EXPECT_NEAR(crop.centre_v, 24, 0.5);
+  EXPECT_EQ(crop.rotation_deg, -1.5);
+
+  // Inside the margin of a quarter: no move; beyond it, the move that centres the position.
+  EXPECT_FALSE(window.recentre_shift(20, 20, 0.25));
+  EXPECT_FALSE(window.recentre_shift(16, 12, 0.25));
+  const auto shift = window.recentre_shift(60.4, 5.6, 0.25);
+  ASSERT_TRUE(shift);
+  EXPECT_EQ((*shift)[0], 60 - 32);
+  EXPECT_EQ((*shift)[1], 6 - 24);
+  EXPECT_TRUE(window.recentre_shift(-3, 20, 0.25)) << "outside the window";
+
+  std::vector<std::uint16_t> cm;
+  auto expect_road_of_window = [&] {
+    cache.read_road_distance(window.origin_u(), window.origin_v(), 64, 48, cm, true);
+    const float* road = window.road_distance_m();
+    for (std::size_t i = 0; i < cm.size(); ++i) ASSERT_EQ(road[i], static_cast<float>(cm[i] * 0.01)) << i;
+  };
+  expect_road_of_window();
+  window.shift(7, -3);
+  EXPECT_EQ(window.origin_u(), cu - 32 + 7);
+  EXPECT_EQ(window.origin_v(), cv - 24 - 3);
+  expect_road_of_window();  // read again after the move
+}
+
+// Frames come in order from the source, the next one prepared meanwhile (lookahead) or not; the
+// source's error for a frame surfaces when that frame is asked for.
+TEST(FramePrefetcher, GivesEachFrameOnceInOrderAndRethrowsItsError) {
+  for (const bool lookahead : {false, true}) {
+    std::mutex mutex;
+    std::vector<std::size_t> asked;
+    const FrameSource source = [&](std::size_t i) {
+      {
+        std::lock_guard lock(mutex);
+        asked.push_back(i);
+      }
+      if (i == 3) throw DataError("frame 3 is bad");
+      auto f = std::make_shared<filter::PreparedFrame>();
+      f->entropy = static_cast<double>(i);
+      return std::shared_ptr<const filter::PreparedFrame>(f);
+    };
+    FramePrefetcher frames(source, 5, lookahead);
+    EXPECT_EQ(frames.get(0).entropy, 0);
+    EXPECT_EQ(frames.get(1).entropy, 1);
+    EXPECT_EQ(frames.get(1).entropy, 1) << "kept until released";
+    frames.release(1);
+    EXPECT_EQ(frames.get(2).entropy, 2);
+    EXPECT_THROW((void)frames.get(3), DataError);
+    {
+      std::lock_guard lock(mutex);
+      EXPECT_EQ(asked, (std::vector<std::size_t>{0, 1, 2, 3})) << "each frame asked for once, in order";
+      asked.clear();
+    }
+    // With lookahead, taking frame 0 has frame 1 prepared in the background (the destructor
+    // waits for it); without, nothing more is asked for.
+    {
+      FramePrefetcher ahead(source, 5, lookahead);
+      EXPECT_EQ(ahead.get(0).entropy, 0);
+    }
+    EXPECT_EQ(asked, lookahead ? (std::vector<std::size_t>{0, 1}) : (std::vector<std::size_t>{0})) << lookahead;
+  }
 }
 
 }  // namespace

@@ -9,7 +9,6 @@
 // 70 nats below the peak can round to zero.
 
 #include <cstddef>
-#include <cstdint>
 #include <vector>
 
 #include "seqloc/filter/aligned.hpp"
@@ -37,10 +36,6 @@ class BeliefVolume {
   [[nodiscard]] double log_at(int u, int v, int k) const;
   [[nodiscard]] float* data() { return data_.data(); }
   [[nodiscard]] const float* data() const { return data_.data(); }
-
-  /// Region-grid cell (u east, v south) of window cell (0, 0); recentre() moves it.
-  std::int64_t origin_u = 0;
-  std::int64_t origin_v = 0;
 
   /// Uniform over the window.
   void set_uniform();

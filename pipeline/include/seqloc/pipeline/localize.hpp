@@ -10,12 +10,15 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/pipeline/frame_prefetcher.hpp"
 #include "seqloc/pipeline/matcher.hpp"
+#include "seqloc/pipeline/region_window.hpp"
 #include "seqloc/pipeline/route.hpp"
 #include "seqloc/raster/cache.hpp"
 
@@ -92,10 +95,6 @@ struct RouteResult {
 /// double), row-major over the window.
 [[nodiscard]] std::vector<float> belief_marginal(const filter::BeliefVolume& belief);
 
-/// Where frame i's prepared (normalized) volume comes from. Called from a background task as
-/// well as from the calling thread, never twice at once.
-using FrameSource = std::function<std::shared_ptr<const filter::PreparedFrame>(std::size_t frame)>;
-
 /// The route's own frames: its .npy volumes, or the built-in matcher run on its observations
 /// against the cache's class raster. Throws DataError naming the file.
 [[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
@@ -112,12 +111,7 @@ using FrameSource = std::function<std::shared_ptr<const filter::PreparedFrame>(s
 [[nodiscard]] std::vector<float> match_frame(const RouteFrame& frame, raster::CacheReader& cache,
                                              const BevMatcher& matcher);
 
-/// The region-grid centre of a frame's crop (x, y in metres) and the rotation of its north from
-/// grid north (degrees clockwise). Observation frames are matched on a crop in grid coordinates
-/// whose centre is snapped to the nearest cell corner, so that volume and map cells coincide.
-struct GridCrop {
-  double x = 0, y = 0, rotation_deg = 0;
-};
+/// Where a frame's crop lies in the region grid (GridCrop, region_window.hpp).
 [[nodiscard]] GridCrop frame_crop(const RouteFrame& frame, const raster::RegionGrid& grid,
                                   const osm::RegionProjection& projection);
 
@@ -180,7 +174,7 @@ struct Metrics {
   double mean_heading_error_deg = 0, median_heading_error_deg = 0;
   double mean_abs_lateral_m = 0, mean_abs_longitudinal_m = 0;
 };
-[[nodiscard]] Metrics compute_metrics(const std::vector<const FramePose*>& poses);
+[[nodiscard]] Metrics compute_metrics(std::span<const FramePose> poses);
 
 /// Compass heading difference: min(|a - b| mod 360, 360 - |a - b| mod 360).
 [[nodiscard]] double heading_difference_deg(double a, double b);

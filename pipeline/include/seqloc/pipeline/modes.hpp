@@ -1,0 +1,62 @@
+#pragma once
+// The localization modes (docs/localize.md): each a small class behind one interface that takes
+// a route's frames in order and gives one pose per frame. localize_route drives them; a new mode
+// or estimator is one class here and one line in make_mode.
+//   single   each frame's own argmax                       (modes/single.cpp)
+//   offline  each frame with its neighbours aligned to it  (modes/offline.cpp)
+//   online   the sequential filter without ETU, MGR, PAS   (modes/sequential.cpp)
+//   seqloc   the sequential filter as configured           (modes/sequential.cpp)
+
+#include <cstddef>
+#include <memory>
+
+#include "seqloc/pipeline/frame_prefetcher.hpp"
+#include "seqloc/pipeline/localize.hpp"
+
+namespace seqloc::pipeline {
+
+/// One mode's pose for one frame: region grid metres, grid heading, and what the frame weighed.
+struct FrameEstimate {
+  double x_m = 0, y_m = 0;
+  double grid_heading_deg = 0;
+  double entropy = 0;  ///< the frame volume's normalized entropy
+  double etu_weight = 1;
+  bool relocalized = false;
+};
+
+/// What a mode works on: one route against one region cache. The references outlive the mode.
+struct RouteContext {
+  const Route& route;
+  raster::CacheReader& cache;
+  const LocalizeOptions& options;
+  const FrameInspector& inspect;  ///< may be empty
+};
+
+class LocalizationMode {
+ public:
+  virtual ~LocalizationMode() = default;
+  LocalizationMode(const LocalizationMode&) = delete;
+  LocalizationMode& operator=(const LocalizationMode&) = delete;
+
+  /// Whether the frame after the one being estimated should be prepared meanwhile (a mode that
+  /// reads a range of frames itself says no).
+  [[nodiscard]] virtual bool lookahead() const { return true; }
+  /// Frame i's pose; frames come in order, `crop` is frame_crop of frame i. The mode releases the
+  /// frames it no longer needs.
+  [[nodiscard]] virtual FrameEstimate estimate(std::size_t i, const GridCrop& crop, FramePrefetcher& frames) = 0;
+  /// Adds what the mode gathered along the route (re-centring, filter time, kept beliefs).
+  virtual void finish(RouteResult& result);
+
+ protected:
+  explicit LocalizationMode(const RouteContext& context) : context_(context) {}
+  /// What etu_weight a frame of this entropy gets under the options (reported for every mode).
+  [[nodiscard]] double reported_etu_weight(double entropy) const;
+
+  RouteContext context_;
+  double filter_seconds_ = 0;
+};
+
+/// The mode's class for `mode`.
+[[nodiscard]] std::unique_ptr<LocalizationMode> make_mode(Mode mode, const RouteContext& context);
+
+}  // namespace seqloc::pipeline

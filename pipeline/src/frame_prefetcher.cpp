@@ -1,0 +1,53 @@
+#include "seqloc/pipeline/frame_prefetcher.hpp"
+
+#include <chrono>
+
+namespace seqloc::pipeline {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+}  // namespace
+
+FramePrefetcher::FramePrefetcher(FrameSource source, std::size_t frames, bool lookahead)
+    : source_(std::move(source)), frames_(frames), lookahead_(lookahead) {}
+
+FramePrefetcher::~FramePrefetcher() {
+  if (next_.valid()) next_.wait();
+}
+
+FramePrefetcher::Frame FramePrefetcher::load(std::size_t i, double* seconds) const {
+  const auto t0 = Clock::now();
+  auto frame = source_(i);
+  *seconds = seconds_since(t0);
+  return frame;
+}
+
+const filter::PreparedFrame& FramePrefetcher::get(std::size_t i) {
+  auto it = kept_.find(i);
+  if (it == kept_.end()) {
+    Frame frame;
+    if (next_.valid() && next_index_ == i) {
+      const auto t0 = Clock::now();
+      frame = next_.get();  // rethrows the volume's error, in frame order
+      wait_seconds_ += seconds_since(t0);
+      prepare_seconds_ += next_seconds_;
+    } else {
+      double seconds = 0;
+      frame = load(i, &seconds);
+      prepare_seconds_ += seconds;
+    }
+    it = kept_.emplace(i, std::move(frame)).first;
+  }
+  // Start on the following frame while the caller works on this one.
+  if (lookahead_ && i + 1 < frames_ && !(next_.valid() && next_index_ == i + 1)) {
+    if (next_.valid()) next_.wait();  // a frame nobody took (not in order); never two at once
+    next_index_ = i + 1;
+    next_ = std::async(std::launch::async, [this, i] { return load(i + 1, &next_seconds_); });
+  }
+  return *it->second;
+}
+
+}  // namespace seqloc::pipeline
