@@ -36,64 +36,64 @@ class LocalizeCommand : public Command {
         ->check(CLI::IsMember({"seqloc", "online", "single", "offline", "all"}));
     app.add_option("--offline-window", options_.offline_half_window,
                    "Offline mode: frames within K of each frame are aligned and summed (-1: all)")
-        ->default_val(10);
+        ->capture_default_str();
     auto& f = options_.filter;
     app.add_flag("!--no-etu", f.etu, "Switch off Entropy-Tempered Uncertainty");
     app.add_flag("!--no-mgr", f.mgr, "Switch off Map-Guided Relocalization");
     app.add_flag("!--no-pas", f.pas, "Switch off Peak-Anchored Smoothing");
     app.add_option("--etu-reference", f.etu_reference_entropy,
                    "ETU relative to this normalized entropy: w = min(1, (1 - H) / (1 - H_ref)); 0: the paper's 1 - H")
-        ->default_val(f.etu_reference_entropy);
-    app.add_option("--epsilon", f.mgr_epsilon, "MGR's eps")->default_val(0.01);
-    app.add_option("--sigma", f.mgr_sigma_m, "MGR's road-prior sigma in metres")->default_val(3.0);
-    app.add_option("--pas-radius", f.pas_radius, "PAS radius in cells")->default_val(3);
+        ->capture_default_str();
+    app.add_option("--epsilon", f.mgr_epsilon, "MGR's eps")->capture_default_str();
+    app.add_option("--sigma", f.mgr_sigma_m, "MGR's road-prior sigma in metres")->capture_default_str();
+    app.add_option("--pas-radius", f.pas_radius, "PAS radius in cells")->capture_default_str();
     app.add_option("--outside-crop-nats", f.outside_crop_nats,
                    "Window cells outside a frame's crop get log(1/M) minus this (0: the paper's rule)")
-        ->default_val(f.outside_crop_nats);
+        ->capture_default_str();
     app.add_flag("--subbin-heading", f.subbin_heading, "Refine the heading between bins (beyond the paper)");
     app.add_flag("--motion-noise", f.motion_noise, "Diffuse the belief with the step length (beyond the paper)");
     app.add_flag("--gps-prior", f.gps_prior, "Use every frame's GPS fix as a prior term (beyond the paper)");
-    app.add_option("--window", window_, "Belief window, cells of 0.5 m each way")->default_val(256);
-    app.add_option("--headings", f.headings, "Heading bins R")->default_val(256);
+    app.add_option("--window", window_, "Belief window, cells of 0.5 m each way")->capture_default_str();
+    app.add_option("--headings", f.headings, "Heading bins R")->capture_default_str();
     app.add_option("--threads", f.threads, "Threads: routes run side by side, or one route's filter uses them all")
         ->default_val(default_threads());
     app.add_option("--odometry-noise", noise_, "SIGMA_T_PCT,SIGMA_R_DEG_PER_M: perturb the odometry (KITTI style)");
     app.add_option("--seed", seed_, "Seed of the odometry noise")->default_val(1);
-    app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->default_val(200.0);
-    app.add_option("--max-speed", limits_.max_speed_mps, "Largest plausible speed, m/s")->default_val(70.0);
-    app.add_option("--max-yaw", limits_.max_yaw_deg, "Largest plausible yaw per step, degrees")->default_val(120.0);
+    app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->capture_default_str();
+    app.add_option("--max-speed", limits_.max_speed_mps, "Largest plausible speed, m/s")->capture_default_str();
+    app.add_option("--max-yaw", limits_.max_yaw_deg, "Largest plausible yaw per step, degrees")->capture_default_str();
     app.add_option("--max-crop-jump", options_.max_crop_jump_m,
                    "Largest distance between consecutive crop centres, m (0: the window's size)")
-        ->default_val(0.0);
+        ->capture_default_str();
     app.add_option("--max-crop-outside", options_.max_crop_outside_m,
                    "How far beyond the region's edge a crop centre may lie, m (0: crops must be in the region)")
-        ->default_val(0.0);
+        ->capture_default_str();
     app.add_option("--volume-temperature", options_.volume_temperature,
                    "Divide every volume's log-probabilities by T and renormalize (T > 1 flattens an overconfident "
                    "backbone, T < 1 sharpens)")
-        ->default_val(1.0);
+        ->capture_default_str();
     auto& m = options_.matcher;
     app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
-        ->default_val(m.size);
+        ->capture_default_str();
     app.add_option("--matcher-temperature", m.temperature, "Built-in matcher: the log-likelihood is divided by this")
-        ->default_val(m.temperature);
+        ->capture_default_str();
     app.add_option("--matcher-tolerance", m.tolerance_m, "Built-in matcher: positional tolerance (sigma, m)")
-        ->default_val(m.tolerance_m);
+        ->capture_default_str();
     app.add_option("--matcher-blur-cells", m.calibration.blur_cells,
                    "Built-in matcher calibration: positional blur of the volume (sigma, cells)")
-        ->default_val(m.calibration.blur_cells);
+        ->capture_default_str();
     app.add_option("--matcher-blur-bins", m.calibration.blur_bins,
                    "Built-in matcher calibration: heading blur of the volume (sigma, bins)")
-        ->default_val(m.calibration.blur_bins);
+        ->capture_default_str();
     app.add_option("--matcher-floor", m.calibration.floor,
                    "Built-in matcher calibration: share of each volume spread uniformly")
-        ->default_val(m.calibration.floor);
+        ->capture_default_str();
     app.add_option("--shard", shard_,
                    "Localize only shard I of N (I/N, 0-based: every N-th route in sorted order from the I-th), e.g. "
                    "--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; merge the outputs with `seqloc evaluate`");
     app.add_option("--frame-memory", options_.frame_memory_mb,
                    "Memory for the frames a route's modes share, MB (float16; beyond it they go to a temporary file)")
-        ->default_val(options_.frame_memory_mb);
+        ->capture_default_str();
     app.add_flag("--beliefs", options_.keep_beliefs,
                  "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings) and beliefs.csv "
                  "(their windows), which seqloc render then draws without running the filter again");
@@ -202,9 +202,7 @@ class LocalizeCommand : public Command {
       }
       pipeline::MetricsByMode metrics;
       for (const auto& [mode, poses] : by_mode) {
-        std::vector<const pipeline::FramePose*> pointers;
-        for (const auto& p : poses) pointers.push_back(&p);
-        metrics[mode] = pipeline::compute_metrics(pointers);
+        metrics[mode] = pipeline::compute_metrics(poses);
       }
       pipeline::write_summary(temp / "summary.json", metrics, route_names);
       // Into place: the old folder (if any) is replaced only once the new one is complete.
@@ -229,7 +227,7 @@ class LocalizeCommand : public Command {
   fs::path out_;
   std::string mode_ = "seqloc";
   pipeline::LocalizeOptions options_;
-  int window_ = 256;
+  int window_ = filter::FilterConfig{}.width;
   std::string noise_;
   std::string shard_;
   std::uint64_t seed_ = 1;
@@ -263,9 +261,7 @@ class EvaluateCommand : public Command {
     if (by_mode.empty()) throw pipeline::DataError("no poses.csv found under the given folders");
     pipeline::MetricsByMode metrics;
     for (const auto& [mode, poses] : by_mode) {
-      std::vector<const pipeline::FramePose*> pointers;
-      for (const auto& p : poses) pointers.push_back(&p);
-      metrics[mode] = pipeline::compute_metrics(pointers);
+      metrics[mode] = pipeline::compute_metrics(poses);
     }
     std::fputs(pipeline::format_table(metrics).c_str(), stdout);
     return kExitOk;

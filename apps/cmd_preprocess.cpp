@@ -29,9 +29,9 @@ class PreprocessCommand : public Command {
         ->required();
     app.add_option("--bbox", bbox_, "Region lon0,lat0,lon1,lat1 (default: the file header's bbox, else the data's)");
     app.add_option("--max-distance", options_.max_distance_m, "Road-distance clamp in metres")
-        ->default_val(100.0)
+        ->capture_default_str()
         ->check(CLI::Range(0.01, pipeline::kMaxClampM));
-    app.add_option("--threads", options_.threads, "Worker threads (0: all cores)")->default_val(0)->check(
+    app.add_option("--threads", options_.threads, "Worker threads (0: all cores)")->capture_default_str()->check(
         CLI::NonNegativeNumber);
     app.add_option("--shard", shard_,
                    "Build only shard I of N (I/N, 0-based), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; "

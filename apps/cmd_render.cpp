@@ -26,7 +26,7 @@ class RenderCommand : public Command {
                    "kept by localize --beliefs shrinks most (needs --localized); 'sharpest': the frame after the first "
                    "whose own likelihood has the lowest entropy")
         ->default_val("0");
-    app.add_option("--window", window_, "Belief window, cells")->default_val(256);
+    app.add_option("--window", window_, "Belief window, cells")->capture_default_str();
     app.add_option("--threads", options_.localize.filter.threads, "Threads")->default_val(2);
     app.footer("Writes likelihood_K.png (the frame's own likelihood and the SeqLoc belief over the map, the ground\n"
                "truth as a star), entropy_route.png and error_over_time.png (docs/render.md).");
@@ -91,7 +91,7 @@ class RenderCommand : public Command {
   fs::path cache_path_, route_dir_, out_, localized_;
   std::string frame_;
   pipeline::RenderOptions options_;
-  int window_ = 256;
+  int window_ = filter::FilterConfig{}.width;
 };
 
 }  // namespace

@@ -221,7 +221,7 @@ PYBIND11_MODULE(seqloc, m) {
       .def(py::init<const std::string&, std::size_t>(), py::arg("path"), py::arg("lru_tiles") = 64)
       .def("crop", &PyCache::crop, py::arg("lat"), py::arg("lon"), py::arg("size_m") = 128.0,
            py::arg("layers") = std::vector<std::string>{"classes", "road_distance", "road_prior"},
-           py::arg("prior_sigma_m") = 3.0, py::arg("max_size_m") = serve::kDefaultMaxCropM,
+           py::arg("prior_sigma_m") = serve::LayerOptions{}.prior_sigma_m, py::arg("max_size_m") = serve::kDefaultMaxCropM,
            "North-up crop around a WGS84 point in region-grid cells (conventions.md section 4: crop_x, crop_y)")
       .def("to_grid", &PyCache::to_grid, py::arg("lat"), py::arg("lon"), "(x, y) in the region CRS, metres")
       .def_property_readonly("info", &PyCache::info);

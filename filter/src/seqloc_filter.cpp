@@ -209,8 +209,7 @@ std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int
   std::vector<double> g(n);
   double z = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    const double d = road_distance_m[i];
-    g[i] = std::exp(-d * d / (2 * sigma_m * sigma_m));
+    g[i] = road_prior_g(road_distance_m[i], sigma_m);
     z += g[i];
   }
   std::vector<float> log_q(n);

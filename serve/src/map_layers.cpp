@@ -7,7 +7,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "seqloc/pipeline/render.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/raster/palette.hpp"
 #include "seqloc/raster/png_codec.hpp"
 
 namespace seqloc::serve {
@@ -73,17 +74,15 @@ std::vector<float> road_distance_m(std::span<const std::uint16_t> cm) {
 }
 
 std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m) {
-  // g(x) = exp(-d^2 / (2 sigma^2)); runs of equal distances (far from roads, the clamp) reuse
-  // the last value instead of another exp.
-  const double k = -1.0 / (2.0 * sigma_m * sigma_m);
+  // filter::road_prior_g; runs of equal distances (far from roads, the clamp) reuse the last
+  // value instead of another exp.
   std::vector<float> g(cm.size());
   std::uint16_t last = 0;
   float last_value = 1.0f;
   for (std::size_t i = 0; i < cm.size(); ++i) {
     if (i == 0 || cm[i] != last) {
-      const double d = cm[i] * 0.01;
       last = cm[i];
-      last_value = static_cast<float>(std::exp(k * d * d));
+      last_value = static_cast<float>(filter::road_prior_g(cm[i] * 0.01, sigma_m));
     }
     g[i] = last_value;
   }
@@ -299,9 +298,9 @@ std::vector<std::uint8_t> encode_styled_png(const MapBlock& block) {
   switch (block.layers[0]) {
     case MapLayer::classes: {
       const auto codes = interleave_classes(block);
-      const pipeline::Picture picture = pipeline::map_picture(codes, block.width, block.height);
+      const std::vector<std::uint8_t> rgb = raster::class_colours(codes);
       for (std::size_t i = 0; i < n; ++i) {
-        std::copy_n(picture.rgb.data() + 3 * i, 3, rgba.data() + 4 * i);
+        std::copy_n(rgb.data() + 3 * i, 3, rgba.data() + 4 * i);
         const bool background = codes[3 * i] == 0 && codes[3 * i + 1] == 0 && codes[3 * i + 2] == 0;
         rgba[4 * i + 3] = background ? 0 : 255;
       }

@@ -16,6 +16,7 @@
 //   (1/M)^w. (The offline baseline interpolates probabilities too, and takes logs only to add.)
 
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -61,6 +62,13 @@ struct PreparedFrame {
   const double w = reference_entropy > 0 ? (1.0 - normalized_entropy) / (1.0 - reference_entropy)
                                          : 1.0 - normalized_entropy;
   return std::clamp(w, 1e-3, 1.0);
+}
+
+/// The road prior of MGR before normalization (conventions.md section 6, step 4):
+/// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road. The one definition the
+/// filter, the served road_prior layer and the Python module use.
+[[nodiscard]] inline double road_prior_g(double distance_m, double sigma_m) {
+  return std::exp(-distance_m * distance_m / (2 * sigma_m * sigma_m));
 }
 
 /// The road prior of MGR over the window: log q(x) for every cell (one heading's share).

@@ -15,6 +15,7 @@
 #include <string_view>
 #include <vector>
 
+#include "seqloc/filter/config.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::serve {
@@ -67,7 +68,7 @@ struct MapBlock {
 };
 
 struct LayerOptions {
-  double prior_sigma_m = 3.0;  ///< sigma of road_prior (the filter's default mgr_sigma_m)
+  double prior_sigma_m = filter::FilterConfig{}.mgr_sigma_m;  ///< sigma of road_prior (the filter's MGR default)
 };
 
 /// A block's geometry and band names, without its values (what a sidecar describes).
