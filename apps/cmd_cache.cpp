@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "command.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::app {
@@ -51,19 +51,16 @@ class CacheInfoCommand : public Command {
   bool json_ = false;
 };
 
-class CacheMergeCommand : public Command {
+class CacheMergeCommand : public Command, public WithOverwrite {
  public:
   void setup(CLI::App& app) override {
     app.add_option("output", out_, "Merged cache to write")->required();
     app.add_option("shards", shards_, "Every shard of one build (from preprocess --shard I/N)")->required();
-    app.add_flag("--overwrite", overwrite_, "Replace an existing output");
+    add_overwrite_option(app, "output");
   }
 
   int run() override {
-    std::error_code ec;
-    if (std::filesystem::exists(out_, ec) && !overwrite_) {
-      throw pipeline::UsageError(out_.string() + ": already exists; pass --overwrite to replace it");
-    }
+    check_overwrite(out_);
     raster::merge_shards(shards_, out_);
     std::printf("merged %zu shards into %s\n", shards_.size(), out_.c_str());
     return kExitOk;
@@ -72,7 +69,6 @@ class CacheMergeCommand : public Command {
  private:
   std::filesystem::path out_;
   std::vector<std::filesystem::path> shards_;
-  bool overwrite_ = false;
 };
 
 }  // namespace

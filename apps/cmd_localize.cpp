@@ -17,14 +17,14 @@
 #include "command.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::app {
 namespace {
 
 namespace fs = std::filesystem;
 
-class LocalizeCommand : public Command {
+class LocalizeCommand : public Command, public WithOverwrite, public WithProgress {
  public:
   void setup(CLI::App& app) override {
     app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
@@ -97,8 +97,8 @@ class LocalizeCommand : public Command {
     app.add_flag("--beliefs", options_.keep_beliefs,
                  "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings) and beliefs.csv "
                  "(their windows), which seqloc render then draws without running the filter again");
-    app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
-    app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
+    add_overwrite_option(app, "output folder");
+    add_progress_option(app);
     app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"
                "Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} and OUT/summary.json,\n"
                "and prints the recall table. Any bad input stops the run with nothing written.");
@@ -112,10 +112,8 @@ class LocalizeCommand : public Command {
     } catch (const std::exception& e) {
       throw pipeline::UsageError(e.what());  // option values, not data
     }
+    check_overwrite(out_);
     std::error_code ec;
-    if (fs::exists(out_, ec) && !overwrite_) {
-      throw pipeline::UsageError(out_.string() + ": already exists; pass --overwrite to replace it");
-    }
     const auto parent = out_.has_parent_path() ? out_.parent_path() : fs::path(".");
     if (!fs::is_directory(parent, ec)) {
       throw pipeline::UsageError(out_.string() + ": output directory '" + parent.string() + "' does not exist");
@@ -177,7 +175,7 @@ class LocalizeCommand : public Command {
     const fs::path temp = pipeline::staging_directory(out_);
     fs::create_directories(temp);
     try {
-      ProgressBar bar(progress_wanted(progress_), "frames");
+      ProgressBar bar(show_progress(), "frames");
       std::atomic<long long> done{0};
       std::mutex progress_mutex;
       const auto batch = pipeline::localize_routes(routes, cache, options_, modes, [&] {
@@ -232,8 +230,6 @@ class LocalizeCommand : public Command {
   std::string shard_;
   std::uint64_t seed_ = 1;
   pipeline::RouteLimits limits_;
-  bool overwrite_ = false;
-  int progress_ = 0;
 };
 
 class EvaluateCommand : public Command {

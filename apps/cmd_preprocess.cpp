@@ -21,7 +21,7 @@ osm::GeoBox parse_bbox(const std::string& text) {
 
 namespace {
 
-class PreprocessCommand : public Command {
+class PreprocessCommand : public Command, public WithProgress {
  public:
   void setup(CLI::App& app) override {
     app.add_option("input", options_.input, "OSM input: .osm.pbf, .osm, .osm.gz or .osm.bz2")->required();
@@ -36,7 +36,7 @@ class PreprocessCommand : public Command {
     app.add_option("--shard", shard_,
                    "Build only shard I of N (I/N, 0-based), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; "
                    "combine the shards with `seqloc cache merge`");
-    app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
+    add_progress_option(app);
     app.add_flag("--overwrite", options_.overwrite, "Replace an existing cache");
     app.add_option("--report", report_path_, "Also write the run's figures (tiles, timings per stage) as JSON");
     app.footer(
@@ -54,7 +54,7 @@ class PreprocessCommand : public Command {
     }
     options_.validate();
     log("preprocess %s -> %s", options_.input.c_str(), options_.output.c_str());
-    ProgressBar bar(progress_wanted(progress_), "tiles");
+    ProgressBar bar(show_progress(), "tiles");
     const auto report = pipeline::preprocess_region(
         options_, [&bar](const pipeline::PreprocessProgress& p) { bar.update(p.tiles_done, p.tiles_total); });
     bar.done();
@@ -105,7 +105,6 @@ class PreprocessCommand : public Command {
   pipeline::PreprocessOptions options_;
   std::string bbox_;
   std::string shard_;
-  int progress_ = 0;
   std::string report_path_;
 };
 

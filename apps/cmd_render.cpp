@@ -3,7 +3,7 @@
 
 #include "command.hpp"
 #include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/pipeline/render.hpp"
 
 namespace seqloc::app {

@@ -7,8 +7,7 @@
 #include <vector>
 
 #include "command.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
-#include "seqloc/serve/geotiff.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/serve/server.hpp"
 #include "seqloc/serve/service.hpp"
 
@@ -101,58 +100,8 @@ class ServeCommand : public Command {
   std::filesystem::path web_;
 };
 
-class ExportCommand : public Command {
- public:
-  void setup(CLI::App& app) override {
-    app.add_option("cache", cache_, "Region cache (GeoPackage)")->required()->check(CLI::ExistingFile);
-    app.add_option("--layer", layer_, "classes, road_distance or road_prior")->capture_default_str();
-    app.add_option("--bbox", bbox_, "lon0,lat0,lon1,lat1 to export (default: the whole region)");
-    app.add_option("--prior-sigma", options_.layer_options.prior_sigma_m, "Sigma of road_prior, metres")
-        ->capture_default_str();
-    app.add_option("-o,--output", out_, "Output: .tif (Cloud Optimized GeoTIFF) or .vrt (the whole cache)")->required();
-    app.add_flag("--overwrite", overwrite_, "Replace an existing output");
-    app.add_flag("--progress,!--no-progress", progress_, "Show progress (default: when stderr is a terminal)");
-  }
-
-  int run() override {
-    std::error_code ec;
-    if (std::filesystem::exists(out_, ec) && !overwrite_) {
-      throw pipeline::UsageError(out_.string() + ": already exists; pass --overwrite to replace it");
-    }
-    raster::CacheReader cache(cache_, 256);
-    const std::string ext = out_.extension().string();
-    if (ext == ".vrt") {
-      if (!bbox_.empty()) throw pipeline::UsageError("--bbox: a VRT covers the whole cache; export a .tif for a box");
-      serve::write_region_vrt(cache, out_);
-      std::printf("wrote %s (classes: bands 1-3, road distance in metres: band 4)\n", out_.c_str());
-      return kExitOk;
-    }
-    if (ext != ".tif" && ext != ".tiff") throw pipeline::UsageError(out_.string() + ": the output must end in .tif or .vrt");
-    const auto layer = serve::parse_layer(layer_);
-    if (!layer) throw pipeline::UsageError("--layer '" + layer_ + "': classes, road_distance or road_prior");
-    options_.layer = *layer;
-    if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
-    if (!(options_.layer_options.prior_sigma_m > 0)) throw pipeline::UsageError("--prior-sigma must be positive");
-    ProgressBar bar(progress_wanted(progress_), "export");
-    options_.progress = [&](long long done, long long total) { bar.update(done, total); };
-    serve::export_cog(cache, options_, out_);
-    bar.done();
-    std::printf("wrote %s (%s, Cloud Optimized GeoTIFF)\n", out_.c_str(), layer_.c_str());
-    return kExitOk;
-  }
-
- private:
-  std::filesystem::path cache_, out_;
-  std::string layer_ = "classes";
-  std::string bbox_;
-  serve::ExportOptions options_;
-  bool overwrite_ = false;
-  int progress_ = 0;
-};
-
 }  // namespace
 
 std::unique_ptr<Command> make_serve_command() { return std::make_unique<ServeCommand>(); }
-std::unique_ptr<Command> make_export_command() { return std::make_unique<ExportCommand>(); }
 
 }  // namespace seqloc::app

@@ -2,7 +2,7 @@
 #include <filesystem>
 
 #include "command.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/pipeline/simulate.hpp"
 
 namespace seqloc::app {
@@ -10,7 +10,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class SimulateCommand : public Command {
+class SimulateCommand : public Command, public WithOverwrite, public WithProgress {
  public:
   void setup(CLI::App& app) override {
     app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
@@ -36,8 +36,8 @@ class SimulateCommand : public Command {
     app.add_option("--wrong-frames", c.wrong_frame, "Noise: probability a frame shows another place")
         ->default_val(c.wrong_frame);
     app.add_flag("--clean", clean_, "No perception noise at all (every noise option 0)");
-    app.add_flag("--overwrite", overwrite_, "Replace an existing output folder");
-    app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
+    add_overwrite_option(app, "output folder");
+    add_progress_option(app);
     app.footer("Writes OUT/route_NNN/{route.json,frames.csv,observations/*.png}: routes along the cache's roads with\n"
                "ground truth, BEV observations for the built-in matcher and a GPS-like crop (docs/simulate.md).");
   }
@@ -52,12 +52,9 @@ class SimulateCommand : public Command {
     } catch (const std::exception& e) {
       throw pipeline::UsageError(e.what());
     }
-    std::error_code ec;
-    if (fs::exists(out_, ec) && !overwrite_) {
-      throw pipeline::UsageError(out_.string() + ": already exists; pass --overwrite to replace it");
-    }
+    check_overwrite(out_);
     raster::CacheReader cache(cache_path_, 256);
-    ProgressBar bar(progress_wanted(progress_), "routes");
+    ProgressBar bar(show_progress(), "routes");
     pipeline::simulate_routes(cache, options_, out_, [&](int done, int total) { bar.update(done, total); });
     bar.done();
     std::printf("wrote %s (%d routes of %d frames)\n", out_.c_str(), options_.routes, options_.frames);
@@ -67,8 +64,7 @@ class SimulateCommand : public Command {
  private:
   fs::path cache_path_, out_;
   pipeline::SimulateOptions options_;
-  bool clean_ = false, overwrite_ = false;
-  int progress_ = 0;
+  bool clean_ = false;
 };
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
@@ -58,6 +59,28 @@ class Command {
   const GlobalOptions* global_ = nullptr;
 };
 
+/// --overwrite for the commands that write an output (osmium-tool's option mixins).
+class WithOverwrite {
+ protected:
+  void add_overwrite_option(CLI::App& app, const std::string& what) {
+    app.add_flag("--overwrite", overwrite_, "Replace an existing " + what);
+  }
+  /// Throws UsageError naming `out` when it exists and --overwrite was not given.
+  void check_overwrite(const std::filesystem::path& out) const;
+  bool overwrite_ = false;
+};
+
+/// --progress / --no-progress for the commands with long work.
+class WithProgress {
+ protected:
+  void add_progress_option(CLI::App& app) {
+    app.add_flag("--progress,!--no-progress", progress_, "Show progress on stderr (default: when it is a terminal)");
+  }
+  /// Whether to draw progress: the flag, else whether stderr is a terminal.
+  [[nodiscard]] bool show_progress() const;
+  int progress_ = 0;
+};
+
 /// A one-line progress bar on stderr, drawn only when wanted (a terminal, or --progress).
 class ProgressBar {
  public:
@@ -99,8 +122,6 @@ std::optional<std::vector<T>> parse_numbers(std::string_view text, char separato
   return out;
 }
 
-/// --progress / --no-progress resolved against whether stderr is a terminal.
-bool progress_wanted(int flag);
 
 std::unique_ptr<Command> make_preprocess_command();
 std::unique_ptr<Command> make_cache_info_command();

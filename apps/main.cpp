@@ -9,15 +9,22 @@
 
 #include "command.hpp"
 #include "seqloc/osm/errors.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::app {
 
-bool progress_wanted(int flag) {
-  if (flag > 0) return true;
-  if (flag < 0) return false;
+bool WithProgress::show_progress() const {
+  if (progress_ > 0) return true;
+  if (progress_ < 0) return false;
   return isatty(STDERR_FILENO) != 0;
+}
+
+void WithOverwrite::check_overwrite(const std::filesystem::path& out) const {
+  std::error_code ec;
+  if (std::filesystem::exists(out, ec) && !overwrite_) {
+    throw pipeline::UsageError(out.string() + ": already exists; pass --overwrite to replace it");
+  }
 }
 
 void ProgressBar::update(long long done, long long total) {

@@ -21,7 +21,9 @@
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
+#include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/route.hpp"
 #include "seqloc/pipeline/simulate.hpp"
 
 namespace fs = std::filesystem;
@@ -116,23 +118,22 @@ int main() {
   for (int k = 0; k < distinct; ++k) {
     std::vector<std::uint16_t> values(static_cast<std::size_t>(h) * w * n);
     for (auto& v : values) v = seqloc::filter::float_to_half(std::max(-8.0f, std::min(8.0f, noise(rng))));
-    std::string header = "{'descr': '<f2', 'fortran_order': False, 'shape': (128, 128, 256), }";
-    while ((10 + header.size() + 1) % 64 != 0) header += ' ';
-    header += '\n';
-    std::ofstream out(work / "route" / ("v" + std::to_string(k) + ".npy"), std::ios::binary);
-    out << "\x93NUMPY" << '\x01' << '\0';
-    out.put(static_cast<char>(header.size() & 0xFF)).put(static_cast<char>(header.size() >> 8));
-    out << header;
-    out.write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * 2));
+    std::ofstream(work / "route" / ("v" + std::to_string(k) + ".npy"), std::ios::binary)
+        << seqloc::pipeline::encode_npy_float16(h, w, n, values.data());
   }
-  std::ofstream(work / "route" / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "bench"})";
   {
-    std::ofstream csv(work / "route" / "frames.csv");
-    csv << "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg\n";
+    seqloc::pipeline::Route written;
+    written.name = "bench";
     for (int t = 0; t < frames; ++t) {
-      csv << t << "," << t * 0.5 << ",v" << t % distinct << ".npy," << -2500.0 + 5.0 * t << ",0.25,"
-          << (t ? 5 : 0) << ",0,0\n";
+      seqloc::pipeline::RouteFrame f;
+      f.frame = std::to_string(t);
+      f.timestamp_s = t * 0.5;
+      f.volume = work / "route" / ("v" + std::to_string(t % distinct) + ".npy");
+      f.crop_grid = seqloc::osm::GridPoint{-2500.0 + 5.0 * t, 0.25};
+      f.odometry = {t ? 5.0 : 0.0, 0, 0};
+      written.frames.push_back(std::move(f));
     }
+    seqloc::pipeline::write_route(written, work / "route");
   }
   const auto route = seqloc::pipeline::read_route(work / "route");
   seqloc::raster::CacheReader cache(pre.output, 256);

@@ -250,9 +250,12 @@ NpyVolume& NpyVolume::operator=(NpyVolume&& o) noexcept {
   return *this;
 }
 
-std::string encode_npy_float32(int d0, int d1, int d2, const float* data) {
-  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + std::to_string(d0) + ", " +
-                       std::to_string(d1) + ", " + std::to_string(d2) + "), }";
+namespace {
+
+// A C-order array of shape (d0, d1, d2) of `element`-byte values of NumPy type `descr`.
+std::string encode_npy(const char* descr, std::size_t element, int d0, int d1, int d2, const void* data) {
+  std::string header = std::string("{'descr': '") + descr + "', 'fortran_order': False, 'shape': (" +
+                       std::to_string(d0) + ", " + std::to_string(d1) + ", " + std::to_string(d2) + "), }";
   // Magic (6), version (2), header length (2) and the header padded with spaces to a multiple of
   // 64 bytes, ended by a newline.
   header.append((64 - (10 + header.size() + 1) % 64) % 64, ' ');
@@ -261,9 +264,20 @@ std::string encode_npy_float32(int d0, int d1, int d2, const float* data) {
   out.push_back(static_cast<char>(header.size() & 0xff));
   out.push_back(static_cast<char>(header.size() >> 8));
   out += header;
-  const std::size_t bytes = static_cast<std::size_t>(d0) * static_cast<std::size_t>(d1) * static_cast<std::size_t>(d2) * 4;
-  out.append(reinterpret_cast<const char*>(data), bytes);  // little-endian hosts only, as the reader
+  const std::size_t bytes =
+      static_cast<std::size_t>(d0) * static_cast<std::size_t>(d1) * static_cast<std::size_t>(d2) * element;
+  out.append(static_cast<const char*>(data), bytes);  // little-endian hosts only, as the reader
   return out;
+}
+
+}  // namespace
+
+std::string encode_npy_float32(int d0, int d1, int d2, const float* data) {
+  return encode_npy("<f4", 4, d0, d1, d2, data);
+}
+
+std::string encode_npy_float16(int d0, int d1, int d2, const std::uint16_t* halves) {
+  return encode_npy("<f2", 2, d0, d1, d2, halves);
 }
 
 }  // namespace seqloc::pipeline

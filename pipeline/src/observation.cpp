@@ -6,7 +6,7 @@
 #include <sstream>
 
 #include "seqloc/osm/classes.hpp"
-#include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/raster/png_codec.hpp"
 

@@ -31,8 +31,7 @@ void RegionWindow::shift(int du, int dv) {
 
 const float* RegionWindow::road_distance_m() {
   if (road_stale_) {
-    cache_->read_road_distance(origin_u_, origin_v_, width_, height_, road_cm_, /*fill_outside=*/true);
-    for (std::size_t i = 0; i < road_m_.size(); ++i) road_m_[i] = static_cast<float>(road_cm_[i] * 0.01);
+    cache_->read_road_distance_m(origin_u_, origin_v_, width_, height_, road_m_, /*fill_outside=*/true);
     road_stale_ = false;
   }
   return road_m_.data();

@@ -1,5 +1,6 @@
 #include "seqloc/pipeline/route.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -128,6 +129,7 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
     if (!meta["cell_m"].is_number() || !(meta["cell_m"].get<double>() > 0)) meta_fail("\"cell_m\" must be > 0");
     route.cell_m = meta["cell_m"].get<double>();
   }
+  if (meta.contains("simulated")) route.simulated_json = meta["simulated"].dump();
 
   // frames.csv
   const auto csv_path = dir / "frames.csv";
@@ -249,6 +251,87 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
   if (column.empty()) throw DataError(csv_path.string() + ": empty (a header row and one row per frame are needed)");
   if (route.frames.empty()) throw DataError(csv_path.string() + ": no frames after the header");
   return route;
+}
+
+namespace {
+
+// The shortest text that reads back as the same double.
+std::string shortest(double v) {
+  char buffer[32];
+  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, v);
+  return ec == std::errc() ? std::string(buffer, end) : std::string("nan");
+}
+
+// A CSV field, quoted when it holds a separator, a quote or surrounding blanks (RFC 4180).
+std::string csv_field(const std::string& text) {
+  const bool plain = text.find_first_of(",\"\n\r") == std::string::npos &&
+                     (text.empty() || (text.front() != ' ' && text.back() != ' ' && text.front() != '\t' &&
+                                       text.back() != '\t' && text.front() != '"'));
+  if (plain) return text;
+  std::string quoted = "\"";
+  for (const char c : text) quoted += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return quoted + '"';
+}
+
+// `path` relative to `dir` when it lies under it, else as it is.
+std::string route_path(const std::filesystem::path& path, const std::filesystem::path& dir) {
+  std::error_code ec;
+  const auto relative = std::filesystem::relative(path, dir, ec);
+  if (!ec && !relative.empty() && *relative.begin() != "..") return relative.generic_string();
+  return path.string();
+}
+
+}  // namespace
+
+void write_route(const Route& route, const std::filesystem::path& dir) {
+  std::filesystem::create_directories(dir);
+  nlohmann::ordered_json meta = {{"format", "seqloc-route"},
+                                 {"version", 1},
+                                 {"name", route.name},
+                                 {"volume_kind", route.volume_kind == filter::VolumeValues::prob ? "prob" : "log_prob"},
+                                 {"cell_m", route.cell_m}};
+  if (route.layout_declared) meta["layout"] = route.layout == VolumeLayout::nhw ? "NHW" : "HWN";
+  if (!route.simulated_json.empty()) meta["simulated"] = nlohmann::ordered_json::parse(route.simulated_json);
+  std::ofstream json(dir / "route.json");
+  json << meta.dump(2) << '\n';
+  if (!json.flush()) throw DataError((dir / "route.json").string() + ": cannot write");
+
+  auto any = [&](auto has) { return std::any_of(route.frames.begin(), route.frames.end(), has); };
+  const bool observations = !route.frames.empty() && !route.frames.front().observation.empty();
+  const bool geo = !route.frames.empty() && route.frames.front().crop_geo.has_value();
+  const bool gps = any([](const RouteFrame& f) { return f.gps.has_value(); });
+  const bool truth = any([](const RouteFrame& f) { return f.truth.has_value(); });
+  const bool heading = any([](const RouteFrame& f) { return f.truth && f.truth->heading_deg; });
+  std::ofstream csv(dir / "frames.csv");
+  csv << "frame,timestamp," << (observations ? "observation" : "volume") << (geo ? ",crop_lat,crop_lon" : ",crop_x,crop_y")
+      << ",odo_forward_m,odo_left_m,odo_yaw_deg" << (gps ? ",gps_lat,gps_lon,gps_sigma_m" : "")
+      << (truth ? ",gt_lat,gt_lon" : "") << (heading ? ",gt_heading_deg" : "") << '\n';
+  for (const RouteFrame& f : route.frames) {
+    csv << csv_field(f.frame) << ',' << shortest(f.timestamp_s) << ','
+        << csv_field(route_path(observations ? f.observation : f.volume, dir)) << ',';
+    if (geo) {
+      const osm::GeoPoint c = f.crop_geo.value_or(osm::GeoPoint{});
+      csv << shortest(c.lat_deg) << ',' << shortest(c.lon_deg);
+    } else {
+      const osm::GridPoint c = f.crop_grid.value_or(osm::GridPoint{});
+      csv << shortest(c.x_m) << ',' << shortest(c.y_m);
+    }
+    csv << ',' << shortest(f.odometry.forward_m) << ',' << shortest(f.odometry.left_m) << ','
+        << shortest(f.odometry.yaw_deg);
+    if (gps) {
+      csv << ',';
+      if (f.gps) csv << shortest(f.gps->where.lat_deg) << ',' << shortest(f.gps->where.lon_deg) << ',' << shortest(f.gps->sigma_m);
+      else csv << ",,";
+    }
+    if (truth) {
+      csv << ',';
+      if (f.truth) csv << shortest(f.truth->where.lat_deg) << ',' << shortest(f.truth->where.lon_deg);
+      else csv << ',';
+    }
+    if (heading) csv << ',' << (f.truth && f.truth->heading_deg ? shortest(*f.truth->heading_deg) : std::string());
+    csv << '\n';
+  }
+  if (!csv.flush()) throw DataError((dir / "frames.csv").string() + ": cannot write");
 }
 
 }  // namespace seqloc::pipeline

@@ -1,9 +1,11 @@
 #include "seqloc/pipeline/simulate.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
+#include <locale>
 #include <map>
 #include <random>
 #include <sstream>
@@ -12,8 +14,9 @@
 #include <nlohmann/json.hpp>
 
 #include "seqloc/osm/classes.hpp"
-#include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/pipeline/outputs.hpp"
+#include "seqloc/pipeline/route.hpp"
 #include "flat_index.hpp"
 
 namespace seqloc::pipeline {
@@ -185,10 +188,15 @@ void corrupt(Observation& obs, const ObservationModel& m, std::mt19937_64& rng) 
   }
 }
 
-std::string fixed(double v, int digits) {
+// v to `digits` decimals, as the text of std::fixed would give it.
+double rounded(double v, int digits) {
   std::ostringstream s;
+  s.imbue(std::locale::classic());
   s << std::fixed << std::setprecision(digits) << v;
-  return s.str();
+  const std::string text = s.str();
+  double out = 0;
+  std::from_chars(text.data(), text.data() + text.size(), out);
+  return out;
 }
 
 }  // namespace
@@ -306,9 +314,15 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
     name << "route_" << std::setw(3) << std::setfill('0') << r;
     const auto dir = partial / name.str();
     std::filesystem::create_directories(dir / "observations");
-    std::ofstream csv(dir / "frames.csv");
-    csv << "frame,timestamp,observation,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg,gps_lat,gps_lon,"
-           "gps_sigma_m,gt_lat,gt_lon,gt_heading_deg\n";
+    Route route;
+    route.name = name.str();
+    route.cell_m = kCellM;
+    route.simulated_json = nlohmann::json{{"seed", options.seed},
+                                          {"cache", cache.path().filename().string()},
+                                          {"range_m", options.camera.range_m},
+                                          {"fov_deg", options.camera.fov_deg},
+                                          {"gps_error_m", options.gps_error_m}}
+                               .dump();
     // The crop centre's error: uniform in the disc, then a bounded random walk.
     const double a0 = uniform(rng) * 2 * M_PI, r0 = options.gps_error_m * std::sqrt(uniform(rng));
     double ex = r0 * std::cos(a0), ey = r0 * std::sin(a0);
@@ -356,29 +370,21 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
       double gamma = 0;
       const osm::GeoPoint truth = projection.reverse({p.x, p.y}, gamma);
       const osm::GeoPoint fix = projection.reverse({p.x + ex, p.y + ey});
-      csv << frame.str() << ',' << fixed(timestamp, 3) << ",observations/" << frame.str() << ".png," << fixed(p.x + ex, 3)
-          << ',' << fixed(p.y + ey, 3) << ',' << fixed(odo_f, 4) << ',' << fixed(odo_l, 4) << ',' << fixed(odo_yaw, 4) << ',';
+      // Recorded as a GPS receiver and an odometer would report them: mm, 1e-4 m and degrees,
+      // 1e-9 degrees of lat/lon.
+      RouteFrame f;
+      f.frame = frame.str();
+      f.timestamp_s = rounded(timestamp, 3);
+      f.observation = dir / "observations" / (frame.str() + ".png");
+      f.crop_grid = osm::GridPoint{rounded(p.x + ex, 3), rounded(p.y + ey, 3)};
+      f.odometry = {rounded(odo_f, 4), rounded(odo_l, 4), rounded(odo_yaw, 4)};
       if (i == 0) {
-        csv << fixed(fix.lat_deg, 9) << ',' << fixed(fix.lon_deg, 9) << ',' << fixed(std::max(1.0, options.gps_error_m), 1);
-      } else {
-        csv << ",,";
+        f.gps = GpsPrior{{rounded(fix.lat_deg, 9), rounded(fix.lon_deg, 9)}, rounded(std::max(1.0, options.gps_error_m), 1)};
       }
-      csv << ',' << fixed(truth.lat_deg, 9) << ',' << fixed(truth.lon_deg, 9) << ','
-          << fixed(wrap360(p.heading_deg + gamma), 4) << '\n';
+      f.truth = GroundTruth{{rounded(truth.lat_deg, 9), rounded(truth.lon_deg, 9)}, rounded(wrap360(p.heading_deg + gamma), 4)};
+      route.frames.push_back(std::move(f));
     }
-    if (!csv.flush()) throw DataError((dir / "frames.csv").string() + ": cannot write");
-    const nlohmann::json route = {{"format", "seqloc-route"},
-                                  {"version", 1},
-                                  {"name", name.str()},
-                                  {"volume_kind", "log_prob"},
-                                  {"cell_m", kCellM},
-                                  {"simulated",
-                                   {{"seed", options.seed},
-                                    {"cache", cache.path().filename().string()},
-                                    {"range_m", options.camera.range_m},
-                                    {"fov_deg", options.camera.fov_deg},
-                                    {"gps_error_m", options.gps_error_m}}}};
-    std::ofstream(dir / "route.json") << route.dump(2) << '\n';
+    write_route(route, dir);
     if (progress) progress(r + 1, options.routes);
   }
   // Into place: an old folder is replaced only once the new one is complete.

@@ -735,6 +735,14 @@ void CacheReader::read_road_distance(std::int64_t u0, std::int64_t v0, int width
                         [this](std::int64_t c, std::int64_t r) { return distance_tile(c, r); });
 }
 
+void CacheReader::read_road_distance_m(std::int64_t u0, std::int64_t v0, int width, int height,
+                                       std::vector<float>& metres, bool fill_outside) {
+  std::vector<std::uint16_t> cm;
+  read_road_distance(u0, v0, width, height, cm, fill_outside);
+  metres.resize(cm.size());
+  std::transform(cm.begin(), cm.end(), metres.begin(), road_distance_metres);
+}
+
 std::vector<RoadLine> CacheReader::roads() {
   std::lock_guard lock(mutex_);
   std::vector<RoadLine> out;

@@ -69,7 +69,7 @@ std::int64_t count_outside(const raster::RegionGrid& grid, std::int64_t u0, std:
 
 std::vector<float> road_distance_m(std::span<const std::uint16_t> cm) {
   std::vector<float> metres(cm.size());
-  for (std::size_t i = 0; i < cm.size(); ++i) metres[i] = static_cast<float>(cm[i]) * 0.01f;
+  std::transform(cm.begin(), cm.end(), metres.begin(), raster::road_distance_metres);
   return metres;
 }
 

@@ -147,5 +147,69 @@ TEST(Route, BadFramesCsvRowsNameTheLine) {
   expect_error(kJson, "", "frames.csv: empty");
 }
 
+// write_route then read_route gives back every field exactly: numbers that need all 17 digits,
+// frame ids that need quoting, GPS on the first frame only, truth with and without heading,
+// lat/lon crops, and route.json's members including the simulator's provenance.
+TEST(Route, WriteRouteReadsBackExactly) {
+  test::ScratchDir dir;
+  std::filesystem::create_directories(dir / "out");
+  std::ofstream(dir / "a.npy") << "x";
+  std::ofstream(dir / "out/b c.npy") << "x";
+  Route route;
+  route.name = "round, trip";
+  route.volume_kind = filter::VolumeValues::prob;
+  route.cell_m = 0.25;
+  route.layout = VolumeLayout::nhw;
+  route.layout_declared = true;
+  route.simulated_json = R"({"seed":7,"cache":"x.gpkg"})";
+  for (int t = 0; t < 3; ++t) {
+    RouteFrame f;
+    f.frame = t == 1 ? "frame \"1\", quoted" : "f" + std::to_string(t);
+    f.timestamp_s = t / 3.0;
+    f.volume = t == 2 ? dir / "out/b c.npy" : dir / "a.npy";
+    f.crop_geo = osm::GeoPoint{47.1 + t * 1e-7 / 3, -10.5 - t / 7.0};
+    f.odometry = t == 0 ? filter::Odometry{} : filter::Odometry{5.0 / 3, -1e-9, 0.1 + 0.2};
+    if (t == 0) f.gps = GpsPrior{{47.1, -10.5}, 32.5};
+    if (t != 1) f.truth = GroundTruth{{47.1 + 1e-12, -10.5}, t == 0 ? std::optional<double>(359.99999999999994) : std::nullopt};
+    route.frames.push_back(f);
+  }
+  write_route(route, dir / "out");
+  const Route back = read_route(dir / "out");
+  EXPECT_EQ(back.name, route.name);
+  EXPECT_EQ(back.volume_kind, route.volume_kind);
+  EXPECT_EQ(back.cell_m, route.cell_m);
+  EXPECT_EQ(back.layout, route.layout);
+  EXPECT_TRUE(back.layout_declared);
+  EXPECT_EQ(back.simulated_json, R"({"cache":"x.gpkg","seed":7})");
+  ASSERT_EQ(back.frames.size(), route.frames.size());
+  for (std::size_t i = 0; i < route.frames.size(); ++i) {
+    const RouteFrame &a = route.frames[i], &b = back.frames[i];
+    EXPECT_EQ(b.frame, a.frame);
+    EXPECT_EQ(b.timestamp_s, a.timestamp_s);
+    EXPECT_EQ(std::filesystem::weakly_canonical(b.volume), std::filesystem::weakly_canonical(a.volume));
+    ASSERT_TRUE(b.crop_geo && !b.crop_grid);
+    EXPECT_EQ(b.crop_geo->lat_deg, a.crop_geo->lat_deg);
+    EXPECT_EQ(b.crop_geo->lon_deg, a.crop_geo->lon_deg);
+    EXPECT_EQ(b.odometry.forward_m, a.odometry.forward_m);
+    EXPECT_EQ(b.odometry.left_m, a.odometry.left_m);
+    EXPECT_EQ(b.odometry.yaw_deg, a.odometry.yaw_deg);
+    ASSERT_EQ(b.gps.has_value(), a.gps.has_value()) << i;
+    if (a.gps) {
+      EXPECT_EQ(b.gps->where.lat_deg, a.gps->where.lat_deg);
+      EXPECT_EQ(b.gps->sigma_m, a.gps->sigma_m);
+    }
+    ASSERT_EQ(b.truth.has_value(), a.truth.has_value()) << i;
+    if (a.truth) {
+      EXPECT_EQ(b.truth->where.lat_deg, a.truth->where.lat_deg);
+      EXPECT_EQ(b.truth->where.lon_deg, a.truth->where.lon_deg);
+      EXPECT_EQ(b.truth->heading_deg, a.truth->heading_deg);
+    }
+  }
+  // Paths under the route directory are written relative to it, others as given.
+  const std::string csv = test::read_file(dir / "out/frames.csv");
+  EXPECT_NE(csv.find(",b c.npy,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("," + (dir / "a.npy").string() + ","), std::string::npos) << csv;
+}
+
 }  // namespace
 }  // namespace seqloc::pipeline

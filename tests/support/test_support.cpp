@@ -12,6 +12,7 @@
 
 #include <gtest/gtest.h>
 
+#include "seqloc/pipeline/npy.hpp"
 
 namespace seqloc::test {
 
@@ -87,15 +88,7 @@ std::filesystem::path shared_osm(const std::string& name) {
 }
 
 void write_npy_float32(const std::filesystem::path& path, int h, int w, int n, const std::vector<float>& values) {
-  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + std::to_string(h) + ", " +
-                       std::to_string(w) + ", " + std::to_string(n) + "), }";
-  while ((10 + header.size() + 1) % 64 != 0) header += ' ';
-  header += '\n';
-  std::ofstream out(path, std::ios::binary);
-  out << "\x93NUMPY" << '\x01' << '\0';
-  out.put(static_cast<char>(header.size() & 0xFF)).put(static_cast<char>(header.size() >> 8));
-  out << header;
-  out.write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * sizeof(float)));
+  std::ofstream(path, std::ios::binary) << pipeline::encode_npy_float32(h, w, n, values.data());
 }
 
 std::string read_file(const std::filesystem::path& path) {

@@ -6,19 +6,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
-#include <stdexcept>
 #include <string>
 
 #include "seqloc/filter/types.hpp"
+#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::pipeline {
-
-/// Input data that cannot be used (a malformed file, a bad row); the message names the file, line
-/// or cell and what is wrong.
-class DataError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 class NpyVolume {
  public:
@@ -59,6 +52,8 @@ class NpyVolume {
 /// A C-order float32 array of shape (d0, d1, d2) as the bytes of a .npy file (format 1.0), which
 /// NpyVolume reads back.
 [[nodiscard]] std::string encode_npy_float32(int d0, int d1, int d2, const float* data);
+/// The same for float16 values given as their IEEE half bits (filter::float_to_half).
+[[nodiscard]] std::string encode_npy_float16(int d0, int d1, int d2, const std::uint16_t* halves);
 
 /// Largest volume accepted: 2^31 cells (8 GB of float32), far beyond any backbone's output.
 inline constexpr std::uint64_t kMaxVolumeCells = 1ull << 31;

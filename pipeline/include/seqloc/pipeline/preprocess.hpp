@@ -6,19 +6,12 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
-#include <stdexcept>
 #include <string>
 
 #include "seqloc/osm/features.hpp"
+#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::pipeline {
-
-/// A request that cannot be carried out as given (bad option values, absurd region, output in
-/// the way). Raised before any work is done.
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 /// Limits on a region, so that a mistyped bbox fails at once instead of after hours. Transverse
 /// Mercator keeps the scale error under 0.31 % within 500 km of the centre, hence the extent limit;

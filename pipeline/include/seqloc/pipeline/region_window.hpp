@@ -66,7 +66,6 @@ class RegionWindow {
   int width_, height_;
   std::int64_t origin_u_ = 0, origin_v_ = 0;
   std::vector<float> road_m_;
-  std::vector<std::uint16_t> road_cm_;
   bool road_stale_ = true;
 };
 

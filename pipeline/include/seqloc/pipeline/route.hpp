@@ -47,6 +47,9 @@ struct Route {
   double cell_m = 0.5;
   VolumeLayout layout = VolumeLayout::hwn;
   bool layout_declared = false;  ///< route.json names the layout (else HWN, with a check of each shape)
+  /// route.json's "simulated" object as JSON text (the provenance `seqloc simulate` records), or
+  /// empty; carried through, read by no one.
+  std::string simulated_json;
   std::vector<RouteFrame> frames;
 };
 
@@ -62,5 +65,12 @@ struct RouteLimits {
 /// Reads and checks a route directory. Throws DataError: "DIR/route.json: ..." or
 /// "DIR/frames.csv:LINE: ..." naming what is wrong.
 [[nodiscard]] Route read_route(const std::filesystem::path& dir, const RouteLimits& limits = {});
+
+/// Writes `route` as route.json and frames.csv into `dir` (created), the reverse of read_route:
+/// numbers in their shortest form that reads back to the same double, volume and observation
+/// paths relative to `dir` when they lie under it, and only the columns some frame uses (all
+/// frames' crops as lat/lon when the first has one, else in grid metres). Throws DataError when a
+/// file cannot be written.
+void write_route(const Route& route, const std::filesystem::path& dir);
 
 }  // namespace seqloc::pipeline

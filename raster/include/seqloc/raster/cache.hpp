@@ -148,6 +148,10 @@ class TileEncoder {
   std::unordered_map<std::uint16_t, std::vector<std::uint8_t>> constant_distance_;
 };
 
+/// A road distance as the cache stores it (centimetres, UInt16) in metres: the float nearest to
+/// cm / 100. Every reader of the layer converts with this.
+[[nodiscard]] inline float road_distance_metres(std::uint16_t cm) { return static_cast<float>(cm * 0.01); }
+
 class CacheReader {
  public:
   /// Opens a complete cache read-only. Throws CacheFormatError for a file that is not a seqloc
@@ -175,6 +179,9 @@ class CacheReader {
                     bool fill_outside = false);
   void read_road_distance(std::int64_t u0, std::int64_t v0, int width, int height, std::vector<std::uint16_t>& cm,
                           bool fill_outside = false);
+  /// The same window in metres (road_distance_metres of each cell).
+  void read_road_distance_m(std::int64_t u0, std::int64_t v0, int width, int height, std::vector<float>& metres,
+                            bool fill_outside = false);
 
   /// The road centerlines of the cache.
   [[nodiscard]] std::vector<RoadLine> roads();
