@@ -10,20 +10,19 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <list>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <tuple>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "seqloc/osm/features.hpp"
 #include "seqloc/osm/projection.hpp"
 #include "seqloc/raster/grid.hpp"
+#include "seqloc/raster/lru_cache.hpp"
 #include "seqloc/raster/tile_renderer.hpp"
 
 namespace seqloc::raster {
@@ -204,7 +203,6 @@ class CacheReader {
   std::unique_ptr<detail::Database> db_;
   std::unique_ptr<detail::Statement> select_tile_[2];  ///< per layer, prepared on first use
   CacheMetadata metadata_;
-  std::size_t capacity_;
   mutable std::mutex mutex_;
   using Key = std::tuple<int, std::int64_t, std::int64_t>;
   struct KeyHash {
@@ -212,8 +210,7 @@ class CacheReader {
       return std::hash<std::int64_t>()((std::get<1>(k) * 1000003 + std::get<2>(k)) * 4 + std::get<0>(k));
     }
   };
-  std::list<std::pair<Key, Decoded>> lru_;
-  std::unordered_map<Key, std::list<std::pair<Key, Decoded>>::iterator, KeyHash> index_;
+  LruCache<Key, Decoded, KeyHash> lru_;  ///< guarded by mutex_
   LruStats stats_;
 };
 

@@ -1,0 +1,327 @@
+// Writing a region cache: the GeoPackage schema, tiles, roads and metadata; and the tile encoder.
+#include "seqloc/raster/cache.hpp"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <ctime>
+#include <utility>
+
+#include "seqloc/osm/classes.hpp"
+#include "seqloc/raster/png_codec.hpp"
+#include "cache_format.hpp"
+#include "sqlite.hpp"
+
+#ifndef SEQLOC_VERSION
+#define SEQLOC_VERSION "unknown"
+#endif
+
+namespace seqloc::raster {
+
+CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata)
+    : final_(final_path), partial_(final_path.string() + ".partial"), metadata_(std::move(metadata)) {
+  const auto dir = final_.has_parent_path() ? final_.parent_path() : std::filesystem::path(".");
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) {
+    throw CacheIoError(final_.string() + ": output directory '" + dir.string() + "' does not exist");
+  }
+  metadata_.complete = false;
+  if (metadata_.software_version.empty()) metadata_.software_version = SEQLOC_VERSION;
+  if (metadata_.created_utc.empty()) metadata_.created_utc = detail::now_utc();
+
+  if (std::filesystem::exists(partial_, ec)) {
+    try {
+      auto db = std::make_unique<detail::Database>(partial_.string(), SQLITE_OPEN_READWRITE);
+      const CacheMetadata previous = detail::metadata_from_db(*db);
+      if (previous.same_build(metadata_) && previous.shard_index == metadata_.shard_index &&
+          previous.shard_count == metadata_.shard_count && !previous.complete) {
+        db_ = std::move(db);
+        resumed_ = true;
+        metadata_.created_utc = previous.created_utc;
+      }
+    } catch (const CacheError&) {
+      // An unreadable or foreign partial file is simply rebuilt.
+    }
+    if (!resumed_) detail::remove_sqlite_files(partial_);
+  }
+  if (!db_) {
+    db_ = std::make_unique<detail::Database>(partial_.string(), SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
+  }
+  db_->exec("PRAGMA journal_mode = WAL");
+  db_->exec("PRAGMA synchronous = NORMAL");
+  if (resumed_) {
+    detail::Statement s(*db_, "SELECT tile_column, tile_row FROM classes");
+    while (s.step()) done_[detail::tile_key(s.column_int(0), s.column_int(1))] = true;
+  } else {
+    create_schema(metadata_.projection());
+  }
+}
+
+CacheWriter::~CacheWriter() {
+  if (db_ && in_transaction_) {
+    try {
+      db_->exec("COMMIT");
+    } catch (const CacheError&) {
+    }
+  }
+}
+
+bool CacheWriter::has_tile(std::int64_t col, std::int64_t row) const { return done_.count(detail::tile_key(col, row)) > 0; }
+
+void CacheWriter::create_schema(const osm::RegionProjection& projection) {
+  auto& db = *db_;
+  db.exec("PRAGMA application_id = 1196444487");  // 'GPKG'
+  db.exec("PRAGMA user_version = 10200");         // GeoPackage 1.2
+  db.exec("BEGIN");
+  db.exec(R"sql(
+CREATE TABLE gpkg_spatial_ref_sys (
+  srs_name TEXT NOT NULL, srs_id INTEGER NOT NULL PRIMARY KEY, organization TEXT NOT NULL,
+  organization_coordsys_id INTEGER NOT NULL, definition TEXT NOT NULL, description TEXT);
+CREATE TABLE gpkg_contents (
+  table_name TEXT NOT NULL PRIMARY KEY, data_type TEXT NOT NULL, identifier TEXT UNIQUE,
+  description TEXT DEFAULT '', last_change DATETIME NOT NULL DEFAULT (strftime('%Y-%m-%dT%H:%M:%fZ','now')),
+  min_x DOUBLE, min_y DOUBLE, max_x DOUBLE, max_y DOUBLE, srs_id INTEGER,
+  CONSTRAINT fk_gc_r_srs_id FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys(srs_id));
+CREATE TABLE gpkg_geometry_columns (
+  table_name TEXT NOT NULL, column_name TEXT NOT NULL, geometry_type_name TEXT NOT NULL,
+  srs_id INTEGER NOT NULL, z TINYINT NOT NULL, m TINYINT NOT NULL,
+  CONSTRAINT pk_geom_cols PRIMARY KEY (table_name, column_name),
+  CONSTRAINT fk_gc_tn FOREIGN KEY (table_name) REFERENCES gpkg_contents(table_name),
+  CONSTRAINT fk_gc_srs FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id));
+CREATE TABLE gpkg_tile_matrix_set (
+  table_name TEXT NOT NULL PRIMARY KEY, srs_id INTEGER NOT NULL,
+  min_x DOUBLE NOT NULL, min_y DOUBLE NOT NULL, max_x DOUBLE NOT NULL, max_y DOUBLE NOT NULL,
+  CONSTRAINT fk_gtms_table_name FOREIGN KEY (table_name) REFERENCES gpkg_contents(table_name),
+  CONSTRAINT fk_gtms_srs FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id));
+CREATE TABLE gpkg_tile_matrix (
+  table_name TEXT NOT NULL, zoom_level INTEGER NOT NULL, matrix_width INTEGER NOT NULL,
+  matrix_height INTEGER NOT NULL, tile_width INTEGER NOT NULL, tile_height INTEGER NOT NULL,
+  pixel_x_size DOUBLE NOT NULL, pixel_y_size DOUBLE NOT NULL,
+  CONSTRAINT pk_ttm PRIMARY KEY (table_name, zoom_level),
+  CONSTRAINT fk_tmm_table_name FOREIGN KEY (table_name) REFERENCES gpkg_contents(table_name));
+CREATE TABLE gpkg_extensions (
+  table_name TEXT, column_name TEXT, extension_name TEXT NOT NULL, definition TEXT NOT NULL,
+  scope TEXT NOT NULL, CONSTRAINT ge_tce UNIQUE (table_name, column_name, extension_name));
+CREATE TABLE gpkg_2d_gridded_coverage_ancillary (
+  id INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, tile_matrix_set_name TEXT NOT NULL UNIQUE,
+  datatype TEXT NOT NULL DEFAULT 'integer', scale REAL NOT NULL DEFAULT 1.0, offset REAL NOT NULL DEFAULT 0.0,
+  precision REAL DEFAULT 1.0, data_null REAL, grid_cell_encoding TEXT DEFAULT 'grid-value-is-center',
+  uom TEXT, field_name TEXT DEFAULT 'Height', quantity_definition TEXT DEFAULT 'Height',
+  CONSTRAINT fk_g2dgtct_name FOREIGN KEY(tile_matrix_set_name) REFERENCES gpkg_tile_matrix_set(table_name),
+  CHECK (datatype in ('integer','float')));
+CREATE TABLE gpkg_2d_gridded_tile_ancillary (
+  id INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, tpudt_name TEXT NOT NULL, tpudt_id INTEGER NOT NULL,
+  scale REAL NOT NULL DEFAULT 1.0, offset REAL NOT NULL DEFAULT 0.0, min REAL DEFAULT NULL,
+  max REAL DEFAULT NULL, mean REAL DEFAULT NULL, std_dev REAL DEFAULT NULL,
+  CONSTRAINT fk_g2dgtat_name FOREIGN KEY (tpudt_name) REFERENCES gpkg_contents(table_name),
+  UNIQUE (tpudt_name, tpudt_id));
+CREATE TABLE classes (
+  id INTEGER PRIMARY KEY AUTOINCREMENT, zoom_level INTEGER NOT NULL, tile_column INTEGER NOT NULL,
+  tile_row INTEGER NOT NULL, tile_data BLOB NOT NULL, UNIQUE (zoom_level, tile_column, tile_row));
+CREATE TABLE road_distance (
+  id INTEGER PRIMARY KEY AUTOINCREMENT, zoom_level INTEGER NOT NULL, tile_column INTEGER NOT NULL,
+  tile_row INTEGER NOT NULL, tile_data BLOB NOT NULL, UNIQUE (zoom_level, tile_column, tile_row));
+CREATE TABLE roads (
+  fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, geom LINESTRING, osm_id INTEGER, highway TEXT);
+CREATE TABLE seqloc_metadata (key TEXT NOT NULL PRIMARY KEY, value TEXT NOT NULL);
+INSERT INTO gpkg_spatial_ref_sys VALUES
+  ('Undefined cartesian SRS', -1, 'NONE', -1, 'undefined', 'undefined cartesian coordinate reference system'),
+  ('Undefined geographic SRS', 0, 'NONE', 0, 'undefined', 'undefined geographic coordinate reference system'),
+  ('WGS 84 geodetic', 4326, 'EPSG', 4326, 'GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563,AUTHORITY["EPSG","7030"]],AUTHORITY["EPSG","6326"]],PRIMEM["Greenwich",0,AUTHORITY["EPSG","8901"]],UNIT["degree",0.0174532925199433,AUTHORITY["EPSG","9122"]],AXIS["Latitude",NORTH],AXIS["Longitude",EAST],AUTHORITY["EPSG","4326"]]', 'longitude/latitude coordinates in decimal degrees on the WGS 84 spheroid');
+)sql");
+  const RegionGrid& g = metadata_.grid;
+  {
+    detail::Statement s(db, "INSERT INTO gpkg_spatial_ref_sys VALUES (?, ?, 'NONE', ?, ?, ?)");
+    s.bind(1, std::string_view("seqloc region TM"))
+        .bind(2, detail::kSrsId)
+        .bind(3, detail::kSrsId)
+        .bind(4, projection.wkt())
+        .bind(5, projection.proj_string());
+    s.run();
+  }
+  {
+    detail::Statement s(db, "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, "
+                            "max_x, max_y, srs_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)");
+    auto add = [&](std::string_view table, std::string_view type, std::string_view description, bool spatial) {
+      s.bind(1, table).bind(2, type).bind(3, table).bind(4, description);
+      if (spatial) {
+        s.bind(5, g.min_x()).bind(6, g.min_y()).bind(7, g.max_x()).bind(8, g.max_y()).bind(9, detail::kSrsId);
+      } else {
+        s.bind_null(5).bind_null(6).bind_null(7).bind_null(8).bind_null(9);
+      }
+      s.run();
+    };
+    add("classes", "tiles", "OrienterNet semantic classes: R = areas, G = ways, B = nodes (0 = background)", true);
+    add("road_distance", "2d-gridded-coverage", "distance to the nearest road cell, metres (UInt16 cm)", true);
+    add("roads", "features", "road-group centerlines (OrienterNet 'road' ways)", true);
+    add("seqloc_metadata", "attributes", "seqloc cache metadata", false);
+  }
+  {
+    detail::Statement s(db, "INSERT INTO gpkg_tile_matrix_set VALUES (?, ?, ?, ?, ?, ?)");
+    detail::Statement m(db, "INSERT INTO gpkg_tile_matrix VALUES (?, 0, ?, ?, ?, ?, ?, ?)");
+    for (const char* table : {"classes", "road_distance"}) {
+      s.bind(1, std::string_view(table)).bind(2, detail::kSrsId).bind(3, g.min_x()).bind(4, g.min_y()).bind(5, g.max_x());
+      s.bind(6, g.max_y());
+      s.run();
+      m.bind(1, std::string_view(table)).bind(2, g.tiles_wide()).bind(3, g.tiles_high());
+      m.bind(4, std::int64_t{kTilePx}).bind(5, std::int64_t{kTilePx}).bind(6, kCellM).bind(7, kCellM);
+      m.run();
+    }
+  }
+  {
+    detail::Statement s(db, "INSERT INTO gpkg_2d_gridded_coverage_ancillary (tile_matrix_set_name, datatype, scale, "
+                            "offset, precision, data_null, grid_cell_encoding, uom, field_name, quantity_definition) "
+                            "VALUES ('road_distance', 'integer', 0.01, 0.0, 0.01, ?, 'grid-value-is-area', 'm', "
+                            "'road_distance', 'Distance to the nearest road cell')");
+    s.bind(1, static_cast<double>(detail::kDistanceNull));
+    s.run();
+  }
+  {
+    detail::Statement s(db, "INSERT INTO gpkg_extensions VALUES (?, ?, 'gpkg_2d_gridded_coverage', ?, 'read-write')");
+    auto add = [&](std::string_view table, const char* column) {
+      s.bind(1, table);
+      if (column) {
+        s.bind(2, std::string_view(column));
+      } else {
+        s.bind_null(2);
+      }
+      s.bind(3, std::string_view(detail::kGriddedCoverageSpec));
+      s.run();
+    };
+    add("gpkg_2d_gridded_coverage_ancillary", nullptr);
+    add("gpkg_2d_gridded_tile_ancillary", nullptr);
+    add("road_distance", "tile_data");
+  }
+  {
+    detail::Statement s(db, "INSERT INTO gpkg_geometry_columns VALUES ('roads', 'geom', 'LINESTRING', ?, 0, 0)");
+    s.bind(1, detail::kSrsId);
+    s.run();
+  }
+  write_metadata();
+  db.exec("COMMIT");
+}
+
+void CacheWriter::write_metadata() {
+  detail::Statement s(*db_, "INSERT OR REPLACE INTO seqloc_metadata (key, value) VALUES (?, ?)");
+  for (const auto& [key, value] : metadata_rows(metadata_)) {
+    s.bind(1, key).bind(2, value);
+    s.run();
+  }
+}
+
+void CacheWriter::begin() {
+  if (!in_transaction_) {
+    db_->exec("BEGIN");
+    in_transaction_ = true;
+  }
+}
+
+void CacheWriter::commit() {
+  if (in_transaction_) {
+    db_->exec("COMMIT");
+    in_transaction_ = false;
+    pending_ = 0;
+  }
+}
+
+void CacheWriter::write_roads(const std::vector<RoadLine>& roads) {
+  {
+    detail::Statement count(*db_, "SELECT COUNT(*) FROM seqloc_metadata WHERE key = 'roads_written'");
+    if (count.step() && count.column_int(0) > 0) return;
+  }
+  begin();
+  detail::Statement s(*db_, "INSERT INTO roads (geom, osm_id, highway) VALUES (?, ?, ?)");
+  for (const auto& road : roads) {
+    if (road.points.size() < 2) continue;
+    const auto blob = detail::linestring_blob(road.points);
+    s.bind_blob(1, blob).bind(2, road.osm_id).bind(3, road.highway);
+    s.run();
+  }
+  db_->exec("INSERT OR REPLACE INTO seqloc_metadata (key, value) VALUES ('roads_written', 'yes')");
+  commit();
+}
+
+void CacheWriter::write_tile(const EncodedTile& tile) {
+  assert(metadata_.grid.contains_tile(tile.col, tile.row));
+  begin();
+  if (!insert_classes_) {
+    insert_classes_ = std::make_unique<detail::Statement>(
+        *db_, "INSERT OR REPLACE INTO classes (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
+    insert_distance_ = std::make_unique<detail::Statement>(
+        *db_, "INSERT OR REPLACE INTO road_distance (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
+    insert_ancillary_ = std::make_unique<detail::Statement>(
+        *db_, "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, scale, offset, min, max, "
+              "mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
+  }
+  insert_classes_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.classes_png);
+  insert_classes_->run();
+  insert_distance_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.distance_png);
+  insert_distance_->run();
+  const std::int64_t id = sqlite3_last_insert_rowid(db_->get());
+  detail::Statement& ancillary = *insert_ancillary_;
+  ancillary.bind(1, id)
+      .bind(2, tile.distance_min_m)
+      .bind(3, tile.distance_max_m)
+      .bind(4, tile.distance_mean_m);
+  ancillary.run();
+  done_[detail::tile_key(tile.col, tile.row)] = true;
+  if (++pending_ >= detail::kTilesPerTransaction) commit();
+}
+
+void CacheWriter::finish() {
+  commit();
+  const RegionGrid& g = metadata_.grid;
+  for (std::int64_t row = 0; row < g.tiles_high(); ++row) {
+    for (std::int64_t col = 0; col < g.tiles_wide(); ++col) {
+      if (metadata_.shard_owns(col, row) && !has_tile(col, row)) {
+        throw CacheError(partial_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) +
+                         ") was never written; the cache is not complete");
+      }
+    }
+  }
+  insert_classes_.reset();
+  insert_distance_.reset();
+  insert_ancillary_.reset();
+  metadata_.complete = true;
+  db_->exec("BEGIN");
+  write_metadata();
+  db_->exec("COMMIT");
+  db_->exec("PRAGMA journal_mode = DELETE");  // a finished cache is one self-contained file
+  db_.reset();
+  std::error_code ec;
+  std::filesystem::rename(partial_, final_, ec);
+  if (ec) throw CacheIoError(final_.string() + ": cannot move the finished cache into place: " + ec.message());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Encoder
+
+EncodedTile TileEncoder::encode(std::int64_t col, std::int64_t row, const std::vector<std::uint8_t>& rgb,
+                                bool classes_empty, const std::vector<std::uint16_t>& cm) {
+  EncodedTile tile;
+  tile.col = col;
+  tile.row = row;
+  if (classes_empty) {
+    if (empty_classes_.empty()) empty_classes_ = encode_png_rgb8(rgb, kTilePx, kTilePx);
+    tile.classes_png = empty_classes_;
+  } else {
+    tile.classes_png = encode_png_rgb8(rgb, kTilePx, kTilePx);
+  }
+  const auto [lo, hi] = std::minmax_element(cm.begin(), cm.end());
+  tile.distance_min_m = *lo * 0.01;
+  tile.distance_max_m = *hi * 0.01;
+  if (*lo == *hi) {
+    auto& blob = constant_distance_[*lo];
+    if (blob.empty()) blob = encode_png_gray16(cm, kTilePx, kTilePx);
+    tile.distance_png = blob;
+    tile.distance_mean_m = tile.distance_min_m;
+  } else {
+    tile.distance_png = encode_png_gray16(cm, kTilePx, kTilePx);
+    double sum = 0;
+    for (auto v : cm) sum += v;
+    tile.distance_mean_m = sum / static_cast<double>(cm.size()) * 0.01;
+  }
+  return tile;
+}
+
+}  // namespace seqloc::raster
