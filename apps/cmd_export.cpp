@@ -38,7 +38,11 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
     if (!layer) throw pipeline::UsageError("--layer '" + layer_ + "': classes, road_distance or road_prior");
     options_.layer = *layer;
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
-    if (!(options_.layer_options.prior_sigma_m > 0)) throw pipeline::UsageError("--prior-sigma must be positive");
+    try {
+      options_.validate();  // --prior-sigma, --bbox
+    } catch (const serve::ExportError& e) {
+      throw pipeline::UsageError(e.what());
+    }
     ProgressBar bar(show_progress(), "export");
     options_.progress = [&](long long done, long long total) { bar.update(done, total); };
     serve::export_cog(cache, options_, out_);

@@ -39,8 +39,10 @@ class ServeCommand : public Command {
   }
 
   int run() override {
-    if (service_.max_crop_m <= 0 || !(service_.layers.prior_sigma_m > 0)) {
-      throw pipeline::UsageError("--max-crop-m and --prior-sigma must be positive");
+    try {
+      service_.validate();  // --max-crop-m, --prior-sigma, ...
+    } catch (const serve::ServiceError& e) {
+      throw pipeline::UsageError(e.what());
     }
     if (!web_.empty()) {
       service_.web_root = web_;

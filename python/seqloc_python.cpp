@@ -3,11 +3,14 @@
 // online on its output. Arrays come back as NumPy arrays that own the C++ buffers (no copies);
 // volumes go in as NumPy arrays read in place.
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include <pybind11/numpy.h>
@@ -104,29 +107,36 @@ class PyCache {
   std::unique_ptr<raster::CacheReader> cache_;
 };
 
+// The filter's settings by name, from filter::filter_config_fields (the one list of them).
 filter::FilterConfig config_from(const py::dict& d) {
   filter::FilterConfig c;
+  const auto fields = filter::filter_config_fields();
   for (const auto& [key_obj, value] : d) {
     const auto key = key_obj.cast<std::string>();
-    if (key == "width") c.width = value.cast<int>();
-    else if (key == "height") c.height = value.cast<int>();
-    else if (key == "headings") c.headings = value.cast<int>();
-    else if (key == "etu") c.etu = value.cast<bool>();
-    else if (key == "mgr") c.mgr = value.cast<bool>();
-    else if (key == "pas") c.pas = value.cast<bool>();
-    else if (key == "etu_reference_entropy") c.etu_reference_entropy = value.cast<double>();
-    else if (key == "outside_crop_nats") c.outside_crop_nats = value.cast<double>();
-    else if (key == "mgr_epsilon") c.mgr_epsilon = value.cast<double>();
-    else if (key == "mgr_sigma_m") c.mgr_sigma_m = value.cast<double>();
-    else if (key == "pas_radius") c.pas_radius = value.cast<int>();
-    else if (key == "relocalization_jump_m") c.relocalization_jump_m = value.cast<double>();
-    else if (key == "subbin_heading") c.subbin_heading = value.cast<bool>();
-    else if (key == "motion_noise") c.motion_noise = value.cast<bool>();
-    else if (key == "threads") c.threads = value.cast<int>();
-    else throw py::key_error("unknown filter setting '" + key + "'");
+    const auto field = std::find_if(fields.begin(), fields.end(), [&](const auto& f) { return key == f.name; });
+    if (field == fields.end()) throw py::key_error("unknown filter setting '" + key + "' (Filter.settings() lists them)");
+    std::visit([&](auto member) { c.*member = value.cast<std::remove_reference_t<decltype(c.*member)>>(); }, field->member);
   }
   c.validate();
   return c;
+}
+
+py::dict config_dict(const filter::FilterConfig& c) {
+  py::dict d;
+  for (const auto& field : filter::filter_config_fields()) {
+    std::visit([&](auto member) { d[field.name] = c.*member; }, field.member);
+  }
+  return d;
+}
+
+// Every setting with its default and what it is: {name: (default, help)}.
+py::dict filter_settings() {
+  const filter::FilterConfig defaults;
+  py::dict d;
+  for (const auto& field : filter::filter_config_fields()) {
+    std::visit([&](auto member) { d[field.name] = py::make_tuple(defaults.*member, field.help); }, field.member);
+  }
+  return d;
 }
 
 py::dict pose_dict(const filter::Pose& p) {
@@ -140,6 +150,7 @@ py::dict pose_dict(const filter::Pose& p) {
 class PyFilter {
  public:
   explicit PyFilter(const py::dict& config) : filter_(config_from(config)) {}
+  [[nodiscard]] const filter::FilterConfig& config() const { return filter_.config(); }
 
   void reset(const py::object& gps) {
     if (gps.is_none()) {
@@ -227,7 +238,11 @@ PYBIND11_MODULE(seqloc, m) {
       .def_property_readonly("info", &PyCache::info);
 
   py::class_<PyFilter>(m, "Filter", "The SeqLoc filter over a window of cells (docs/filter.md)")
-      .def(py::init<const py::dict&>(), py::arg("config") = py::dict())
+      .def(py::init<const py::dict&>(), py::arg("config") = py::dict(),
+           "config: any of the settings of Filter.settings() by name; the others keep their defaults")
+      .def_static("settings", &filter_settings, "Every filter setting: {name: (default, what it is)}")
+      .def_property_readonly("config", [](const PyFilter& f) { return config_dict(f.config()); },
+                             "The settings in use, by name")
       .def("reset", &PyFilter::reset, py::arg("gps") = py::none(),
            "Start a sequence: uniform belief, or gps=(u, v, sigma_m) in window cells")
       .def("step", &PyFilter::step, py::arg("log_volume"), py::arg("odometry") = std::make_tuple(0.0, 0.0, 0.0),

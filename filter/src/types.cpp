@@ -53,6 +53,32 @@ std::uint16_t float_to_half(float f) {
   return static_cast<std::uint16_t>(sign | round_off(significand, 126 - exponent));  // 2^-14 rounds up to 0x0400
 }
 
+std::span<const FilterConfigField> filter_config_fields() {
+  using C = FilterConfig;
+  static const FilterConfigField kFields[] = {
+      {"width", &C::width, "belief window width, cells of 0.5 m"},
+      {"height", &C::height, "belief window height, cells"},
+      {"headings", &C::headings, "heading bins R"},
+      {"etu", &C::etu, "Entropy-Tempered Uncertainty on"},
+      {"mgr", &C::mgr, "Map-Guided Relocalization on"},
+      {"pas", &C::pas, "Peak-Anchored Smoothing on"},
+      {"etu_reference_entropy", &C::etu_reference_entropy, "ETU relative to this entropy (0: the paper's 1 - H)"},
+      {"mgr_epsilon", &C::mgr_epsilon, "eps of MGR"},
+      {"mgr_sigma_m", &C::mgr_sigma_m, "sigma of the road prior, metres"},
+      {"pas_radius", &C::pas_radius, "PAS radius, cells"},
+      {"outside_crop_nats", &C::outside_crop_nats, "cells outside a frame's crop get log(1/M) minus this"},
+      {"relocalization_jump_m", &C::relocalization_jump_m, "an argmax jump beyond this is flagged relocalized"},
+      {"subbin_heading", &C::subbin_heading, "refine the heading between bins"},
+      {"subbin_half_width", &C::subbin_half_width, "bins each side of the heading in that refinement"},
+      {"motion_noise", &C::motion_noise, "diffuse the belief with the step length"},
+      {"motion_noise_xy_per_m", &C::motion_noise_xy_per_m, "position noise sigma per metre driven"},
+      {"motion_noise_deg_per_m", &C::motion_noise_deg_per_m, "heading noise sigma (degrees) per metre driven"},
+      {"gps_prior", &C::gps_prior, "use each frame's GPS fix as a prior term"},
+      {"threads", &C::threads, "worker threads of one step"},
+  };
+  return kFields;
+}
+
 void FilterConfig::validate() const {
   auto fail = [](const std::string& field, double value, const std::string& constraint) {
     std::ostringstream s;

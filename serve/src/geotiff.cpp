@@ -179,7 +179,19 @@ Window window_of(const raster::CacheReader& cache, const std::optional<osm::GeoB
 
 }  // namespace
 
+void ExportOptions::validate() const {
+  try {
+    layer_options.validate();
+  } catch (const RequestError& e) {
+    throw ExportError(std::string("export options: ") + e.what());
+  }
+  if (bbox && !(bbox->min_lon < bbox->max_lon && bbox->min_lat < bbox->max_lat)) {
+    throw ExportError("export options: bbox: must have min_lon < max_lon and min_lat < max_lat");
+  }
+}
+
 void export_cog(raster::CacheReader& cache, const ExportOptions& options, const std::filesystem::path& out) {
+  options.validate();
   register_gdal();
   const Window w = window_of(cache, options.bbox);
   const std::int64_t width = w.u1 - w.u0, height = w.v1 - w.v0;

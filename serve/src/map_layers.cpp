@@ -73,6 +73,12 @@ std::vector<float> road_distance_m(std::span<const std::uint16_t> cm) {
   return metres;
 }
 
+void LayerOptions::validate() const {
+  if (!(prior_sigma_m > 0) || !std::isfinite(prior_sigma_m)) {
+    throw RequestError(RequestError::Kind::bad_request, "layer options: prior_sigma_m = " + std::to_string(prior_sigma_m) + ": must be finite and > 0");
+  }
+}
+
 std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m) {
   // filter::road_prior_g; runs of equal distances (far from roads, the clamp) reuse the last
   // value instead of another exp.

@@ -245,3 +245,45 @@ TEST(Beyond, RelocalizationIsFlaggedWhenTheArgmaxJumps) {
 
 }  // namespace
 }  // namespace seqloc::filter
+
+namespace seqloc::filter {
+namespace {
+
+// The field table names every field once and each entry reaches its own member: setting one field
+// through the table leaves every other field at its default.
+TEST(FilterConfigFields, EachNameReachesItsOwnMember) {
+  const auto fields = filter_config_fields();
+  ASSERT_GE(fields.size(), 19u);
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    for (std::size_t j = i + 1; j < fields.size(); ++j) {
+      EXPECT_NE(std::string(fields[i].name), fields[j].name);
+      EXPECT_NE(fields[i].member, fields[j].member) << fields[i].name << " and " << fields[j].name;
+    }
+  }
+  const FilterConfig defaults;
+  auto read = [](const FilterConfig& c, const FilterConfigField& f) {
+    return std::visit([&](auto member) { return static_cast<double>(c.*member); }, f.member);
+  };
+  for (const auto& changed : fields) {
+    FilterConfig c;
+    std::visit(
+        [&](auto member) {
+          if constexpr (std::is_same_v<std::remove_reference_t<decltype(c.*member)>, bool>) {
+            c.*member = !(c.*member);
+          } else {
+            c.*member += 1;
+          }
+        },
+        changed.member);
+    for (const auto& f : fields) {
+      if (&f == &changed) {
+        EXPECT_NE(read(c, f), read(defaults, f)) << f.name;
+      } else {
+        EXPECT_EQ(read(c, f), read(defaults, f)) << f.name << " changed with " << changed.name;
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace seqloc::filter

@@ -115,6 +115,27 @@ class FilterOnline(unittest.TestCase):
         with self.assertRaises(ValueError):
             seqloc.Filter({"width": -1})
 
+    def test_every_filter_setting_is_reachable_by_name(self):
+        settings = seqloc.Filter.settings()
+        # The four the module once lacked, among the others.
+        for name in ("subbin_half_width", "motion_noise_xy_per_m", "motion_noise_deg_per_m", "gps_prior",
+                     "mgr_sigma_m", "etu_reference_entropy", "outside_crop_nats"):
+            self.assertIn(name, settings)
+        self.assertEqual(settings["mgr_sigma_m"][0], 3.0)
+        # Each setting set to a value other than its default reads back as set.
+        for name, (default, what) in settings.items():
+            self.assertTrue(what)
+            if isinstance(default, bool):
+                value = not default
+            elif isinstance(default, int):
+                value = {"width": 64, "height": 48, "headings": 32, "threads": 2, "pas_radius": 5,
+                         "subbin_half_width": 3}[name]
+            else:
+                value = default * 0.5 if default else 0.5
+            config = {"width": 64, "height": 48, "headings": 32}
+            config[name] = value
+            self.assertEqual(seqloc.Filter(config).config[name], value, name)
+
     def test_float16_volumes_are_read_in_place(self):
         f = seqloc.Filter({"width": 32, "height": 32, "headings": 8, "mgr": False})
         vol = np.full((9, 9, 8), -20.0, np.float16)

@@ -522,5 +522,42 @@ TEST(ServiceSetup, RefusesMissingCachesAndDuplicateIds) {
   EXPECT_THROW(Service({monaco_cache(), monaco_cache()}, ServiceOptions{}), ServiceError);
 }
 
+// Each options struct refuses a bad value itself, naming the field (the CLI turns it into a usage
+// error); the service checks its options before opening anything.
+TEST(ServeOptions, ValidateNamesTheField) {
+  auto message_of = [](auto&& f) -> std::string {
+    try {
+      f();
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    return "";
+  };
+  LayerOptions layers;
+  EXPECT_NO_THROW(layers.validate());
+  layers.prior_sigma_m = 0;
+  EXPECT_NE(message_of([&] { layers.validate(); }).find("prior_sigma_m"), std::string::npos);
+
+  ServiceOptions service;
+  EXPECT_NO_THROW(service.validate());
+  service.max_crop_m = -1;
+  EXPECT_NE(message_of([&] { Service({"/no/such.gpkg"}, service); }).find("max_crop_m"), std::string::npos)
+      << "checked before the cache is opened";
+  service.max_crop_m = 100;
+  service.tile_lru = 0;
+  EXPECT_THROW(service.validate(), ServiceError);
+  service.tile_lru = 1;
+  service.layers.prior_sigma_m = -2;
+  EXPECT_NE(message_of([&] { service.validate(); }).find("prior_sigma_m"), std::string::npos);
+
+  ExportOptions exported;
+  EXPECT_NO_THROW(exported.validate());
+  exported.bbox = osm::GeoBox{10, 47, 9, 48};
+  EXPECT_THROW(exported.validate(), ExportError);
+  exported.bbox.reset();
+  exported.layer_options.prior_sigma_m = std::nan("");
+  EXPECT_NE(message_of([&] { exported.validate(); }).find("prior_sigma_m"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace seqloc::serve

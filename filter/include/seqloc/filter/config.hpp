@@ -1,7 +1,9 @@
 #pragma once
 // The filter's configuration: the paper's defaults, our additions off.
 
+#include <span>
 #include <string>
+#include <variant>
 
 namespace seqloc::filter {
 
@@ -51,5 +53,16 @@ struct FilterConfig {
   /// Throws FilterError naming the field, its value and the constraint it breaks.
   void validate() const;
 };
+
+/// One field of FilterConfig for the tools that set fields by name (the Python module's config
+/// dict and its help): its name, the member, and a line saying what it is.
+struct FilterConfigField {
+  const char* name;
+  std::variant<int FilterConfig::*, double FilterConfig::*, bool FilterConfig::*> member;
+  const char* help;
+};
+
+/// Every field of FilterConfig, in declaration order: the one list a new field is added to.
+[[nodiscard]] std::span<const FilterConfigField> filter_config_fields();
 
 }  // namespace seqloc::filter

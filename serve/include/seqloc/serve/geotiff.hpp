@@ -31,6 +31,9 @@ struct ExportOptions {
   LayerOptions layer_options;
   /// Called with (rows done, rows in all) while the raster is read.
   std::function<void(long long, long long)> progress;
+
+  /// Throws ExportError naming the field, its value and the constraint it breaks.
+  void validate() const;
 };
 
 /// Writes one layer as a Cloud Optimized GeoTIFF at `out` (through a temporary name, renamed when

@@ -69,6 +69,9 @@ struct MapBlock {
 
 struct LayerOptions {
   double prior_sigma_m = filter::FilterConfig{}.mgr_sigma_m;  ///< sigma of road_prior (the filter's MGR default)
+
+  /// Throws RequestError naming the field, its value and the constraint it breaks.
+  void validate() const;
 };
 
 /// A block's geometry and band names, without its values (what a sidecar describes).

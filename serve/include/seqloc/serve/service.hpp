@@ -7,17 +7,16 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
-#include <list>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
 #include <string_view>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "seqloc/raster/cache.hpp"
+#include "seqloc/raster/lru_cache.hpp"
 #include "seqloc/serve/map_layers.hpp"
 
 namespace seqloc::serve {
@@ -61,6 +60,9 @@ struct ServiceOptions {
   double reload_check_s = 1.0;
   /// Told of each reload: the region id, and an empty string or why the new file was not taken.
   std::function<void(const std::string& id, const std::string& error)> on_reload;
+
+  /// Throws ServiceError naming the field, its value and the constraint it breaks.
+  void validate() const;
 };
 
 /// A configuration that cannot be served (a missing cache, two regions of one id); names the file.
@@ -113,9 +115,7 @@ class Service {
 
   // Encoded tiles by request key, least recently used first out, bounded in bytes.
   mutable std::mutex cache_mutex_;
-  std::list<std::pair<std::string, Response>> lru_;
-  std::unordered_map<std::string, std::list<std::pair<std::string, Response>>::iterator> lru_index_;
-  std::size_t lru_bytes_ = 0;
+  raster::LruCache<std::string, Response> responses_;  ///< guarded by cache_mutex_
   std::atomic<std::uint64_t> requests_{0}, cache_hits_{0};  // counted without the cache's lock
 };
 
