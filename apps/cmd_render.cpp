@@ -54,9 +54,9 @@ class RenderCommand : public Command {
       }
       options_.beliefs_dir = dir / "seqloc";  // used when localize kept the beliefs (--beliefs)
     } else {
-      for (const auto mode : {pipeline::Mode::single, pipeline::Mode::seqloc}) {
-        poses.emplace_back(pipeline::mode_name(mode), pipeline::localize_route(route, cache, options_.localize, mode).poses);
-      }
+      // Both modes side by side on the route's shared frames, as seqloc localize runs them.
+      auto batch = pipeline::localize_routes({route}, cache, options_.localize, {pipeline::Mode::single, pipeline::Mode::seqloc});
+      for (auto& result : batch.results) poses.emplace_back(pipeline::mode_name(result.mode), std::move(result.poses));
     }
     if (frame_ == "collapse") {
       if (localized_.empty() || !fs::exists(options_.beliefs_dir / "beliefs.npy")) {
