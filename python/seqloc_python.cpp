@@ -111,8 +111,9 @@ class PyCache {
 filter::FilterConfig config_from(const py::dict& d) {
   filter::FilterConfig c;
   const auto fields = filter::filter_config_fields();
-  for (const auto& [key_obj, value] : d) {
-    const auto key = key_obj.cast<std::string>();
+  for (const auto& item : d) {
+    const auto key = item.first.cast<std::string>();
+    const py::handle value = item.second;
     const auto field = std::find_if(fields.begin(), fields.end(), [&](const auto& f) { return key == f.name; });
     if (field == fields.end()) throw py::key_error("unknown filter setting '" + key + "' (Filter.settings() lists them)");
     std::visit([&](auto member) { c.*member = value.cast<std::remove_reference_t<decltype(c.*member)>>(); }, field->member);
