@@ -122,7 +122,6 @@ std::optional<std::vector<T>> parse_numbers(std::string_view text, char separato
   return out;
 }
 
-
 std::unique_ptr<Command> make_preprocess_command();
 std::unique_ptr<Command> make_cache_info_command();
 std::unique_ptr<Command> make_cache_merge_command();

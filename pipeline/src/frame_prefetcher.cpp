@@ -1,15 +1,11 @@
 #include "seqloc/pipeline/frame_prefetcher.hpp"
 
-#include <chrono>
+#include "stopwatch.hpp"
 
 namespace seqloc::pipeline {
-namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-}  // namespace
+using detail::Clock;
+using detail::seconds_since;
 
 FramePrefetcher::FramePrefetcher(FrameSource source, std::size_t frames, bool lookahead)
     : source_(std::move(source)), frames_(frames), lookahead_(lookahead) {}

@@ -14,15 +14,13 @@
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "seqloc/raster/tile_renderer.hpp"
+#include "stopwatch.hpp"
 
 namespace seqloc::pipeline {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
+using detail::Clock;
+using detail::seconds_since;
 
 std::string describe(const osm::GeoBox& b) {
   std::ostringstream s;

@@ -284,6 +284,17 @@ std::string route_path(const std::filesystem::path& path, const std::filesystem:
 }  // namespace
 
 void write_route(const Route& route, const std::filesystem::path& dir) {
+  // frames.csv has one data column and one kind of crop for all its rows: a frame of another kind
+  // cannot be written without losing it.
+  const bool observations = !route.frames.empty() && !route.frames.front().observation.empty();
+  const bool geo = !route.frames.empty() && route.frames.front().crop_geo.has_value();
+  for (const RouteFrame& f : route.frames) {
+    if (f.observation.empty() == observations || f.crop_geo.has_value() != geo || f.crop_grid.has_value() == geo) {
+      throw DataError((dir / "frames.csv").string() + ": frame '" + f.frame +
+                      "' differs from the first in its data (volume or observation) or its crop (lat/lon or grid); "
+                      "a route holds one kind of each");
+    }
+  }
   std::filesystem::create_directories(dir);
   nlohmann::ordered_json meta = {{"format", "seqloc-route"},
                                  {"version", 1},
@@ -297,8 +308,6 @@ void write_route(const Route& route, const std::filesystem::path& dir) {
   if (!json.flush()) throw DataError((dir / "route.json").string() + ": cannot write");
 
   auto any = [&](auto has) { return std::any_of(route.frames.begin(), route.frames.end(), has); };
-  const bool observations = !route.frames.empty() && !route.frames.front().observation.empty();
-  const bool geo = !route.frames.empty() && route.frames.front().crop_geo.has_value();
   const bool gps = any([](const RouteFrame& f) { return f.gps.has_value(); });
   const bool truth = any([](const RouteFrame& f) { return f.truth.has_value(); });
   const bool heading = any([](const RouteFrame& f) { return f.truth && f.truth->heading_deg; });
@@ -310,11 +319,9 @@ void write_route(const Route& route, const std::filesystem::path& dir) {
     csv << csv_field(f.frame) << ',' << shortest(f.timestamp_s) << ','
         << csv_field(route_path(observations ? f.observation : f.volume, dir)) << ',';
     if (geo) {
-      const osm::GeoPoint c = f.crop_geo.value_or(osm::GeoPoint{});
-      csv << shortest(c.lat_deg) << ',' << shortest(c.lon_deg);
+      csv << shortest(f.crop_geo->lat_deg) << ',' << shortest(f.crop_geo->lon_deg);
     } else {
-      const osm::GridPoint c = f.crop_grid.value_or(osm::GridPoint{});
-      csv << shortest(c.x_m) << ',' << shortest(c.y_m);
+      csv << shortest(f.crop_grid->x_m) << ',' << shortest(f.crop_grid->y_m);
     }
     csv << ',' << shortest(f.odometry.forward_m) << ',' << shortest(f.odometry.left_m) << ','
         << shortest(f.odometry.yaw_deg);

@@ -209,6 +209,11 @@ TEST(Route, WriteRouteReadsBackExactly) {
   const std::string csv = test::read_file(dir / "out/frames.csv");
   EXPECT_NE(csv.find(",b c.npy,"), std::string::npos) << csv;
   EXPECT_NE(csv.find("," + (dir / "a.npy").string() + ","), std::string::npos) << csv;
+  // A frame of another kind than the first cannot be written faithfully: refused, nothing written.
+  route.frames[1].crop_geo.reset();
+  route.frames[1].crop_grid = osm::GridPoint{1, 2};
+  EXPECT_THROW(write_route(route, dir / "mixed"), DataError);
+  EXPECT_FALSE(std::filesystem::exists(dir / "mixed"));
 }
 
 }  // namespace

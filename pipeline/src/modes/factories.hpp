@@ -1,10 +1,10 @@
 #pragma once
 // The mode classes' factories (each defined beside its class) and the timing they share.
 
-#include <chrono>
 #include <memory>
 
 #include "seqloc/pipeline/modes.hpp"
+#include "stopwatch.hpp"
 
 namespace seqloc::pipeline::modes {
 
@@ -13,9 +13,7 @@ namespace seqloc::pipeline::modes {
 /// online: the filter with ETU, MGR and PAS off; seqloc: as the options configure it.
 [[nodiscard]] std::unique_ptr<LocalizationMode> make_sequential(const RouteContext& context, bool online);
 
-using Clock = std::chrono::steady_clock;
-[[nodiscard]] inline double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using detail::Clock;
+using detail::seconds_since;
 
 }  // namespace seqloc::pipeline::modes
