@@ -45,7 +45,7 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(simulate.find(option), std::string::npos) << option;
   }
   const auto render = run_seqloc({"render", "--help"}).out;
-  for (const char* option : {"--localized", "--frame", "sharpest", "-o"}) {
+  for (const char* option : {"--localized", "--frame", "collapse", "sharpest", "-o"}) {
     EXPECT_NE(render.find(option), std::string::npos) << option;
   }
   const auto localize = run_seqloc({"localize", "--help"}).out;
