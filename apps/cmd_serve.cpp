@@ -23,11 +23,21 @@ class ServeCommand : public Command {
     app.add_option("--bind", server_.bind, "Address to listen on (loopback unless told otherwise)")
         ->capture_default_str();
     app.add_option("--port", server_.port, "Port (0: any free port, printed at start)")->capture_default_str();
-    app.add_option("--threads", server_.threads, "Worker threads, one connection each")->capture_default_str();
-    app.add_option("--max-pending", server_.max_pending,
-                   "Connections that may wait for a worker; beyond that they get 503")
+    app.add_option("--threads", server_.threads,
+                   "Threads running the event loop and answering requests (no thread waits on a client)")
         ->capture_default_str();
-    app.add_option("--timeout", server_.timeout_s, "Read/write timeout of a connection, seconds")->capture_default_str();
+    app.add_option("--header-timeout", server_.header_timeout_s,
+                   "Seconds for a request head to arrive, from its first byte (a new connection: from its opening)")
+        ->capture_default_str();
+    app.add_option("--keep-alive", server_.keep_alive_s, "Seconds a connection may stay idle between requests")
+        ->capture_default_str();
+    app.add_option("--timeout", server_.timeout_s, "Seconds to send a response or receive a request body")
+        ->capture_default_str();
+    app.add_option("--max-connections", server_.max_connections,
+                   "Open connections; past it new ones get a 503 and are closed")
+        ->capture_default_str();
+    app.add_option("--max-per-client", server_.max_per_client, "Open connections from one client address")
+        ->capture_default_str();
     app.add_option("--reload-check", service_.reload_check_s,
                    "Seconds between checks for a replaced cache file (0: every request, -1: never)")
         ->capture_default_str();
@@ -73,6 +83,10 @@ class ServeCommand : public Command {
     serve::Service service(caches_, service_);
     serve::HttpServer server(service, server_);
     server.bind();
+    if (server.max_connections() < server_.max_connections) {
+      std::fprintf(stderr, "seqloc serve: the open-file limit allows %d connections, not --max-connections %d "
+                   "(raise it with ulimit -n)\n", server.max_connections(), server_.max_connections);
+    }
     std::printf("seqloc serve: http://%s:%d/ (%zu region%s: ", server_.bind.c_str(), server.port(), caches_.size(),
                 caches_.size() == 1 ? "" : "s");
     const auto ids = service.region_ids();
@@ -89,9 +103,12 @@ class ServeCommand : public Command {
     // and taken by its sigwait, so this wakes the thread, it does not terminate it.
     pthread_kill(waiter.native_handle(), SIGTERM);  // NOLINT(bugprone-bad-signal-to-kill-thread)
     waiter.join();
-    std::fprintf(stderr, "seqloc serve: stopped after %llu requests (%llu turned away at the connection limit)\n",
+    std::fprintf(stderr,
+                 "seqloc serve: stopped after %llu requests (%llu connections turned away at a limit, %llu closed "
+                 "at a deadline)\n",
                  static_cast<unsigned long long>(service.stats().requests),
-                 static_cast<unsigned long long>(server.rejected()));
+                 static_cast<unsigned long long>(server.rejected()),
+                 static_cast<unsigned long long>(server.timed_out()));
     return kExitOk;
   }
 

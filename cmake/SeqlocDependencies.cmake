@@ -47,10 +47,20 @@ add_library(seqloc::opencv ALIAS seqloc_opencv)
 # GDAL: GeoTIFF and COG output of the serve module (libgdal-dev ships a CMake config).
 find_package(GDAL CONFIG REQUIRED)
 
-# cpp-httplib: Debian builds it as a shared library; its pkg-config file carries the feature
-# macros the library was compiled with, which every user must define alike (they change its ABI).
-find_package(PkgConfig REQUIRED)
-pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
-add_library(seqloc_httplib INTERFACE)
-target_link_libraries(seqloc_httplib INTERFACE PkgConfig::HTTPLIB Threads::Threads)
-add_library(seqloc::httplib ALIAS seqloc_httplib)
+# Boost.Beast and Asio (header-only, libboost-dev): the event-driven HTTP layer of `seqloc serve`.
+find_package(Boost 1.74 CONFIG REQUIRED)
+add_library(seqloc_beast INTERFACE)
+target_link_libraries(seqloc_beast INTERFACE Boost::headers Threads::Threads)
+target_compile_definitions(seqloc_beast INTERFACE BOOST_BEAST_USE_STD_STRING_VIEW BOOST_ASIO_NO_DEPRECATED)
+add_library(seqloc::beast ALIAS seqloc_beast)
+
+# cpp-httplib: the test suite's HTTP client. Debian builds it as a shared library; its
+# pkg-config file carries the feature macros the library was compiled with, which every user
+# must define alike (they change its ABI).
+if(SEQLOC_BUILD_TESTS)
+  find_package(PkgConfig REQUIRED)
+  pkg_check_modules(HTTPLIB REQUIRED IMPORTED_TARGET cpp-httplib)
+  add_library(seqloc_httplib INTERFACE)
+  target_link_libraries(seqloc_httplib INTERFACE PkgConfig::HTTPLIB Threads::Threads)
+  add_library(seqloc::httplib ALIAS seqloc_httplib)
+endif()

@@ -54,7 +54,8 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(localize.find(option), std::string::npos) << option;
   }
   const auto serve = run_seqloc({"serve", "--help"}).out;
-  for (const char* option : {"--bind", "--port", "--threads", "--max-pending", "--timeout", "--max-crop-m", "--web"}) {
+  for (const char* option : {"--bind", "--port", "--threads", "--header-timeout", "--keep-alive", "--max-connections",
+                             "--max-per-client", "--timeout", "--max-crop-m", "--web"}) {
     EXPECT_NE(serve.find(option), std::string::npos) << option;
   }
   const auto exporter = run_seqloc({"export", "--help"}).out;

@@ -45,9 +45,8 @@ def main():
         served = os.path.join(work, "valley.gpkg")
         shutil.copy(os.path.join(work, "a.gpkg"), served)
 
-        # Threads >= connections (16 of wrk, 2 checkers): a keep-alive connection holds its worker.
-        server = subprocess.Popen([args.seqloc, "serve", served, "--port", "0", "--reload-check", "0.05",
-                                   "--threads", "20"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        server = subprocess.Popen([args.seqloc, "serve", served, "--port", "0", "--reload-check", "0.05"],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = server.stdout.readline()
         assert line.startswith("seqloc serve: http://"), line
         host, port = line.split()[2].split("//")[1].rstrip("/").rsplit(":", 1)

@@ -1,6 +1,6 @@
 // The road-prior service, endpoint by endpoint, on the Monaco extract: tiles against the cache's
 // own tiles, crops against the cell-centre formula of conventions.md, errors and limits, ETags, and
-// the HTTP layer's connection limit.
+// the HTTP layer's limits and deadlines.
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -8,8 +8,10 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/time.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -369,15 +371,86 @@ TEST_F(ServiceTest, TilesHaveETagsAndComeFromMemoryTheSecondTime) {
   EXPECT_NE(header(get("/regions/monaco/road_prior/4/5.png"), "ETag"), etag);
 }
 
-TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
+// A raw client socket, connected from a chosen loopback address (the server counts connections
+// per client address), with a receive timeout so that a test never hangs on it.
+class RawClient {
+ public:
+  explicit RawClient(int port, const char* from = "127.0.0.1") : fd_(::socket(AF_INET, SOCK_STREAM, 0)) {
+    timeval limit{20, 0};
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &limit, sizeof limit);
+    sockaddr_in source{};
+    source.sin_family = AF_INET;
+    ::inet_pton(AF_INET, from, &source.sin_addr);
+    connected_ = ::bind(fd_, reinterpret_cast<sockaddr*>(&source), sizeof source) == 0;
+    sockaddr_in server{};
+    server.sin_family = AF_INET;
+    server.sin_port = htons(static_cast<std::uint16_t>(port));
+    server.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    connected_ = connected_ && ::connect(fd_, reinterpret_cast<sockaddr*>(&server), sizeof server) == 0;
+  }
+  ~RawClient() { ::close(fd_); }
+  RawClient(const RawClient&) = delete;
+  RawClient& operator=(const RawClient&) = delete;
+
+  [[nodiscard]] bool connected() const { return connected_; }
+  bool send(const std::string& bytes) { return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size()); }
+  /// One response: its status (0 when the connection closed or timed out first) and body.
+  std::pair<int, std::string> response() {
+    while (pending_.find("\r\n\r\n") == std::string::npos) {
+      if (!receive()) return {0, {}};
+    }
+    const std::size_t head_end = pending_.find("\r\n\r\n") + 4;
+    const std::string head = pending_.substr(0, head_end);
+    std::size_t length = 0;
+    if (const auto at = head.find("Content-Length: "); at != std::string::npos) length = std::stoul(head.substr(at + 16));
+    while (pending_.size() < head_end + length) {
+      if (!receive()) return {0, {}};
+    }
+    const int status = std::stoi(head.substr(9, 3));
+    std::string body = pending_.substr(head_end, length);
+    pending_.erase(0, head_end + length);
+    return {status, body};
+  }
+  /// Whether the server closed the connection (end of stream or reset) before the receive timeout.
+  bool closed_by_server() {
+    char byte = 0;
+    const auto n = ::recv(fd_, &byte, 1, 0);
+    return n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK);
+  }
+
+ private:
+  bool receive() {
+    char chunk[4096];
+    const auto n = ::recv(fd_, chunk, sizeof chunk, 0);
+    if (n <= 0) return false;
+    pending_.append(chunk, static_cast<std::size_t>(n));
+    return true;
+  }
+  int fd_;
+  bool connected_ = false;
+  std::string pending_;
+};
+
+const std::string kGetHealth = "GET /health HTTP/1.1\r\nHost: test\r\n\r\n";
+
+// Polls (no fixed sleeps: the sanitizer build on a loaded machine is slow).
+template <class Condition>
+bool eventually(Condition condition) {
+  for (int i = 0; i < 2000; ++i) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return condition();
+}
+
+TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimits) {
   ServerOptions options;
   options.threads = 1;
-  options.max_pending = 0;
+  options.max_connections = 3;
+  options.max_per_client = 2;
   ListeningServer running(*service_, options);
   HttpServer& server = running.server();
   {
-    // One kept-alive connection: two would race the only worker, which may not yet have let
-    // go of the first when the second arrives (a 503 that is correct, but not this test's).
     httplib::Client client("127.0.0.1", server.port());
     client.set_keep_alive(true);
     const auto health = client.Get("/health");
@@ -387,30 +460,107 @@ TEST_F(ServiceTest, HttpServerAnswersAndTurnsAwayConnectionsPastItsLimit) {
     ASSERT_TRUE(tile);
     EXPECT_EQ(tile->status, 200);
     EXPECT_EQ(tile->get_header_value("Content-Type"), "image/png");
+    EXPECT_EQ(tile->body, get("/regions/monaco/classes/2/2.png").text());
+    // HEAD: the GET's headers, its length, no body.
+    const auto head = client.Head("/regions/monaco/classes/2/2.png");
+    ASSERT_TRUE(head);
+    EXPECT_EQ(head->status, 200);
+    EXPECT_EQ(head->get_header_value("Content-Length"), std::to_string(tile->body.size()));
+    EXPECT_TRUE(head->body.empty());
   }
-  // Wait for the worker to let go of the client's closed connection (no fixed sleeps: the
-  // sanitizer build on a loaded machine is slow).
-  auto wait_for_busy = [&](int n) {
-    for (int i = 0; i < 1000 && server.busy_workers() != n; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    return server.busy_workers();
-  };
-  ASSERT_EQ(wait_for_busy(0), 0);
-  // A connection that sends nothing holds the only worker (until its read times out) ...
-  const int holder = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(static_cast<std::uint16_t>(server.port()));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::connect(holder, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
-  ASSERT_EQ(wait_for_busy(1), 1);
-  // ... so the next one is turned away at once with a 503, not queued.
-  httplib::Client second("127.0.0.1", server.port());
-  second.set_connection_timeout(2);
-  const auto turned_away = second.Get("/health");
-  ASSERT_TRUE(turned_away);
-  EXPECT_EQ(turned_away->status, 503);
+  ASSERT_TRUE(eventually([&] { return server.open_connections() == 0; }));
+  // Two connections from 127.0.0.1 that send nothing: the client's limit. They hold no thread.
+  RawClient a(server.port()), b(server.port());
+  ASSERT_TRUE(a.connected() && b.connected());
+  ASSERT_TRUE(eventually([&] { return server.open_connections() == 2; }));
+  // A third from the same address is turned away at once with a 503 ...
+  RawClient c(server.port());
+  ASSERT_TRUE(c.connected());
+  EXPECT_EQ(c.response().first, 503);
   EXPECT_EQ(server.rejected(), 1u);
-  ::close(holder);
+  // ... while another address is served, by the only thread, although two clients are idle.
+  RawClient d(server.port(), "127.0.0.2");
+  ASSERT_TRUE(d.connected() && d.send(kGetHealth));
+  EXPECT_EQ(d.response().first, 200);
+  // d stays open: 3 connections, the total limit, so a fourth address is turned away too.
+  RawClient e(server.port(), "127.0.0.3");
+  ASSERT_TRUE(e.connected());
+  EXPECT_EQ(e.response().first, 503);
+  EXPECT_EQ(server.rejected(), 2u);
+  // The idle ones still get their answer when they do ask.
+  ASSERT_TRUE(a.send(kGetHealth));
+  EXPECT_EQ(a.response().first, 200);
+}
+
+TEST_F(ServiceTest, HttpServerClosesConnectionsThatMissTheirDeadlines) {
+  ServerOptions options;
+  options.threads = 1;
+  options.header_timeout_s = 0.5;
+  options.keep_alive_s = 1.0;
+  ListeningServer running(*service_, options);
+  HttpServer& server = running.server();
+  // Half a head and then nothing (a slowloris): closed at the head deadline ...
+  RawClient slow(server.port());
+  ASSERT_TRUE(slow.connected() && slow.send("GET /health HTTP/1.1\r\nHost: te"));
+  const auto start = std::chrono::steady_clock::now();
+  // ... and meanwhile the only thread answers someone else.
+  RawClient other(server.port(), "127.0.0.2");
+  ASSERT_TRUE(other.connected() && other.send(kGetHealth));
+  EXPECT_EQ(other.response().first, 200);
+  EXPECT_TRUE(slow.closed_by_server());
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(400));
+  // A connection that sends a head one byte at a time, each byte well within the idle time,
+  // is still closed at the head deadline: it runs from the first byte, not from the last.
+  RawClient dribble(server.port());
+  ASSERT_TRUE(dribble.connected());
+  const auto dribble_start = std::chrono::steady_clock::now();
+  bool cut = false;
+  for (char ch : std::string("GET /health HTTP/1.1\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\r\n\r\n")) {
+    if (!dribble.send(std::string(1, ch))) {
+      cut = true;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  // ~70 bytes x 50 ms = 3.5 s of dribbling against a 0.5 s head deadline.
+  EXPECT_TRUE(cut || dribble.closed_by_server());
+  EXPECT_LT(std::chrono::steady_clock::now() - dribble_start, std::chrono::seconds(3));
+  // A kept-alive connection idle past --keep-alive after its answer is closed.
+  RawClient idle(server.port());
+  ASSERT_TRUE(idle.connected() && idle.send(kGetHealth));
+  EXPECT_EQ(idle.response().first, 200);
+  EXPECT_TRUE(idle.closed_by_server());
+  EXPECT_GE(server.timed_out(), 3u);
+}
+
+TEST_F(ServiceTest, HttpServerRefusesOversizedHeadsAndBodies) {
+  ServerOptions options;
+  options.threads = 1;
+  ListeningServer running(*service_, options);
+  const int port = running.server().port();
+  // A head over max_header_bytes: a 431, then the connection is closed.
+  RawClient big_head(port);
+  ASSERT_TRUE(big_head.connected());
+  ASSERT_TRUE(big_head.send("GET /health HTTP/1.1\r\nX-Big: " + std::string(options.max_header_bytes, 'a') + "\r\n\r\n"));
+  EXPECT_EQ(big_head.response().first, 431);
+  EXPECT_TRUE(big_head.closed_by_server());
+  // A declared body over max_body_bytes: a 413 before a byte of it is read.
+  RawClient big_body(port);
+  ASSERT_TRUE(big_body.connected());
+  ASSERT_TRUE(big_body.send("POST /health HTTP/1.1\r\nHost: test\r\nContent-Length: 1000000000\r\n\r\n"));
+  const auto refused = big_body.response();
+  EXPECT_EQ(refused.first, 413);
+  EXPECT_NE(refused.second.find("body"), std::string::npos) << refused.second;
+  // A small body is read, ignored, and the method still decides (405 for a POST).
+  RawClient small_body(port);
+  ASSERT_TRUE(small_body.connected());
+  ASSERT_TRUE(small_body.send("POST /health HTTP/1.1\r\nHost: test\r\nContent-Length: 5\r\n\r\nhello" + kGetHealth));
+  EXPECT_EQ(small_body.response().first, 405);
+  EXPECT_EQ(small_body.response().first, 200);  // the pipelined request after it
+  // Not HTTP at all: a 400 naming the problem.
+  RawClient garbage(port);
+  ASSERT_TRUE(garbage.connected() && garbage.send("\x01\x02\x03 nonsense\r\n\r\n"));
+  EXPECT_EQ(garbage.response().first, 400);
 }
 
 TEST_F(ServiceTest, HttpServerDecodesTheRawTargetItself) {
@@ -428,8 +578,8 @@ TEST_F(ServiceTest, HttpServerDecodesTheRawTargetItself) {
 }
 
 TEST_F(ServiceTest, AStopBeforeListenStartsStopsTheListen) {
-  // seqloc serve's SIGTERM can arrive between bind() and listen(): httplib alone ignores a stop
-  // before it runs, and the listen that followed served on.
+  // seqloc serve's SIGTERM can arrive between bind() and listen(): the listen that follows must
+  // not serve on.
   ServerOptions options;
   options.port = 0;
   HttpServer server(*service_, options);
@@ -442,12 +592,28 @@ TEST_F(ServiceTest, AStopBeforeListenStartsStopsTheListen) {
 }
 
 TEST_F(ServiceTest, ServerOptionsAreValidated) {
+  const auto message = [](const ServerOptions& options) {
+    try {
+      options.validate();
+    } catch (const ServiceError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(message(ServerOptions{}), "");
   ServerOptions options;
   options.threads = 0;
-  EXPECT_THROW(options.validate(), ServiceError);
-  options.threads = 4;
+  EXPECT_NE(message(options).find("--threads 0"), std::string::npos) << message(options);
+  options = {};
   options.port = 70000;
-  EXPECT_THROW(options.validate(), ServiceError);
+  EXPECT_NE(message(options).find("--port 70000"), std::string::npos) << message(options);
+  options = {};
+  options.header_timeout_s = 0;
+  EXPECT_NE(message(options).find("--header-timeout"), std::string::npos) << message(options);
+  options = {};
+  options.max_connections = 100;
+  options.max_per_client = 101;
+  EXPECT_NE(message(options).find("--max-per-client 101"), std::string::npos) << message(options);
 }
 
 // Two builds of the sample region that differ in every road-distance tile (another clamp).
