@@ -1,5 +1,6 @@
 #include <cstdio>
 #include <filesystem>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,14 @@ namespace seqloc::app {
 namespace {
 
 class CacheInfoCommand : public Command {
+  static bool is_number_row(const std::string& key) {
+    static const std::set<std::string> kNumbers = {
+        "format_version", "centre_lat", "centre_lon", "bbox_min_lon", "bbox_min_lat", "bbox_max_lon", "bbox_max_lat",
+        "max_distance_m", "cell_m", "tile_px", "tile_x0", "tile_y0", "tile_x1", "tile_y1", "shard_index",
+        "shard_count"};
+    return kNumbers.count(key) > 0;
+  }
+
  public:
   void setup(CLI::App& app) override {
     app.add_option("cache", path_, "Region cache (GeoPackage)")->required();
@@ -26,7 +35,9 @@ class CacheInfoCommand : public Command {
       nlohmann::ordered_json out;
       out["path"] = path_.string();
       for (const auto& [key, value] : rows) {
-        if (key == "classes") {
+        // The class table is JSON already, and numbers are JSON numbers (the rows hold each one
+        // as a decimal that reads back to the same double, %.17g).
+        if (key == "classes" || (is_number_row(key) && !value.empty())) {
           out[key] = nlohmann::json::parse(value);
         } else {
           out[key] = value;

@@ -119,7 +119,16 @@ TEST(Cli, PreprocessWritesACacheAndInfoDescribesIt) {
   const auto info = run_seqloc({"cache", "info", out.string(), "--json"});
   ASSERT_EQ(info.exit_code, 0) << info.err;
   const auto json = nlohmann::json::parse(info.out);
-  EXPECT_EQ(json["format_version"], std::to_string(raster::kCacheFormatVersion));
+  // Numbers are JSON numbers, equal to what the cache holds.
+  EXPECT_EQ(json["format_version"], raster::kCacheFormatVersion);
+  const auto metadata = raster::read_cache_metadata(out);
+  EXPECT_TRUE(json["centre_lat"].is_number_float());
+  EXPECT_EQ(json["centre_lat"].get<double>(), metadata.centre_lat);
+  EXPECT_EQ(json["bbox_max_lon"].get<double>(), metadata.bbox.max_lon);
+  EXPECT_EQ(json["cell_m"], 0.5);
+  EXPECT_EQ(json["tile_px"], 512);
+  EXPECT_EQ(json["tile_x0"], metadata.grid.tx0);
+  EXPECT_TRUE(json["shard_count"].is_number_integer());
   EXPECT_EQ(json["source_sha256"], osm::file_sha256(map));
   EXPECT_EQ(json["source_file"], "map.osm.pbf");
   EXPECT_EQ(json["state"], "complete");
