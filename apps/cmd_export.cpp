@@ -18,6 +18,8 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
     app.add_option("--bbox", bbox_, "lon0,lat0,lon1,lat1 to export (default: the whole region)");
     app.add_option("--prior-sigma", options_.layer_options.prior_sigma_m, "Sigma of road_prior, metres")
         ->capture_default_str();
+    app.add_flag("--float", options_.float32,
+                 "road_distance as Float32 metres (default: UInt16 centimetres, scale 0.01, unit m)");
     app.add_option("-o,--output", out_, "Output: .tif (Cloud Optimized GeoTIFF) or .vrt (the whole cache)")->required();
     add_overwrite_option(app, "output");
     add_progress_option(app);

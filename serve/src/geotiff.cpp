@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <mutex>
 #include <unistd.h>
@@ -71,15 +72,27 @@ void set_georeference(GDALDatasetH ds, double west_m, double north_m, const osm:
   GDALSetProjection(ds, projection.wkt().c_str());
 }
 
-void write_bands(GDALDatasetH ds, const MapBlock& block, int y_offset, const std::string& what) {
+/// Writes the block's bands at row `y_offset`: as bytes when every band is uint8, as centimetres
+/// (UInt16, rounded) when `centimetres`, else as Float32.
+void write_bands(GDALDatasetH ds, const MapBlock& block, int y_offset, const std::string& what,
+                 bool centimetres = false) {
   const bool u8 = block.all_uint8();
   std::vector<float> converted;
+  std::vector<std::uint16_t> cm;
   for (std::size_t b = 0; b < block.bands.size(); ++b) {
     const Band& band = block.bands[b];
     GDALRasterBandH h = GDALGetRasterBand(ds, static_cast<int>(b) + 1);
     void* data = nullptr;
     GDALDataType type = GDT_Float32;
-    if (u8) {
+    if (centimetres && !band.is_uint8) {
+      // Metres that came from the cache's centimetres: the rounding gives those back exactly.
+      cm.resize(band.f32.size());
+      std::transform(band.f32.begin(), band.f32.end(), cm.begin(), [](float m) {
+        return static_cast<std::uint16_t>(std::clamp<long>(std::lround(static_cast<double>(m) * 100.0), 0, 65535));
+      });
+      data = cm.data();
+      type = GDT_UInt16;
+    } else if (u8) {
       data = const_cast<std::uint8_t*>(band.u8.data());
       type = GDT_Byte;
     } else if (band.is_uint8) {
@@ -215,6 +228,8 @@ void export_cog(raster::CacheReader& cache, const ExportOptions& options, const 
 
   const MapBlock probe = read_block(cache, w.u0, w.v0, 1, 1, layers, options.layer_options);
   const bool u8 = probe.all_uint8();
+  const bool centimetres = options.layer == MapLayer::road_distance && !options.float32;
+  const GDALDataType type = u8 ? GDT_Byte : centimetres ? GDT_UInt16 : GDT_Float32;
   const int band_count = static_cast<int>(probe.bands.size());
   {
     Options create;
@@ -222,15 +237,23 @@ void export_cog(raster::CacheReader& cache, const ExportOptions& options, const 
                                                                                                            "IF_SAFER");
     if (band_count > 1) create.set("INTERLEAVE", "PIXEL");
     Dataset ds(GDALCreate(GDALGetDriverByName("GTiff"), staging.c_str(), static_cast<int>(width),
-                          static_cast<int>(height), band_count, u8 ? GDT_Byte : GDT_Float32, create.get()));
+                          static_cast<int>(height), band_count, type, create.get()));
     if (!ds) throw ExportError(staging.string() + ": " + gdal_message());
     set_georeference(ds.get(), cache.grid().min_x() + static_cast<double>(w.u0) * raster::kCellM,
                      cache.grid().max_y() - static_cast<double>(w.v0) * raster::kCellM, projection);
     describe_bands(ds.get(), probe);
+    if (options.layer == MapLayer::road_distance) {
+      GDALRasterBandH band = GDALGetRasterBand(ds.get(), 1);
+      GDALSetRasterUnitType(band, "m");
+      if (centimetres) {
+        GDALSetRasterScale(band, 0.01);
+        GDALSetRasterOffset(band, 0.0);
+      }
+    }
     for (std::int64_t v = w.v0; v < w.v1; v += raster::kTilePx) {
       const int rows = static_cast<int>(std::min<std::int64_t>(raster::kTilePx, w.v1 - v));
       const MapBlock strip = read_block(cache, w.u0, v, static_cast<int>(width), rows, layers, options.layer_options);
-      write_bands(ds.get(), strip, static_cast<int>(v - w.v0), staging.string());
+      write_bands(ds.get(), strip, static_cast<int>(v - w.v0), staging.string(), centimetres);
       if (options.progress) options.progress(v - w.v0 + rows, height);
     }
     if (!ds.close()) throw ExportError(staging.string() + ": " + gdal_message());

@@ -145,9 +145,24 @@ class Exported(unittest.TestCase):
             x0, y0 = round((gt[0] - rgt[0]) / 0.5), round((rgt[3] - gt[3]) / 0.5)
             self.assertAlmostEqual(gt[0], rgt[0] + x0 * 0.5)
             self.assertAlmostEqual(gt[3], rgt[3] - y0 * 0.5)
-            # GDAL's GeoPackage driver applies the coverage's scale: it reads metres.
+            # GDAL's GeoPackage driver applies the coverage's scale: it reads metres. The export
+            # holds the cache's centimetres (UInt16) with the scale and unit that make them metres.
             expected = ref.GetRasterBand(1).ReadAsArray(x0, y0, ds.RasterXSize, ds.RasterYSize)
-            np.testing.assert_allclose(ds.GetRasterBand(1).ReadAsArray(), expected, atol=1e-4)
+            band = ds.GetRasterBand(1)
+            self.assertEqual(gdal.GetDataTypeName(band.DataType), "UInt16")
+            self.assertEqual((band.GetScale(), band.GetOffset(), band.GetUnitType()), (0.01, 0.0, "m"))
+            self.assertEqual(band.GetDescription(), "road_distance")
+            np.testing.assert_allclose(band.ReadAsArray() * band.GetScale(), expected, atol=1e-4)
+            # --float: Float32 metres, the same values, no scale.
+            out32 = os.path.join(d, "distance32.tif")
+            r = self.run_seqloc("export", ARGS.cache, "--layer", "road_distance", "--bbox", bbox, "--float", "-o", out32)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            ds32 = gdal.Open(out32)  # held: a GDAL band must not outlive its dataset
+            band32 = ds32.GetRasterBand(1)
+            self.assertEqual(gdal.GetDataTypeName(band32.DataType), "Float32")
+            self.assertEqual(band32.GetUnitType(), "m")
+            self.assertIn(band32.GetScale(), (None, 1.0))
+            np.testing.assert_allclose(band32.ReadAsArray(), expected, atol=1e-4)
             # The box's corners lie inside the exported raster.
             srs = ds.GetSpatialRef()
             self.assertTrue(srs.IsSame(ref.GetSpatialRef()))

@@ -29,6 +29,9 @@ struct ExportOptions {
   /// lon/lat box; the whole region when empty. Rounded outwards to whole cells, clipped to the region.
   std::optional<osm::GeoBox> bbox;
   LayerOptions layer_options;
+  /// road_distance as Float32 metres; by default it is the cache's own UInt16 centimetres with
+  /// scale 0.01 and unit "m" (GDAL and QGIS show metres; half the size).
+  bool float32 = false;
   /// Called with (rows done, rows in all) while the raster is read.
   std::function<void(long long, long long)> progress;
 
@@ -36,7 +39,8 @@ struct ExportOptions {
   void validate() const;
 };
 
-/// Writes one layer as a Cloud Optimized GeoTIFF at `out` (through a temporary name, renamed when
+/// Writes one layer as a Cloud Optimized GeoTIFF at `out`, the band described by the layer's name
+/// and, for road_distance, its unit (through a temporary name, renamed when
 /// complete). Throws RequestError for a bbox that does not meet the region, ExportError for GDAL
 /// or I/O failures.
 void export_cog(raster::CacheReader& cache, const ExportOptions& options, const std::filesystem::path& out);
