@@ -265,6 +265,9 @@ void export_cog(raster::CacheReader& cache, const ExportOptions& options, const 
     cog.set("COMPRESS", "DEFLATE").set("BLOCKSIZE", "512").set("OVERVIEWS", "AUTO").set("BIGTIFF", "IF_SAFER");
     // Class codes are categories: overviews pick a code, never average them.
     cog.set("RESAMPLING", options.layer == MapLayer::classes ? "NEAREST" : "AVERAGE");
+    // Distances and priors vary smoothly: deflate on the differences between neighbours (halves
+    // the UInt16 road distance of Monaco, 12.3 MB to 6.3 MB).
+    if (options.layer != MapLayer::classes) cog.set("PREDICTOR", "YES");
     CPLErrorReset();
     Dataset dst(GDALCreateCopy(GDALGetDriverByName("COG"), partial.c_str(), src.get(), FALSE, cog.get(), nullptr, nullptr));
     if (!dst) throw ExportError(out.string() + ": " + gdal_message());
