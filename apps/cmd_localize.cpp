@@ -100,7 +100,8 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     add_overwrite_option(app, "output folder");
     add_progress_option(app);
     app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"
-               "Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} and OUT/summary.json,\n"
+               "Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} (and groundtruth.tum\n"
+               "when the route has ground truth) and OUT/summary.json,\n"
                "and prints the recall table. Any bad input stops the run with nothing written.");
   }
 
@@ -235,26 +236,39 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
 class EvaluateCommand : public Command {
  public:
   void setup(CLI::App& app) override {
-    app.add_option("outputs", outs_, "Output folders of seqloc localize")->required();
+    app.add_option("outputs", outs_,
+                   "Folders of seqloc localize output: a whole output folder, a route's folder or a mode's folder "
+                   "(any mix; a file reached twice counts once)")
+        ->required();
   }
 
   int run() override {
-    std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
+    // OUT/<route>/<mode>/poses.csv: a poses.csv at most two levels under each folder given; its
+    // mode is the name of the folder holding it.
+    std::map<fs::path, std::string> files;  // canonical path -> mode
     for (const auto& out : outs_) {
       std::error_code ec;
       if (!fs::is_directory(out, ec)) throw pipeline::DataError(out.string() + ": not an output folder");
-      for (const auto& route : fs::directory_iterator(out)) {
-        if (!route.is_directory()) continue;
-        for (const auto& mode : fs::directory_iterator(route.path())) {
-          const auto poses = mode.path() / "poses.csv";
-          if (!fs::exists(poses)) continue;
-          auto read = pipeline::read_poses_csv(poses);
-          auto& all = by_mode[mode.path().filename().string()];
-          all.insert(all.end(), read.begin(), read.end());
+      const auto add = [&files](const fs::path& poses) {
+        std::error_code e;
+        if (fs::is_regular_file(poses, e)) files.emplace(fs::canonical(poses), poses.parent_path().filename().string());
+      };
+      add(out / "poses.csv");
+      for (const auto& child : fs::directory_iterator(out)) {
+        if (!child.is_directory()) continue;
+        add(child.path() / "poses.csv");
+        for (const auto& grandchild : fs::directory_iterator(child.path())) {
+          if (grandchild.is_directory()) add(grandchild.path() / "poses.csv");
         }
       }
     }
-    if (by_mode.empty()) throw pipeline::DataError("no poses.csv found under the given folders");
+    if (files.empty()) throw pipeline::DataError("no poses.csv found in or under the given folders");
+    std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
+    for (const auto& [path, mode] : files) {
+      auto read = pipeline::read_poses_csv(path);
+      auto& all = by_mode[mode];
+      all.insert(all.end(), read.begin(), read.end());
+    }
     pipeline::MetricsByMode metrics;
     for (const auto& [mode, poses] : by_mode) {
       metrics[mode] = pipeline::compute_metrics(poses);

@@ -260,7 +260,9 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
     const auto t = projection.forward(f.truth->where, gamma_true);
     const double ex = e.x_m - t.x_m, ey = e.y_m - t.y_m;
     pose.position_error_m = std::hypot(ex, ey);
+    pose.truth = FramePose::Truth{t.x_m, t.y_m, f.truth->where.lat_deg, f.truth->where.lon_deg, std::nullopt};
     if (f.truth->heading_deg) {
+      pose.truth->grid_heading_deg = wrap360(*f.truth->heading_deg - gamma_true);
       pose.heading_error_deg = heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
       const double h = (*f.truth->heading_deg - gamma_true) * M_PI / 180.0;  // true grid heading
       pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);

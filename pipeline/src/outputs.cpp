@@ -118,30 +118,51 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
   }
   write_file(dir / "poses.csv", csv.str());
 
-  // trajectory.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw counter-clockwise from
-  // the grid's x axis (east): 90 degrees minus the grid heading.
-  std::ostringstream tum;
+  // trajectory.tum and groundtruth.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw
+  // counter-clockwise from the grid's x axis (east): 90 degrees minus the grid heading. The ground
+  // truth has the frames whose truth has a position and a heading, at the same timestamps, so
+  // that `evo_ape tum groundtruth.tum trajectory.tum` needs no projection or association step.
+  const auto tum_line = [&line](double t, double x, double y, double grid_heading_deg) {
+    const double yaw = (90.0 - grid_heading_deg) * M_PI / 180.0;
+    std::snprintf(line, sizeof line, "%.6f %.4f %.4f 0 0 0 %.9f %.9f\n", t, x, y, std::sin(yaw / 2),
+                  std::cos(yaw / 2));
+    return std::string(line);
+  };
+  std::ostringstream tum, truth_tum;
   for (const auto& p : r.poses) {
-    const double yaw = (90.0 - p.grid_heading_deg) * M_PI / 180.0;
-    std::snprintf(line, sizeof line, "%.6f %.4f %.4f 0 0 0 %.9f %.9f\n", p.timestamp_s, p.x_m, p.y_m,
-                  std::sin(yaw / 2), std::cos(yaw / 2));
-    tum << line;
+    tum << tum_line(p.timestamp_s, p.x_m, p.y_m, p.grid_heading_deg);
+    if (p.truth && p.truth->grid_heading_deg) {
+      truth_tum << tum_line(p.timestamp_s, p.truth->x_m, p.truth->y_m, *p.truth->grid_heading_deg);
+    }
   }
   write_file(dir / "trajectory.tum", tum.str());
+  if (!truth_tum.str().empty()) write_file(dir / "groundtruth.tum", truth_tum.str());
 
-  // track.geojson (RFC 7946: WGS84, [lon, lat]).
+  // track.geojson (RFC 7946: WGS84, [lon, lat]): the estimated track, the ground-truth track when
+  // the route has one, and a point per frame with its values and errors.
   nlohmann::ordered_json features = nlohmann::json::array();
-  nlohmann::json coordinates = nlohmann::json::array();
-  for (const auto& p : r.poses) coordinates.push_back({p.lon_deg, p.lat_deg});
+  nlohmann::json coordinates = nlohmann::json::array(), truth_coordinates = nlohmann::json::array();
+  for (const auto& p : r.poses) {
+    coordinates.push_back({p.lon_deg, p.lat_deg});
+    if (p.truth) truth_coordinates.push_back({p.truth->lon_deg, p.truth->lat_deg});
+  }
   features.push_back({{"type", "Feature"},
                       {"geometry", {{"type", "LineString"}, {"coordinates", coordinates}}},
-                      {"properties", {{"route", r.route}, {"mode", mode_name(r.mode)}}}});
+                      {"properties", {{"route", r.route}, {"mode", mode_name(r.mode)}, {"track", "estimate"}}}});
+  if (truth_coordinates.size() >= 2) {
+    features.push_back({{"type", "Feature"},
+                        {"geometry", {{"type", "LineString"}, {"coordinates", truth_coordinates}}},
+                        {"properties", {{"route", r.route}, {"mode", mode_name(r.mode)}, {"track", "ground_truth"}}}});
+  }
   for (const auto& p : r.poses) {
     nlohmann::ordered_json props = {{"frame", p.frame},         {"timestamp", p.timestamp_s},
                                     {"heading_deg", p.compass_heading_deg}, {"entropy", p.entropy},
                                     {"etu_weight", p.etu_weight}, {"relocalized", p.relocalized}};
     if (p.position_error_m) props["position_error_m"] = *p.position_error_m;
     if (p.heading_error_deg) props["heading_error_deg"] = *p.heading_error_deg;
+    if (p.lateral_error_m) props["lateral_error_m"] = *p.lateral_error_m;
+    if (p.longitudinal_error_m) props["longitudinal_error_m"] = *p.longitudinal_error_m;
+    if (p.truth) props["truth"] = {p.truth->lon_deg, p.truth->lat_deg};
     features.push_back({{"type", "Feature"},
                         {"geometry", {{"type", "Point"}, {"coordinates", {p.lon_deg, p.lat_deg}}}},
                         {"properties", props}});

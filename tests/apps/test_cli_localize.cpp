@@ -1,9 +1,11 @@
 // seqloc localize and seqloc evaluate from the command line: the files, the table, exit codes,
 // and nothing written when an input is bad.
 
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <sstream>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -51,6 +53,24 @@ struct Fixture {
   }
 };
 
+// A TUM trajectory file by the rules evo documents: a line per pose, "timestamp tx ty tz qx qy qz
+// qw" separated by spaces, lines starting with '#' are comments.
+std::vector<std::array<double, 8>> read_tum(const std::filesystem::path& path) {
+  std::vector<std::array<double, 8>> poses;
+  std::ifstream in(path);
+  EXPECT_TRUE(in) << path;
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream fields(line);
+    std::array<double, 8> pose{};
+    for (double& value : pose) EXPECT_TRUE(fields >> value) << path << ": " << line;
+    std::string extra;
+    EXPECT_FALSE(fields >> extra) << path << ": more than 8 fields: " << line;
+    poses.push_back(pose);
+  }
+  return poses;
+}
+
 std::vector<std::string> args(const Fixture& f, const std::filesystem::path& out, std::vector<std::string> extra) {
   std::vector<std::string> a{"localize", f.cache.string(), f.route.string(), "-o", out.string(), "--window", "64",
                              "--headings", "64"};
@@ -73,12 +93,36 @@ TEST(CliLocalize, WritesEveryFileAndTheTable) {
     EXPECT_EQ(track["type"], "FeatureCollection");
     EXPECT_EQ(track["features"][0]["geometry"]["type"], "LineString");
     EXPECT_EQ(track["features"][0]["geometry"]["coordinates"].size(), 8u);
-    const double lon = track["features"][1]["geometry"]["coordinates"][0];
+    const double lon = track["features"][2]["geometry"]["coordinates"][0];
     EXPECT_NEAR(lon, 10.5, 0.01) << "RFC 7946 order: [lon, lat]";
     const std::string tum = test::read_file(dir / "trajectory.tum");
     EXPECT_EQ(std::count(tum.begin(), tum.end(), '\n'), 8);
     // Heading east: yaw 0 from the x axis, so qz = 0 and qw = 1.
     EXPECT_NE(tum.find(" 0 0 0 0.000000000 1.000000000"), std::string::npos) << tum.substr(0, 200);
+    // groundtruth.tum, read by the TUM rules evo documents, holds the fixture's truth at the
+    // estimate's timestamps: x = -20.25 + 5 t, y = 0.25, heading east.
+    const auto truth = read_tum(dir / "groundtruth.tum");
+    const auto estimate = read_tum(dir / "trajectory.tum");
+    ASSERT_EQ(truth.size(), 8u) << mode;
+    ASSERT_EQ(estimate.size(), 8u) << mode;
+    for (std::size_t t = 0; t < truth.size(); ++t) {
+      EXPECT_EQ(truth[t][0], estimate[t][0]) << "the same timestamps";
+      EXPECT_NEAR(truth[t][0], static_cast<double>(t), 1e-9);
+      EXPECT_NEAR(truth[t][1], -20.25 + 5.0 * static_cast<double>(t), 1e-3) << mode << " frame " << t;
+      EXPECT_NEAR(truth[t][2], 0.25, 1e-3) << mode << " frame " << t;
+      EXPECT_NEAR(std::hypot(truth[t][6], truth[t][7]), 1.0, 1e-6) << "a unit quaternion";
+      EXPECT_NEAR(truth[t][6], 0.0, 1e-6) << "yaw 0: heading east";
+    }
+    // track.geojson: the ground-truth line next to the estimate's, and each frame's truth.
+    ASSERT_GE(track["features"].size(), 2u + 8u);
+    EXPECT_EQ(track["features"][0]["properties"]["track"], "estimate");
+    const auto& truth_line = track["features"][1];
+    EXPECT_EQ(truth_line["properties"]["track"], "ground_truth");
+    ASSERT_EQ(truth_line["geometry"]["coordinates"].size(), 8u);
+    const auto& frame3 = track["features"][2 + 3];
+    EXPECT_EQ(frame3["properties"]["truth"], truth_line["geometry"]["coordinates"][3]);
+    EXPECT_TRUE(frame3["properties"].contains("position_error_m"));
+    EXPECT_TRUE(frame3["properties"].contains("lateral_error_m"));
     const auto metrics = nlohmann::json::parse(test::read_file(dir / "metrics.json"));
     EXPECT_EQ(metrics["position_recall_pct"]["1m"], 100.0) << mode;
     EXPECT_EQ(metrics["heading_recall_pct"]["1deg"], 100.0) << mode;
@@ -90,10 +134,22 @@ TEST(CliLocalize, WritesEveryFileAndTheTable) {
     ASSERT_NE(row, std::string::npos) << r.out;
     EXPECT_NE(r.out.substr(row, 60).find("100.0"), std::string::npos) << r.out;
   }
-  // evaluate recomputes the same table from the files.
+  // evaluate recomputes the same table from the files; from the route's folder too, and from
+  // mode folders (one row each), and a file named twice counts once.
   const auto e = run_seqloc({"evaluate", out.string()});
   ASSERT_EQ(e.exit_code, 0) << e.err;
   EXPECT_EQ(e.out, r.out.substr(0, r.out.find("wrote ")));
+  const auto by_route = run_seqloc({"evaluate", (out / "east").string(), out.string()});
+  ASSERT_EQ(by_route.exit_code, 0) << by_route.err;
+  EXPECT_EQ(by_route.out, e.out);
+  const auto two_modes = run_seqloc({"evaluate", (out / "east/seqloc").string(), (out / "east/single").string()});
+  ASSERT_EQ(two_modes.exit_code, 0) << two_modes.err;
+  EXPECT_NE(two_modes.out.find("seqloc "), std::string::npos) << two_modes.out;
+  EXPECT_NE(two_modes.out.find("single "), std::string::npos) << two_modes.out;
+  EXPECT_EQ(two_modes.out.find("online "), std::string::npos) << two_modes.out;
+  const auto nothing = run_seqloc({"evaluate", (f.dir / "route").string()});
+  EXPECT_EQ(nothing.exit_code, 1);
+  EXPECT_NE(nothing.err.find("no poses.csv"), std::string::npos) << nothing.err;
 }
 
 TEST(CliLocalize, RoutesSideBySideGiveTheSameFiles) {

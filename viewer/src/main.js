@@ -50,9 +50,13 @@ function viridis(t) {
 }
 
 const lineStyle = new Style({ stroke: new Stroke({ color: 'rgba(0,0,0,0.7)', width: 2 }) });
+// The ground truth (track.geojson's "track": "ground_truth" line), dashed beside the estimate.
+const truthStyle = new Style({ stroke: new Stroke({ color: 'rgba(0,140,60,0.9)', width: 2, lineDash: [6, 4] }) });
 const pointStyles = new globalThis.Map();
 function trackStyle(feature) {
-  if (feature.getGeometry().getType() !== 'Point') return lineStyle;
+  if (feature.getGeometry().getType() !== 'Point') {
+    return feature.get('track') === 'ground_truth' ? truthStyle : lineStyle;
+  }
   const e = Number(feature.get('entropy'));
   const key = Number.isFinite(e) ? Math.round(e * 50) : -1;
   if (!pointStyles.has(key)) {

@@ -71,6 +71,12 @@ struct FramePose {
   double etu_weight = 1;
   bool relocalized = false;
   std::optional<double> position_error_m, heading_error_deg, lateral_error_m, longitudinal_error_m;
+  /// The ground truth of the frame, when the route has it, in the same forms as the estimate.
+  struct Truth {
+    double x_m = 0, y_m = 0, lat_deg = 0, lon_deg = 0;
+    std::optional<double> grid_heading_deg;  ///< clockwise from grid north
+  };
+  std::optional<Truth> truth;
 };
 
 struct RouteResult {
