@@ -124,11 +124,11 @@ struct Core {
 /// the next under the idle deadline. Every step runs on the connection's strand.
 class Connection : public std::enable_shared_from_this<Connection> {
  public:
-  Connection(Core& core, tcp::socket socket, const asio::ip::address& client, std::uint64_t id)
+  Connection(Core& core, tcp::socket socket, asio::ip::address client, std::uint64_t id)
       : core_(core),
         stream_(std::move(socket)),
         buffer_(core.options.max_header_bytes + 4096),
-        client_(client),
+        client_(std::move(client)),
         id_(id) {}
   ~Connection() { core_.forget(id_, client_); }
   Connection(const Connection&) = delete;
