@@ -8,6 +8,7 @@
 
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/serve/geotiff.hpp"
+#include "seqloc/serve/web_mercator.hpp"
 #include "service_internal.hpp"
 
 namespace seqloc::serve {
@@ -33,6 +34,26 @@ Response Service::tile(Region& region, std::string_view layer_name_, std::string
 
   const std::string key = region.build_tag + "/" + region.id + "/" + layer_name(*layer) + "/" + std::to_string(col) + "/" + std::to_string(row) +
                           "." + std::string(ext) + "/" + style;
+  return cached_tile(region, key, detail::content_type_of(ext), [&]() -> std::shared_ptr<const std::string> {
+    require_tile(*region.cache, col, row);
+    if (ext == "png" && style == "data" && *layer != MapLayer::road_prior) {
+      // The stored blob is already this PNG: no decoding, no encoding.
+      const auto blob = region.cache->tile_blob(
+          *layer == MapLayer::classes ? raster::Layer::classes : raster::Layer::road_distance, col, row);
+      return std::make_shared<const std::string>(blob.begin(), blob.end());
+    }
+    const MapBlock block = read_tile(*region.cache, *layer, col, row, options_.layers);
+    if (ext == "npy") return std::make_shared<const std::string>(encode_npy(block));
+    if (ext == "tif") {
+      return std::make_shared<const std::string>(encode_geotiff(block, region.cache->metadata().projection()));
+    }
+    const auto png = style == "color" ? encode_styled_png(block) : encode_data_png(block);
+    return std::make_shared<const std::string>(png.begin(), png.end());
+  });
+}
+
+Response Service::cached_tile(const Region& region, const std::string& key, std::string content_type,
+                              const std::function<std::shared_ptr<const std::string>()>& encode) {
   {
     std::lock_guard lock(cache_mutex_);
     if (const Response* hit = responses_.find(key)) {
@@ -40,32 +61,49 @@ Response Service::tile(Region& region, std::string_view layer_name_, std::string
       return *hit;
     }
   }
-  require_tile(*region.cache, col, row);
-
   Response r;
-  r.content_type = detail::content_type_of(ext);
-  if (ext == "png" && style == "data" && *layer != MapLayer::road_prior) {
-    // The stored blob is already this PNG: no decoding, no encoding.
-    const auto blob = region.cache->tile_blob(*layer == MapLayer::classes ? raster::Layer::classes : raster::Layer::road_distance,
-                                              col, row);
-    r.body = std::make_shared<const std::string>(blob.begin(), blob.end());
-  } else {
-    const MapBlock block = read_tile(*region.cache, *layer, col, row, options_.layers);
-    if (ext == "npy") {
-      r.body = std::make_shared<const std::string>(encode_npy(block));
-    } else if (ext == "tif") {
-      r.body = std::make_shared<const std::string>(encode_geotiff(block, region.cache->metadata().projection()));
-    } else {
-      const auto png = style == "color" ? encode_styled_png(block) : encode_data_png(block);
-      r.body = std::make_shared<const std::string>(png.begin(), png.end());
-    }
-  }
+  r.content_type = std::move(content_type);
+  r.body = encode();
   r.headers.emplace_back("ETag", "\"" + region.build_tag + "-" + detail::hex(detail::fnv1a(key)) + "\"");
   r.headers.emplace_back("Cache-Control", "public, max-age=" + std::to_string(options_.tile_max_age_s));
-
   std::lock_guard lock(cache_mutex_);
   if (r.body->size() <= options_.response_cache_bytes / 8) responses_.insert(key, r);
   return r;
+}
+
+Response Service::xyz_tile(Region& region, std::string_view layer_text, std::string_view z_text,
+                           std::string_view x_text, std::string_view file, const Request& request) {
+  const auto layer = parse_layer(layer_text);
+  if (!layer) {
+    return error_response(404, "no layer '" + std::string(layer_text).substr(0, 100) + "' (classes, road_distance, road_prior)");
+  }
+  // {y}.png (256 px) or {y}@2x.png (512 px, the same ground).
+  constexpr std::string_view kPng = ".png", kRetina = "@2x";
+  if (file.size() <= kPng.size() || file.substr(file.size() - kPng.size()) != kPng) {
+    return error_response(404, "XYZ tiles are PNG: {y}.png or {y}@2x.png");
+  }
+  std::string_view y_text = file.substr(0, file.size() - kPng.size());
+  int tile_px = 256;
+  if (y_text.size() > kRetina.size() && y_text.substr(y_text.size() - kRetina.size()) == kRetina) {
+    y_text.remove_suffix(kRetina.size());
+    tile_px = 512;
+  }
+  std::int64_t z = 0, x = 0, y = 0;
+  if (!detail::parse_index(z_text, z) || !detail::parse_index(x_text, x) || !detail::parse_index(y_text, y) || z > 30) {
+    return error_response(400, "z, x and y must be non-negative integers (z at most 30): " + request.path.substr(0, 200));
+  }
+  // Web maps want pictures: 'color' unless the data is asked for.
+  std::string style = "color";
+  if (const std::string* s = detail::find_param(request, "style")) style = *s;
+  if (style != "data" && style != "color") return error_response(400, "style: 'data' or 'color'");
+
+  const std::string key = region.build_tag + "/" + region.id + "/xyz/" + layer_name(*layer) + "/" + std::to_string(z) +
+                          "/" + std::to_string(x) + "/" + std::to_string(y) + "/" + std::to_string(tile_px) + "/" + style;
+  return cached_tile(region, key, "image/png", [&] {
+    const WebTile tile = read_web_tile(*region.cache, *layer, static_cast<int>(z), x, y, tile_px, options_.layers);
+    const auto png = style == "color" ? encode_styled_png(tile.block, tile.covered) : encode_data_png(tile.block);
+    return std::make_shared<const std::string>(png.begin(), png.end());
+  });
 }
 
 Response Service::crop(Region& region, const Request& request, bool sidecar_only) {
@@ -212,26 +250,32 @@ Response Service::tilejson(const Region& region, const Request& request) const {
   const auto& m = region.cache->metadata();
   const auto& g = m.grid;
   const std::string base = request.base_url + "/regions/" + region.id;
+  const WebZooms zooms = web_zooms(m);
   ordered_json layers = ordered_json::object();
   for (MapLayer layer : kAllLayers) {
     const std::string name = layer_name(layer);
-    std::string tiles = base;
-    tiles.append("/").append(name).append("/{x}/{y}.png");
-    layers[name] = {{"tiles", {tiles}},
+    std::string xyz = base, region_tiles = base;
+    xyz.append("/xyz/").append(name).append("/{z}/{x}/{y}.png");
+    region_tiles.append("/").append(name).append("/{x}/{y}.png");
+    layers[name] = {{"tiles", {xyz}},
+                    {"region_tiles", region_tiles},
                     {"formats", {"png", "tif", "npy"}},
                     {"styles", {"data", "color"}}};
   }
+  // The standard fields describe the Web Mercator XYZ tiles (what web maps read); `crs` and
+  // `tile_matrix` describe the region's own tiles (what the viewer and GIS read).
   return detail::json_response(
       {{"tilejson", "3.0.0"},
        {"name", region.id},
-       {"description", "seqloc region cache of " + m.source_file + " (tiles in the region's own CRS, not Web Mercator)"},
+       {"description", "seqloc region cache of " + m.source_file +
+                           ": XYZ tiles in Web Mercator, and the region's own tiles (crs, tile_matrix)"},
        {"attribution", "Map data (c) OpenStreetMap contributors, ODbL 1.0"},
        {"scheme", "xyz"},
-       {"tiles", {base + "/classes/{x}/{y}.png?style=color"}},
-       {"minzoom", 0},
-       {"maxzoom", 0},
+       {"tiles", {base + "/xyz/classes/{z}/{x}/{y}.png"}},
+       {"minzoom", zooms.min_zoom},
+       {"maxzoom", zooms.max_zoom},
        {"bounds", {region.bounds.min_lon, region.bounds.min_lat, region.bounds.max_lon, region.bounds.max_lat}},
-       {"center", {m.centre_lon, m.centre_lat, 0}},
+       {"center", {m.centre_lon, m.centre_lat, zooms.max_zoom - 1}},
        {"crs", {{"wkt", m.projection().wkt()}, {"proj", m.projection().proj_string()}}},
        {"tile_matrix",
         {{"tile_size", raster::kTilePx},
@@ -272,10 +316,17 @@ Response Service::wmts(const Region& region, const Request& request) const {
       << "</ows:UpperCorner></ows:WGS84BoundingBox>"
       << R"(<Style isDefault="true"><ows:Identifier>data</ows:Identifier></Style>)"
       << "<Style><ows:Identifier>color</ows:Identifier></Style>"
-      << "<Format>image/png</Format>"
+      << "<Format>image/png</Format>" << (layer == MapLayer::classes ? "" : "<Format>image/tiff</Format>")
       << "<TileMatrixSetLink><TileMatrixSet>" << matrix_set << "</TileMatrixSet></TileMatrixSetLink>"
       << R"(<ResourceURL format="image/png" resourceType="tile" template=")" << base << "/" << name
-      << "/{TileCol}/{TileRow}.png?style={Style}\"/></Layer>\n";
+      << "/{TileCol}/{TileRow}.png?style={Style}\"/>";
+    // Metres and priors as Float32 GeoTIFF tiles: GDAL's WMTS client decodes them as data (it
+    // reads any PNG as 8-bit RGBA unless told otherwise; wmts/LAYER.xml tells it).
+    if (layer != MapLayer::classes) {
+      x << R"(<ResourceURL format="image/tiff" resourceType="tile" template=")" << base << "/" << name
+        << "/{TileCol}/{TileRow}.tif\"/>";
+    }
+    x << "</Layer>\n";
   }
   x << "    <TileMatrixSet><ows:Identifier>" << matrix_set << "</ows:Identifier>"
     << "<ows:SupportedCRS>" << m.projection().proj_string() << "</ows:SupportedCRS>"
@@ -285,6 +336,35 @@ Response Service::wmts(const Region& region, const Request& request) const {
     << "<MatrixWidth>" << g.tiles_wide() << "</MatrixWidth><MatrixHeight>" << g.tiles_high() << "</MatrixHeight>"
     << "</TileMatrix></TileMatrixSet>\n"
     << "  </Contents>\n</Capabilities>\n";
+  Response r;
+  r.content_type = "application/xml";
+  r.body = std::make_shared<const std::string>(x.str());
+  r.headers.emplace_back("Cache-Control", "no-cache");
+  return r;
+}
+
+Response Service::gdal_wmts(const Region& region, std::string_view file, const Request& request) const {
+  // GDAL's WMTS client reads every layer as 4 bands of Byte unless a service description says
+  // otherwise: this one names the layer, its format, band count and type, and no local cache.
+  constexpr std::string_view kSuffix = ".xml";
+  const std::string_view name =
+      file.size() > kSuffix.size() && file.substr(file.size() - kSuffix.size()) == kSuffix ? file.substr(0, file.size() - kSuffix.size()) : "";
+  const auto layer = parse_layer(name);
+  if (!layer) {
+    return error_response(404, "no GDAL service description '" + std::string(file).substr(0, 100) +
+                                   "': wmts/classes.xml, wmts/road_distance.xml or wmts/road_prior.xml");
+  }
+  const bool classes = *layer == MapLayer::classes;
+  std::ostringstream x;
+  x << "<GDAL_WMTS>\n"
+    << "  <GetCapabilitiesUrl>" << request.base_url << "/regions/" << region.id << "/wmts.xml</GetCapabilitiesUrl>\n"
+    << "  <Layer>" << layer_name(*layer) << "</Layer>\n"
+    << "  <Style>data</Style>\n"
+    << "  <TileMatrixSet>seqloc-" << region.id << "</TileMatrixSet>\n"
+    << "  <Format>" << (classes ? "image/png" : "image/tiff") << "</Format>\n"
+    << "  <BandsCount>" << (classes ? 3 : 1) << "</BandsCount>\n"
+    << "  <DataType>" << (classes ? "Byte" : "Float32") << "</DataType>\n"
+    << "</GDAL_WMTS>\n";
   Response r;
   r.content_type = "application/xml";
   r.body = std::make_shared<const std::string>(x.str());

@@ -14,57 +14,15 @@
 #include <cpl_vsi.h>
 #include <gdal.h>
 
+#include "gdal_support.hpp"
+
 namespace seqloc::serve {
 namespace {
 
-void register_gdal() {
-  static std::once_flag once;
-  std::call_once(once, [] { GDALAllRegister(); });
-}
-
-std::string gdal_message() {
-  const char* m = CPLGetLastErrorMsg();
-  return m && *m ? m : "unknown GDAL error";
-}
-
-/// CSL option lists freed on scope exit.
-class Options {
- public:
-  Options() = default;
-  ~Options() { CSLDestroy(list_); }
-  Options(const Options&) = delete;
-  Options& operator=(const Options&) = delete;
-  Options& set(const char* key, const std::string& value) {
-    list_ = CSLSetNameValue(list_, key, value.c_str());
-    return *this;
-  }
-  [[nodiscard]] char** get() const { return list_; }
-
- private:
-  char** list_ = nullptr;
-};
-
-/// A GDAL dataset closed on scope exit (which flushes it).
-class Dataset {
- public:
-  explicit Dataset(GDALDatasetH h) : h_(h) {}
-  ~Dataset() { close(); }
-  Dataset(const Dataset&) = delete;
-  Dataset& operator=(const Dataset&) = delete;
-  [[nodiscard]] GDALDatasetH get() const { return h_; }
-  explicit operator bool() const { return h_ != nullptr; }
-  /// Closes now; false when GDAL reported a failure while flushing.
-  bool close() {
-    if (!h_) return true;
-    CPLErrorReset();
-    GDALClose(h_);
-    h_ = nullptr;
-    return CPLGetLastErrorType() < CE_Failure;
-  }
-
- private:
-  GDALDatasetH h_;
-};
+using detail::Dataset;
+using detail::gdal_message;
+using detail::Options;
+using detail::register_gdal;
 
 void set_georeference(GDALDatasetH ds, double west_m, double north_m, const osm::RegionProjection& projection) {
   double transform[6] = {west_m, raster::kCellM, 0, north_m, 0, -raster::kCellM};

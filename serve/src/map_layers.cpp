@@ -297,7 +297,7 @@ std::vector<std::uint8_t> encode_data_png(const MapBlock& block) {
   return {};
 }
 
-std::vector<std::uint8_t> encode_styled_png(const MapBlock& block) {
+std::vector<std::uint8_t> encode_styled_png(const MapBlock& block, std::span<const std::uint8_t> coverage) {
   require_one_layer(block, "a styled PNG");
   const std::size_t n = cells(block.width, block.height);
   std::vector<std::uint8_t> rgba(n * 4);
@@ -325,6 +325,9 @@ std::vector<std::uint8_t> encode_styled_png(const MapBlock& block) {
       }
       break;
     }
+  }
+  if (!coverage.empty()) {
+    for (std::size_t i = 0; i < n; ++i) rgba[4 * i + 3] = std::min(rgba[4 * i + 3], coverage[i]);
   }
   return raster::encode_png_rgba8(rgba, block.width, block.height);
 }

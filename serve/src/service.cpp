@@ -122,10 +122,12 @@ Response Service::route(const Request& request) {
   Region& region = *snapshot;
   if (parts.size() == 2 || (parts.size() == 3 && parts[2] == "tilejson.json")) return tilejson(region, request);
   if (parts.size() == 3 && parts[2] == "wmts.xml") return wmts(region, request);
+  if (parts.size() == 4 && parts[2] == "wmts") return gdal_wmts(region, parts[3], request);
   if (parts.size() == 3 && parts[2] == "crop") return crop(region, request, false);
   if (parts.size() == 3 && parts[2] == "crop.json") return crop(region, request, true);
   if (parts.size() == 4 && parts[2] == "point") return point(region, parts[3]);
   if (parts.size() == 5) return tile(region, parts[2], parts[3], parts[4], request);
+  if (parts.size() == 7 && parts[2] == "xyz") return xyz_tile(region, parts[3], parts[4], parts[5], parts[6], request);
   return error_response(404, "no such resource: " + request.path.substr(0, 200));
 }
 

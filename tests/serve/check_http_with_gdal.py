@@ -4,6 +4,7 @@ exported VRT; each is compared with GDAL's GeoPackage driver reading the cache i
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -58,6 +59,95 @@ class Served(unittest.TestCase):
         for b in range(3):
             np.testing.assert_array_equal(ds.GetRasterBand(b + 1).ReadAsArray(x0, y0, w, h),
                                           ref.GetRasterBand(b + 1).ReadAsArray(x0, y0, w, h))
+
+    def test_gdal_wmts_reads_distances_and_priors_as_data(self):
+        # GDAL's WMTS client takes any layer as 4 bands of Byte; the service description the
+        # server offers per layer makes it read the GeoTIFF tiles as Float32 metres.
+        ref = gdal.Open(f"GPKG:{ARGS.cache}:road_distance")
+        w, h = 700, 600  # around the centre, across tile corners
+        x0, y0 = ref.RasterXSize // 2 - 300, ref.RasterYSize // 2 - 200
+        expected = ref.GetRasterBand(1).ReadAsArray(x0, y0, w, h)
+        self.assertGreater(np.ptp(expected), 10.0)  # a window with roads and fields, not a constant
+        _, headers, description = self.get(f"/regions/{self.region}/wmts/road_distance.xml")
+        self.assertIn("application/xml", headers["Content-Type"])
+        ds = gdal.Open(description.decode())
+        self.assertEqual(ds.RasterCount, 1)
+        self.assertEqual(gdal.GetDataTypeName(ds.GetRasterBand(1).DataType), "Float32")
+        self.assertEqual(ds.GetGeoTransform(), ref.GetGeoTransform())
+        np.testing.assert_allclose(ds.GetRasterBand(1).ReadAsArray(x0, y0, w, h), expected, atol=1e-4)
+        # The prior is exp(-d^2 / (2 sigma^2)) of those distances (tilejson gives sigma).
+        sigma = json.loads(self.get(f"/regions/{self.region}/tilejson.json")[2])["road_prior_sigma_m"]
+        prior = gdal.Open(self.get(f"/regions/{self.region}/wmts/road_prior.xml")[2].decode())
+        np.testing.assert_allclose(prior.GetRasterBand(1).ReadAsArray(x0, y0, w, h),
+                                   np.exp(-expected.astype(np.float64) ** 2 / (2 * sigma ** 2)), atol=1e-5)
+        with self.assertRaises(urllib.error.HTTPError) as e:
+            self.get(f"/regions/{self.region}/wmts/roads.xml")
+        self.assertEqual(e.exception.code, 404)
+
+    def xyz_tile_at_centre(self, zoom):
+        """The XYZ tile holding a point near the region's centre, and its EPSG:3857 bounds."""
+        info = json.loads(self.get(f"/regions/{self.region}/tilejson.json")[2])
+        lon, lat = info["center"][0], info["center"][1]
+        n = 2 ** zoom
+        x = int((lon + 180.0) / 360.0 * n)
+        y = int((1.0 - math.asinh(math.tan(math.radians(lat))) / math.pi) / 2.0 * n)
+        half = 20037508.342789244
+        size = 2 * half / n
+        west, north = -half + x * size, half - y * size
+        return x, y, (west, north - size, west + size, north)
+
+    def tms_description(self, layer, zoom, bands, data_type):
+        """GDAL's TMS minidriver over the server's XYZ tiles of one layer (data style)."""
+        url = f"{self.base}/regions/{self.region}/xyz/{layer}/${{z}}/${{x}}/${{y}}.png?style=data"
+        return (f"<GDAL_WMS><Service name=\"TMS\"><ServerUrl>{url}</ServerUrl></Service>"
+                "<DataWindow><UpperLeftX>-20037508.342789244</UpperLeftX><UpperLeftY>20037508.342789244</UpperLeftY>"
+                "<LowerRightX>20037508.342789244</LowerRightX><LowerRightY>-20037508.342789244</LowerRightY>"
+                f"<TileLevel>{zoom}</TileLevel><TileCountX>1</TileCountX><TileCountY>1</TileCountY>"
+                "<YOrigin>top</YOrigin></DataWindow><Projection>EPSG:3857</Projection>"
+                f"<BlockSizeX>256</BlockSizeX><BlockSizeY>256</BlockSizeY><BandsCount>{bands}</BandsCount>"
+                f"<DataType>{data_type}</DataType></GDAL_WMS>")
+
+    def test_xyz_tiles_are_gdalwarp_of_the_cache(self):
+        info = json.loads(self.get(f"/regions/{self.region}/tilejson.json")[2])
+        self.assertEqual(info["tilejson"], "3.0.0")
+        self.assertEqual(info["tiles"][0], f"{self.base}/regions/{self.region}/xyz/classes/{{z}}/{{x}}/{{y}}.png")
+        zmin, zmax = info["minzoom"], info["maxzoom"]
+        # The highest zoom's pixels are about the 0.5 m cells at this latitude.
+        pixel_m = 2 * 20037508.342789244 / 256 / 2 ** zmax * math.cos(math.radians(info["center"][1]))
+        self.assertTrue(0.5 / math.sqrt(2) <= pixel_m <= 0.5 * math.sqrt(2), pixel_m)
+        self.assertLess(zmin, zmax)
+        self.assertEqual(len(info["bounds"]), 4)
+        for zoom in (zmax, zmin + 1):
+            x, y, te = self.xyz_tile_at_centre(zoom)
+            # GDAL's TMS reader against gdalwarp of the GeoPackage itself, on the tile's grid.
+            ds = gdal.Open(self.tms_description("road_distance", zoom, 1, "UInt16"))
+            served_cm = ds.GetRasterBand(1).ReadAsArray(x * 256, y * 256, 256, 256)
+            ref = gdal.Warp("", gdal.Open(f"GPKG:{ARGS.cache}:road_distance"), format="MEM", dstSRS="EPSG:3857",
+                            outputBounds=te, width=256, height=256, resampleAlg="bilinear", outputType=gdal.GDT_Float32)
+            expected = ref.GetRasterBand(1).ReadAsArray()
+            self.assertGreater(np.ptp(expected), 5.0, "a tile with roads and fields")
+            np.testing.assert_allclose(served_cm * 0.01, expected, atol=0.0051, err_msg=f"road_distance zoom {zoom}")
+            classes = gdal.Open(self.tms_description("classes", zoom, 3, "Byte"))
+            source = gdal.OpenEx(f"GPKG:{ARGS.cache}:classes", open_options=["BAND_COUNT=3"])
+            ref = gdal.Warp("", source, format="MEM", dstSRS="EPSG:3857", outputBounds=te, width=256, height=256,
+                            resampleAlg="near")
+            for b in range(3):
+                np.testing.assert_array_equal(classes.GetRasterBand(b + 1).ReadAsArray(x * 256, y * 256, 256, 256),
+                                              ref.GetRasterBand(b + 1).ReadAsArray(), err_msg=f"classes zoom {zoom}")
+        # @2x: the same ground at 512 px; the picture style by default; outside the zooms, a 404.
+        x, y, _ = self.xyz_tile_at_centre(zmax)
+        status, headers, body = self.get(f"/regions/{self.region}/xyz/classes/{zmax}/{x}/{y}@2x.png")
+        self.assertEqual((status, headers["Content-Type"]), (200, "image/png"))
+        with tempfile.NamedTemporaryFile(suffix=".png") as f:
+            f.write(body)
+            f.flush()
+            picture = gdal.Open(f.name)
+            self.assertEqual((picture.RasterXSize, picture.RasterYSize, picture.RasterCount), (512, 512, 4))
+        for path in (f"/regions/{self.region}/xyz/classes/{zmax + 1}/{2 * x}/{2 * y}.png",
+                     f"/regions/{self.region}/xyz/classes/{zmax}/0/0.png"):
+            with self.assertRaises(urllib.error.HTTPError) as e:
+                self.get(path)
+            self.assertEqual(e.exception.code, 404, path)
 
     def test_served_geotiff_crop_is_georeferenced(self):
         info = json.loads(self.get(f"/regions/{self.region}/tilejson.json")[2])

@@ -1,6 +1,7 @@
 """The viewer page in headless Chromium: `seqloc serve` with the built page, a track from
 `seqloc localize` on the sample region; the page must load the region's tiles without errors and
-draw every frame of the track, and the screenshot must show the map and the track's colours."""
+draw every frame of the track, and the screenshot must show the map and the track's colours. Twice:
+in the region's own projection, and over a Web Mercator view from the server's XYZ tiles (?web=1)."""
 
 import argparse
 import os
@@ -40,42 +41,52 @@ def main():
         shutil.copy(os.path.join(d, "out", "route_000", "seqloc", "track.geojson"), web)
         server = subprocess.Popen([a.seqloc, "serve", cache, "--port", "0", "--web", web],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        failures = []
         try:
             base = server.stdout.readline().split()[2]
-            url = f"{base}?track=static/track.geojson&distance=1"
-            chromium = [a.chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                        "--window-size=1200,800", "--virtual-time-budget=15000"]
-            dom = subprocess.run(chromium + ["--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
-            shot = os.path.join(d, "viewer.png")
-            subprocess.run(chromium + [f"--screenshot={shot}", url], capture_output=True, timeout=120)
+            for label, query in (("region projection", "?track=static/track.geojson&distance=1"),
+                                 ("web mercator", "?web=1&track=static/track.geojson&distance=1")):
+                failures += [f"{label}: {f}" for f in check_page(a.chromium, base + query, d, label)]
         finally:
             server.terminate()
             server.wait(timeout=20)
-        m = re.search(r'<div id="status"[^>]*data-tiles="(\d+)" data-tile-errors="(\d+)" data-track-points="(\d+)"', dom)
-        if not m:
-            sys.exit("the page reported no status; its DOM:\n" + dom[:3000])
-        tiles, errors, points = map(int, m.groups())
-        failures = []
-        if tiles < 4:
-            failures.append(f"only {tiles} tiles loaded")
-        if errors:
-            failures.append(f"{errors} tiles failed to load")
-        if points != 12:
-            failures.append(f"{points} track points drawn, expected 12")
-        # The screenshot: the map part (left of the 320 px panel) is not blank, and track points
-        # (viridis colours: green-blue-yellow with little red) are drawn on it.
-        ds = gdal.Open(shot)
-        r, g, b = (ds.GetRasterBand(i + 1).ReadAsArray()[:, : ds.RasterXSize - 330].astype(int) for i in range(3))
-        distinct = len(set(zip(r[::7, ::7].ravel(), g[::7, ::7].ravel(), b[::7, ::7].ravel())))
-        if distinct < 20:
-            failures.append(f"the map looks blank ({distinct} colours)")
-        outline = ((r < 30) & (g < 30) & (b < 30)).sum()
-        if outline < 50:
-            failures.append("no track outline (black) pixels on the map")
-        print(f"viewer: {tiles} tiles, {errors} errors, {points} track points, {distinct} colours, {outline} dark px")
         if failures:
             sys.exit("; ".join(failures))
-        print("1 passed, 0 failed")
+        print("2 passed, 0 failed")
+
+
+def check_page(chromium_binary, url, d, label):
+    chromium = [chromium_binary, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                "--window-size=1200,800", "--virtual-time-budget=15000"]
+    dom = subprocess.run(chromium + ["--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
+    shot = os.path.join(d, "viewer.png")
+    subprocess.run(chromium + [f"--screenshot={shot}", url], capture_output=True, timeout=120)
+    m = re.search(r'<div id="status"[^>]*data-tiles="(\d+)" data-tile-errors="(\d+)" data-track-points="(\d+)"', dom)
+    if not m:
+        return ["the page reported no status; its DOM:\n" + dom[:3000]]
+    tiles, errors, points = map(int, m.groups())
+    failures = []
+    if tiles < 4:
+        failures.append(f"only {tiles} tiles loaded")
+    if errors:
+        failures.append(f"{errors} tiles failed to load")
+    if points != 12:
+        failures.append(f"{points} track points drawn, expected 12")
+    if "ol-scale-line" not in dom:
+        failures.append("no scale bar")
+    # The screenshot: the map part (left of the 320 px panel) is not blank, and track points
+    # (viridis colours: green-blue-yellow with little red) are drawn on it.
+    ds = gdal.Open(shot)
+    r, g, b = (ds.GetRasterBand(i + 1).ReadAsArray()[:, : ds.RasterXSize - 330].astype(int) for i in range(3))
+    distinct = len(set(zip(r[::7, ::7].ravel(), g[::7, ::7].ravel(), b[::7, ::7].ravel())))
+    if distinct < 20:
+        failures.append(f"the map looks blank ({distinct} colours)")
+    outline = ((r < 30) & (g < 30) & (b < 30)).sum()
+    if outline < 50:
+        failures.append("no track outline (black) pixels on the map")
+    print(f"viewer, {label}: {tiles} tiles, {errors} errors, {points} track points, {distinct} colours, "
+          f"{outline} dark px")
+    return failures
 
 
 if __name__ == "__main__":

@@ -1,13 +1,18 @@
 // The seqloc viewer: a region's tiles in the region's own Transverse Mercator projection (no Web
 // Mercator reprojection: cells stay square and north stays grid north), with a localize track on
-// top coloured by its per-frame entropy. Everything comes from `seqloc serve`: /catalog, a region's
-// tilejson.json (its CRS and tile matrix) and its tiles.
+// top coloured by its per-frame entropy and the ground truth dashed beside it. Everything comes
+// from `seqloc serve`: /catalog, a region's tilejson.json (its CRS and tile matrix) and its tiles.
+// With ?web=1 the same layers come as the server's Web Mercator XYZ tiles, as in any web map.
 
 import Map from 'ol/Map.js';
 import View from 'ol/View.js';
 import TileLayer from 'ol/layer/Tile.js';
 import VectorLayer from 'ol/layer/Vector.js';
 import TileImage from 'ol/source/TileImage.js';
+import XYZ from 'ol/source/XYZ.js';
+import ScaleLine from 'ol/control/ScaleLine.js';
+import MousePosition from 'ol/control/MousePosition.js';
+import { defaults as defaultControls } from 'ol/control/defaults.js';
 import VectorSource from 'ol/source/Vector.js';
 import TileGrid from 'ol/tilegrid/TileGrid.js';
 import GeoJSON from 'ol/format/GeoJSON.js';
@@ -15,7 +20,7 @@ import DragAndDrop from 'ol/interaction/DragAndDrop.js';
 import { defaults as defaultInteractions } from 'ol/interaction/defaults.js';
 import { Circle, Fill, Stroke, Style } from 'ol/style.js';
 import { register } from 'ol/proj/proj4.js';
-import { get as getProjection } from 'ol/proj.js';
+import { get as getProjection, toLonLat, transform, transformExtent } from 'ol/proj.js';
 import proj4 from 'proj4';
 import 'ol/ol.css';
 import './app.css';
@@ -82,6 +87,19 @@ function tileLayer(region, tj, layer, visible, opacity) {
   return new TileLayer({ source, visible, opacity });
 }
 
+// The server's Web Mercator XYZ tiles of one layer (tilejson's template; zooms from tilejson).
+function xyzLayer(tj, layer, visible, opacity) {
+  const source = new XYZ({
+    url: `${tj.layers[layer].tiles[0]}?style=color`,
+    minZoom: tj.minzoom,
+    maxZoom: tj.maxzoom,
+    crossOrigin: 'anonymous',
+  });
+  source.on('tileloadend', () => { status.tilesLoaded++; showStatus(); });
+  source.on('tileloaderror', () => { status.tileErrors++; showStatus(); });
+  return new TileLayer({ source, visible, opacity });
+}
+
 const trackSource = new VectorSource();
 let map = null;
 
@@ -93,7 +111,7 @@ function addTrack(text, name) {
   trackSource.addFeatures(features);
   status.trackPoints = features.filter((f) => f.getGeometry().getType() === 'Point').length;
   showStatus();
-  if (features.length) map.getView().fit(trackSource.getExtent(), { padding: [40, 40, 40, 40], maxZoom: 4 });
+  if (features.length) map.getView().fit(trackSource.getExtent(), { padding: [40, 40, 40, 40], maxZoom: trackMaxZoom });
   document.getElementById('info').textContent = `track ${name}: ${status.trackPoints} frames`;
 }
 
@@ -108,25 +126,53 @@ async function loadTrack(url) {
   }
 }
 
+const webMercator = new URLSearchParams(window.location.search).get('web') === '1';
+let regionCode = null;  // the region CRS, for the cursor's region metres
+let trackMaxZoom = 4;   // a track is fitted no closer than 0.5 m pixels
+
+// The cursor: lat/lon and region metres, whichever projection the view is in.
+function formatCursor(coordinate) {
+  if (!coordinate || !map) return '';
+  const viewProjection = map.getView().getProjection();
+  const [lon, lat] = toLonLat(coordinate, viewProjection);
+  const [x, y] = transform(coordinate, viewProjection, regionCode);
+  return `${lat.toFixed(6)}, ${lon.toFixed(6)} | x ${x.toFixed(1)} m, y ${y.toFixed(1)} m`;
+}
+
 async function showRegion(region) {
   const tj = await fetchJson(`regions/${region}/tilejson.json`);
   const code = `seqloc:${region}`;
   proj4.defs(code, tj.crs.proj);
   register(proj4);
+  regionCode = code;
   const projection = getProjection(code);
   projection.setExtent(tj.tile_matrix.extent);
   status.region = region;
   status.tilesLoaded = 0;
   status.tileErrors = 0;
-  const classes = tileLayer(region, tj, 'classes', document.getElementById('show-classes').checked, 1);
-  const distance = tileLayer(region, tj, 'road_distance', document.getElementById('show-distance').checked,
-                             Number(document.getElementById('distance-opacity').value));
-  const view = new View({ projection, resolutions: [4, 2, 1, 0.5, 0.25, 0.125], constrainResolution: true,
-                          extent: tj.tile_matrix.extent });
+  const showClasses = document.getElementById('show-classes').checked;
+  const showDistance = document.getElementById('show-distance').checked;
+  const opacity = Number(document.getElementById('distance-opacity').value);
+  const classes = webMercator ? xyzLayer(tj, 'classes', showClasses, 1)
+    : tileLayer(region, tj, 'classes', showClasses, 1);
+  const distance = webMercator ? xyzLayer(tj, 'road_distance', showDistance, opacity)
+    : tileLayer(region, tj, 'road_distance', showDistance, opacity);
+  // The whole region in view at first.
+  const extent = webMercator ? transformExtent(tj.bounds, 'EPSG:4326', 'EPSG:3857') : tj.tile_matrix.extent;
+  const view = webMercator
+    ? new View({ minZoom: tj.minzoom, maxZoom: tj.maxzoom + 2 })
+    : new View({ projection, resolutions: [8, 4, 2, 1, 0.5, 0.25, 0.125], constrainResolution: true,
+                 extent: tj.tile_matrix.extent });
+  trackMaxZoom = webMercator ? tj.maxzoom : 4;
   const layers = [classes, distance, new VectorLayer({ source: trackSource, style: trackStyle })];
   if (!map) {
     const dragAndDrop = new DragAndDrop({ formatConstructors: [GeoJSON] });
-    map = new Map({ target: 'map', layers, view, interactions: defaultInteractions().extend([dragAndDrop]) });
+    const controls = defaultControls().extend([
+      new ScaleLine({ units: 'metric' }),
+      new MousePosition({ coordinateFormat: formatCursor, className: 'cursor-position', placeholder: '&nbsp;' }),
+    ]);
+    map = new Map({ target: 'map', layers, view, controls,
+                    interactions: defaultInteractions().extend([dragAndDrop]) });
     dragAndDrop.on('addfeatures', (event) => {
       const text = new GeoJSON().writeFeatures(event.features, { featureProjection: map.getView().getProjection() });
       addTrack(text, event.file.name);
@@ -135,7 +181,8 @@ async function showRegion(region) {
       const hit = map.forEachFeatureAtPixel(event.pixel, (f) => (f.getGeometry().getType() === 'Point' ? f : null));
       const p = hit ? hit.getProperties() : null;
       document.getElementById('info').textContent = p
-        ? ['frame', 'entropy', 'etu_weight', 'heading_deg', 'position_error_m', 'relocalized']
+        ? ['frame', 'entropy', 'etu_weight', 'heading_deg', 'position_error_m', 'heading_error_deg',
+           'lateral_error_m', 'longitudinal_error_m', 'relocalized']
           .filter((k) => p[k] !== undefined)
           .map((k) => `${k}: ${typeof p[k] === 'number' ? p[k].toFixed(3) : p[k]}`).join('\n')
         : '';
@@ -144,9 +191,7 @@ async function showRegion(region) {
     map.setLayers(layers);
     map.setView(view);
   }
-  view.fit(tj.tile_matrix.extent);
-  view.setResolution(2);
-  view.setCenter([0, 0]);
+  view.fit(extent);
   document.getElementById('show-classes').onchange = (e) => classes.setVisible(e.target.checked);
   document.getElementById('show-distance').onchange = (e) => distance.setVisible(e.target.checked);
   document.getElementById('distance-opacity').oninput = (e) => distance.setOpacity(Number(e.target.value));

@@ -125,7 +125,9 @@ struct CropWindow {
 
 /// The block as a picture for people: classes in the colours of seqloc's pictures, road distance
 /// and road prior as a heat map (near/high = warm); RGBA, transparent where classes are background.
-[[nodiscard]] std::vector<std::uint8_t> encode_styled_png(const MapBlock& block);
+/// `coverage` (one byte per cell, when given) caps the alpha: 0 where the block has no data.
+[[nodiscard]] std::vector<std::uint8_t> encode_styled_png(const MapBlock& block,
+                                                          std::span<const std::uint8_t> coverage = {});
 
 /// The value of each band at one cell, for `point` queries.
 struct CellValues {

@@ -102,10 +102,17 @@ class Service {
   Response route(const Request& request);
   Response tile(Region& region, std::string_view layer, std::string_view col, std::string_view file,
                 const Request& request);
+  /// The encoded tile under `key` from the response cache, or made by `encode`, tagged for HTTP
+  /// caches (ETag, Cache-Control) and kept.
+  Response cached_tile(const Region& region, const std::string& key, std::string content_type,
+                       const std::function<std::shared_ptr<const std::string>()>& encode);
+  Response xyz_tile(Region& region, std::string_view layer, std::string_view z, std::string_view x,
+                    std::string_view file, const Request& request);
   Response crop(Region& region, const Request& request, bool sidecar_only);
   Response point(Region& region, std::string_view where);
   Response tilejson(const Region& region, const Request& request) const;
   Response wmts(const Region& region, const Request& request) const;
+  Response gdal_wmts(const Region& region, std::string_view file, const Request& request) const;
   Response catalog(const Request& request);
   Response static_file(std::string_view name) const;
 
