@@ -4,6 +4,7 @@
 // volumes go in as NumPy arrays read in place.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -37,18 +38,54 @@ py::array_t<T> adopt(std::vector<T>&& values, std::vector<py::ssize_t> shape) {
   return py::array_t<T>(shape, owner->data(), free_owner);
 }
 
+/// Any array a Python user holds, read in place where its memory allows: a NumPy array, an object
+/// with __dlpack__ (a CPU torch tensor, JAX, CuPy after .get()), or one with __array__. The error
+/// names the argument and the type, never the array's values.
+py::array as_array(const py::object& value, const char* name) {
+  if (py::isinstance<py::array>(value)) return py::reinterpret_borrow<py::array>(value);
+  try {
+    if (py::hasattr(value, "__dlpack__")) return py::module_::import("numpy").attr("from_dlpack")(value);
+    if (py::hasattr(value, "__array__")) return py::array::ensure(value);
+  } catch (const py::error_already_set& e) {
+    throw py::type_error(std::string(name) + ": cannot read a " + std::string(py::str(py::type::of(value).attr("__name__"))) +
+                         " as an array in memory (" + std::string(py::str(e.value())).substr(0, 200) + ")");
+  }
+  throw py::type_error(std::string(name) + ": expected an array (NumPy, DLPack or __array__), got " +
+                       std::string(py::str(py::type::of(value).attr("__name__"))));
+}
+
+/// Three numbers from any sequence of them; a short TypeError naming the argument otherwise.
+std::array<double, 3> three_numbers(const py::object& value, const char* name, const char* what) {
+  try {
+    const auto t = value.cast<std::tuple<double, double, double>>();
+    return {std::get<0>(t), std::get<1>(t), std::get<2>(t)};
+  } catch (const py::cast_error&) {
+    throw py::type_error(std::string(name) + ": expected three numbers " + what + ", got a " +
+                         std::string(py::str(py::type::of(value).attr("__name__"))));
+  }
+}
+
 class PyCache {
  public:
   PyCache(const std::string& path, std::size_t lru_tiles) : cache_(std::make_unique<raster::CacheReader>(path, lru_tiles)) {}
 
   /// {"classes": (H, W, 3) uint8, "road_distance": (H, W) float32 metres, "road_prior": (H, W)
   /// float32, plus the crop's georeference}.
-  py::dict crop(double lat, double lon, double size_m, const std::vector<std::string>& layers, double prior_sigma_m,
-                double max_size_m) {
+  py::dict crop(const py::object& lat, const py::object& lon, double size_m, const std::vector<std::string>& layers,
+                double prior_sigma_m, double max_size_m, const py::object& x, const py::object& y) {
+    const bool geo = !lat.is_none() || !lon.is_none(), metres = !x.is_none() || !y.is_none();
+    if (geo == metres || (geo && (lat.is_none() || lon.is_none())) || (metres && (x.is_none() || y.is_none()))) {
+      throw py::type_error("crop: give lat and lon (WGS84), or x and y (region CRS metres)");
+    }
     serve::CropWindow w;
-    {
+    if (geo) {
+      const auto la = lat.cast<double>(), lo = lon.cast<double>();
       py::gil_scoped_release release;
-      w = serve::locate_crop(*cache_, lat, lon, size_m, max_size_m);
+      w = serve::locate_crop(*cache_, la, lo, size_m, max_size_m);
+    } else {
+      const auto xm = x.cast<double>(), ym = y.cast<double>();
+      py::gil_scoped_release release;
+      w = serve::locate_crop_xy(*cache_, xm, ym, size_m, max_size_m);
     }
     const auto n = static_cast<py::ssize_t>(w.size);
     py::dict out;
@@ -101,6 +138,12 @@ class PyCache {
   py::tuple to_grid(double lat, double lon) const {
     const auto p = cache_->metadata().projection().forward({lat, lon});
     return py::make_tuple(p.x_m, p.y_m);
+  }
+
+  py::tuple from_grid(double x, double y) const {
+    double convergence = 0;
+    const auto g = cache_->metadata().projection().reverse({x, y}, convergence);
+    return py::make_tuple(g.lat_deg, g.lon_deg);
   }
 
  private:
@@ -162,9 +205,9 @@ class PyFilter {
     }
   }
 
-  py::dict step(const py::array& volume, std::tuple<double, double, double> odometry,
-                std::tuple<double, double, double> crop_pose, const py::object& road_distance, bool probabilities,
-                double cell_m) {
+  py::dict step(const py::object& volume_in, const py::object& odometry_in, const py::object& crop_pose_in,
+                const py::object& road_distance, bool probabilities, double cell_m) {
+    const py::array volume = as_array(volume_in, "log_volume");
     if (volume.ndim() != 3) throw py::value_error("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) + " dimensions");
     filter::FrameVolume view;
     py::array contiguous;
@@ -183,14 +226,20 @@ class PyFilter {
     view.width = static_cast<int>(volume.shape(1));
     view.bins = static_cast<int>(volume.shape(2));
     view.cell_m = cell_m;
-    const filter::Odometry odo{std::get<0>(odometry), std::get<1>(odometry), std::get<2>(odometry)};
-    const filter::CropPose crop{std::get<0>(crop_pose), std::get<1>(crop_pose), std::get<2>(crop_pose)};
+    const auto odometry = three_numbers(odometry_in, "odometry", "(forward_m, left_m, yaw_deg)");
+    const filter::Odometry odo{odometry[0], odometry[1], odometry[2]};
+    // Without a crop pose the volume is centred on the window, north-up (not at its corner).
+    const auto& c = filter_.config();
+    filter::CropPose crop{(c.width - 1) / 2.0, (c.height - 1) / 2.0, 0.0};
+    if (!crop_pose_in.is_none()) {
+      const auto t = three_numbers(crop_pose_in, "crop_pose", "(centre_u, centre_v, rotation_deg)");
+      crop = {t[0], t[1], t[2]};
+    }
 
     py::array_t<float, py::array::c_style | py::array::forcecast> distance;
     const float* distance_data = nullptr;
-    const auto& c = filter_.config();
     if (!road_distance.is_none()) {
-      distance = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(road_distance);
+      distance = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(as_array(road_distance, "road_distance"));
       if (!distance || distance.ndim() != 2 || distance.shape(0) != c.height || distance.shape(1) != c.width) {
         throw py::value_error("road_distance: expected a (" + std::to_string(c.height) + ", " + std::to_string(c.width) +
                               ") float array, the window's size");
@@ -216,6 +265,12 @@ class PyFilter {
 
   void recentre(int du, int dv) { filter_.recentre(du, dv); }
 
+  /// The belief summed over headings, (height, width) float32: a probability per window cell.
+  py::array_t<float> belief_marginal() const {
+    const auto& b = filter_.belief();
+    return adopt(b.position_marginal(), {b.height(), b.width()});
+  }
+
  private:
   filter::SeqLocFilter filter_;
 };
@@ -231,11 +286,14 @@ PYBIND11_MODULE(seqloc, m) {
 
   py::class_<PyCache>(m, "Cache", "A region cache (GeoPackage) opened read-only")
       .def(py::init<const std::string&, std::size_t>(), py::arg("path"), py::arg("lru_tiles") = 64)
-      .def("crop", &PyCache::crop, py::arg("lat"), py::arg("lon"), py::arg("size_m") = 128.0,
+      .def("crop", &PyCache::crop, py::arg("lat") = py::none(), py::arg("lon") = py::none(), py::arg("size_m") = 128.0,
            py::arg("layers") = std::vector<std::string>{"classes", "road_distance", "road_prior"},
            py::arg("prior_sigma_m") = serve::LayerOptions{}.prior_sigma_m, py::arg("max_size_m") = serve::kDefaultMaxCropM,
-           "North-up crop around a WGS84 point in region-grid cells (conventions.md section 4: crop_x, crop_y)")
+           py::kw_only(), py::arg("x") = py::none(), py::arg("y") = py::none(),
+           "North-up crop in region-grid cells (conventions.md section 4: crop_x, crop_y) around a WGS84 point "
+           "(lat, lon) or a region point in metres (x=, y=)")
       .def("to_grid", &PyCache::to_grid, py::arg("lat"), py::arg("lon"), "(x, y) in the region CRS, metres")
+      .def("from_grid", &PyCache::from_grid, py::arg("x"), py::arg("y"), "(lat, lon) of a region point (to_grid's inverse)")
       .def_property_readonly("info", &PyCache::info);
 
   py::class_<PyFilter>(m, "Filter", "The SeqLoc filter over a window of cells (docs/filter.md)")
@@ -246,11 +304,14 @@ PYBIND11_MODULE(seqloc, m) {
                              "The settings in use, by name")
       .def("reset", &PyFilter::reset, py::arg("gps") = py::none(),
            "Start a sequence: uniform belief, or gps=(u, v, sigma_m) in window cells")
-      .def("step", &PyFilter::step, py::arg("log_volume"), py::arg("odometry") = std::make_tuple(0.0, 0.0, 0.0),
-           py::arg("crop_pose") = std::make_tuple(0.0, 0.0, 0.0), py::arg("road_distance") = py::none(),
+      .def("step", &PyFilter::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
+           py::arg("crop_pose") = py::none(), py::arg("road_distance") = py::none(),
            py::arg("probabilities") = false, py::arg("cell_m") = 0.5,
-           "One frame: log_volume (H, W, N) float32/float16, odometry (forward_m, left_m, yaw_deg), "
-           "crop_pose (centre_u, centre_v, rotation_deg) in window cells, road_distance (height, width) "
-           "metres for MGR. Returns the pose and diagnostics.")
-      .def("recentre", &PyFilter::recentre, py::arg("du"), py::arg("dv"), "Move the window by whole cells");
+           "One frame: log_volume (H, W, N) float32/float16 (NumPy, DLPack such as a CPU torch tensor, or "
+           "__array__; read in place when C-contiguous), odometry (forward_m, left_m, yaw_deg), crop_pose "
+           "(centre_u, centre_v, rotation_deg) in window cells (default: the window's centre, north-up), "
+           "road_distance (height, width) metres for MGR. Returns the pose and diagnostics.")
+      .def("recentre", &PyFilter::recentre, py::arg("du"), py::arg("dv"), "Move the window by whole cells")
+      .def("belief_marginal", &PyFilter::belief_marginal,
+           "The belief summed over headings: (height, width) float32, a probability per window cell");
 }

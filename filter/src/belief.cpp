@@ -72,4 +72,13 @@ double BeliefVolume::position_mass(int u, int v) const {
   return sum;
 }
 
+std::vector<float> BeliefVolume::position_marginal() const {
+  std::vector<double> mass(slice_cells(), 0.0);
+  for (int k = 0; k < headings_; ++k) {
+    const float* p = slice(k);
+    for (std::size_t i = 0; i < mass.size(); ++i) mass[i] += p[i];
+  }
+  return {mass.begin(), mass.end()};
+}
+
 }  // namespace seqloc::filter

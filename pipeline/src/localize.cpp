@@ -131,15 +131,6 @@ FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, 
   return [store](std::size_t i) { return store->take(i); };
 }
 
-std::vector<float> belief_marginal(const filter::BeliefVolume& belief) {
-  std::vector<double> mass(belief.slice_cells(), 0.0);
-  for (int k = 0; k < belief.headings(); ++k) {
-    const float* slice = belief.slice(k);
-    for (std::size_t i = 0; i < mass.size(); ++i) mass[i] += slice[i];
-  }
-  return {mass.begin(), mass.end()};
-}
-
 const char* mode_name(Mode mode) {
   switch (mode) {
     case Mode::seqloc:

@@ -312,7 +312,7 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
       head.frames.resize(options.frame + 1);
       run_poses = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
                     if (options.frame > 0 && in.index + 1 == options.frame) {  // the belief the frame arrives on
-                      before_mass = as_double(belief_marginal(*in.belief));
+                      before_mass = as_double(in.belief->position_marginal());
                       before_ou = in.origin_u;
                       before_ov = in.origin_v;
                       return;
@@ -322,7 +322,7 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
                     bh = in.belief->height();
                     ou = in.origin_u;
                     ov = in.origin_v;
-                    belief_mass = as_double(belief_marginal(*in.belief));
+                    belief_mass = as_double(in.belief->position_marginal());
                     place_frame(*in.frame, in.crop);
                   }).poses;
       poses_shown = &run_poses;

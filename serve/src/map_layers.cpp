@@ -172,12 +172,11 @@ std::string metres(double v) {
 }
 }  // namespace
 
-CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
-                       double max_size_m) {
+namespace {
+
+// The crop side in cells, after checking it.
+int crop_cells(double size_m, double max_size_m) {
   using Kind = RequestError::Kind;
-  if (!std::isfinite(lat_deg) || !std::isfinite(lon_deg) || std::abs(lat_deg) > 90 || std::abs(lon_deg) > 180) {
-    throw RequestError(Kind::bad_request, "lat/lon: not a WGS84 coordinate");
-  }
   if (!std::isfinite(size_m) || size_m < raster::kCellM) {
     throw RequestError(Kind::bad_request, "size_m: must be at least one cell (0.5 m)");
   }
@@ -185,20 +184,49 @@ CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double 
     throw RequestError(Kind::bad_request, "size_m: " + metres(size_m) + " m is above the limit of " +
                                               metres(max_size_m) + " m");
   }
-  const auto& grid = cache.grid();
-  const osm::GridPoint p = cache.metadata().projection().forward({lat_deg, lon_deg});
-  if (!(p.x_m >= grid.min_x() && p.x_m < grid.max_x() && p.y_m >= grid.min_y() && p.y_m < grid.max_y())) {
-    throw RequestError(Kind::not_found, "the point (lat " + metres(lat_deg) + ", lon " + metres(lon_deg) +
-                                            ") is outside the region of " + cache.path().filename().string());
-  }
-  const int n = static_cast<int>(std::lround(size_m / raster::kCellM));
-  // Region pixel coordinates are integral at cell centres: an odd side centres on the cell
-  // holding the point, an even side on the cell corner nearest to it (corner c lies at c - 0.5).
-  const double u = grid.region_u(p.x_m), v = grid.region_v(p.y_m);
+  return static_cast<int>(std::lround(size_m / raster::kCellM));
+}
+
+bool inside(const raster::RegionGrid& grid, double x_m, double y_m) {
+  return x_m >= grid.min_x() && x_m < grid.max_x() && y_m >= grid.min_y() && y_m < grid.max_y();
+}
+
+// Region pixel coordinates are integral at cell centres: an odd side centres on the cell holding
+// the point, an even side on the cell corner nearest to it (corner c lies at c - 0.5).
+CropWindow window_around(const raster::RegionGrid& grid, double x_m, double y_m, int n) {
+  const double u = grid.region_u(x_m), v = grid.region_v(y_m);
   const auto centre = [n](double t) {
     return n % 2 ? static_cast<std::int64_t>(std::floor(t + 0.5)) : static_cast<std::int64_t>(std::floor(t + 1.0));
   };
   return {centre(u) - n / 2, centre(v) - n / 2, n};
+}
+
+}  // namespace
+
+CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
+                       double max_size_m) {
+  using Kind = RequestError::Kind;
+  if (!std::isfinite(lat_deg) || !std::isfinite(lon_deg) || std::abs(lat_deg) > 90 || std::abs(lon_deg) > 180) {
+    throw RequestError(Kind::bad_request, "lat/lon: not a WGS84 coordinate");
+  }
+  const int n = crop_cells(size_m, max_size_m);
+  const osm::GridPoint p = cache.metadata().projection().forward({lat_deg, lon_deg});
+  if (!inside(cache.grid(), p.x_m, p.y_m)) {
+    throw RequestError(Kind::not_found, "the point (lat " + metres(lat_deg) + ", lon " + metres(lon_deg) +
+                                            ") is outside the region of " + cache.path().filename().string());
+  }
+  return window_around(cache.grid(), p.x_m, p.y_m, n);
+}
+
+CropWindow locate_crop_xy(const raster::CacheReader& cache, double x_m, double y_m, double size_m, double max_size_m) {
+  using Kind = RequestError::Kind;
+  if (!std::isfinite(x_m) || !std::isfinite(y_m)) throw RequestError(Kind::bad_request, "x/y: not finite");
+  const int n = crop_cells(size_m, max_size_m);
+  if (!inside(cache.grid(), x_m, y_m)) {
+    throw RequestError(Kind::not_found, "the point (x " + metres(x_m) + " m, y " + metres(y_m) +
+                                            " m) is outside the region of " + cache.path().filename().string());
+  }
+  return window_around(cache.grid(), x_m, y_m, n);
 }
 
 MapBlock read_crop(raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,

@@ -217,6 +217,21 @@ TEST(Analytic, ALoopOfOdometryReturnsTheBelief) {
   EXPECT_NEAR(b.total_probability(), before.total_probability(), 1e-4) << "mass is kept (none left the window)";
 }
 
+TEST(Belief, PositionMarginalIsEachCellsSumOverHeadings) {
+  BeliefVolume b(7, 5, 8);
+  b.set_gaussian(2.3, 3.1, 1.5);
+  b.prob(4, 1, 6) += 0.25f;  // one heading of one cell heavier than the others
+  const auto marginal = b.position_marginal();
+  ASSERT_EQ(marginal.size(), 35u);
+  for (int v = 0; v < 5; ++v) {
+    for (int u = 0; u < 7; ++u) {
+      double sum = 0;
+      for (int k = 0; k < 8; ++k) sum += b.prob(u, v, k);
+      EXPECT_NEAR(marginal[static_cast<std::size_t>(v) * 7 + u], sum, 1e-7) << u << "," << v;
+    }
+  }
+}
+
 TEST(Analytic, BeliefSumsToOneAfterEveryStep) {
   FilterConfig c = small_config();
   std::mt19937 rng(5);

@@ -51,6 +51,25 @@ class CacheCrop(unittest.TestCase):
             self.assertLessEqual(abs(x - crop["crop_x"]), 0.25 + 1e-9)
             self.assertLessEqual(abs(y - crop["crop_y"]), 0.25 + 1e-9)
 
+    def test_crop_by_region_metres_is_the_crop_by_lat_lon(self):
+        lat, lon = self.centre[0] + 0.0007, self.centre[1] - 0.0004
+        x, y = self.cache.to_grid(lat, lon)
+        by_geo = self.cache.crop(lat, lon, 40.0)
+        by_metres = self.cache.crop(x=x, y=y, size_m=40.0)
+        self.assertEqual(by_geo["geotransform"], by_metres["geotransform"])
+        for name in ("classes", "road_distance", "road_prior"):
+            np.testing.assert_array_equal(by_geo[name], by_metres[name], name)
+        # from_grid inverts to_grid (to well under a millimetre).
+        back = self.cache.from_grid(x, y)
+        self.assertAlmostEqual(back[0], lat, places=9)
+        self.assertAlmostEqual(back[1], lon, places=9)
+        with self.assertRaises(TypeError):
+            self.cache.crop(lat, lon, 40.0, x=x, y=y)  # both: ambiguous
+        with self.assertRaises(TypeError):
+            self.cache.crop(x=x, size_m=40.0)
+        with self.assertRaises(ValueError):
+            self.cache.crop(x=x + 1e6, y=y, size_m=40.0)  # outside the region
+
     def test_arrays_are_not_copies(self):
         crop = self.cache.crop(*self.centre, 32.0)
         for name in ("classes", "road_distance", "road_prior"):
@@ -79,6 +98,63 @@ class FilterOnline(unittest.TestCase):
         self.assertAlmostEqual(r["argmax"]["v"], 27.0)
         self.assertAlmostEqual(r["heading_deg"], 90.0)
         self.assertLess(r["frame_entropy"], 0.2)
+
+    def test_without_a_crop_pose_the_volume_sits_at_the_window_centre(self):
+        f = seqloc.Filter({"width": 64, "height": 48, "headings": 32, "mgr": False})
+        vol = np.full((31, 31, 32), -20.0, np.float32)
+        vol[15, 15, 0] = 0.0  # the volume's centre cell
+        r = f.step(vol)
+        # The window's centre: cell ((64 - 1) / 2, (48 - 1) / 2), within the half cell a cell
+        # grid allows, not the window's corner.
+        self.assertAlmostEqual(r["argmax"]["u"], 31.5, delta=0.5)
+        self.assertAlmostEqual(r["argmax"]["v"], 23.5, delta=0.5)
+
+    def test_belief_marginal_is_the_belief_over_the_window(self):
+        f = seqloc.Filter({"width": 40, "height": 30, "headings": 16, "mgr": False})
+        vol = np.full((21, 21, 16), -25.0, np.float32)
+        vol[4, 12, 3] = 0.0
+        r = f.step(vol, crop_pose=(20.0, 15.0, 0.0))
+        marginal = f.belief_marginal()
+        self.assertEqual((marginal.shape, marginal.dtype), ((30, 40), np.float32))
+        self.assertAlmostEqual(float(marginal.sum()), 1.0, places=4)
+        v, u = np.unravel_index(np.argmax(marginal), marginal.shape)
+        self.assertEqual((u, v), (round(r["argmax"]["u"]), round(r["argmax"]["v"])))
+
+    def test_arrays_from_dlpack_and_array_interface_give_the_same_step(self):
+        vol = np.full((15, 15, 16), -25.0, np.float32)
+        vol[3, 9, 4] = 0.0
+
+        class DLPackOnly:  # a tensor from another library: only the DLPack protocol
+            def __init__(self, a):
+                self.a = a
+
+            def __dlpack__(self, stream=None):
+                return self.a.__dlpack__()
+
+            def __dlpack_device__(self):
+                return self.a.__dlpack_device__()
+
+        class ArrayOnly:  # only NumPy's __array__ protocol
+            def __init__(self, a):
+                self.a = a
+
+            def __array__(self, dtype=None):
+                return self.a
+
+        results = []
+        for wrap in (lambda a: a, DLPackOnly, ArrayOnly):
+            f = seqloc.Filter({"width": 32, "height": 32, "headings": 16, "mgr": False})
+            results.append(f.step(wrap(vol), crop_pose=(16.0, 16.0, 0.0)))
+        self.assertEqual(results[0], results[1])
+        self.assertEqual(results[0], results[2])
+        # Errors are short and name the argument, never the array's values.
+        f = seqloc.Filter({"width": 32, "height": 32, "headings": 16, "mgr": False})
+        big = np.zeros((200, 200, 16), np.float32)
+        for call in (lambda: f.step("not an array"), lambda: f.step(big, odometry="fast"),
+                     lambda: f.step(big, crop_pose=(1.0, 2.0))):
+            with self.assertRaises(TypeError) as e:
+                call()
+            self.assertLess(len(str(e.exception)), 200, str(e.exception)[:300])
 
     def test_odometry_carries_the_belief(self):
         f = seqloc.Filter({"width": 64, "height": 64, "headings": 32, "mgr": False})

@@ -40,7 +40,7 @@ class SequentialMode final : public LocalizationMode {
     filter_seconds_ += seconds_since(t0);
     if (context_.inspect) context_.inspect({i, &frame, crop, &filter_->belief(), window_.origin_u(), window_.origin_v()});
     if (context_.options.keep_beliefs) {
-      const auto marginal = belief_marginal(filter_->belief());
+      const auto marginal = filter_->belief().position_marginal();
       beliefs_.insert(beliefs_.end(), marginal.begin(), marginal.end());
       belief_origins_.push_back({window_.origin_u(), window_.origin_v()});
     }

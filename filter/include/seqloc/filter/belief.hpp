@@ -51,6 +51,8 @@ class BeliefVolume {
   [[nodiscard]] double total_probability() const;
   /// Marginal over headings of one cell: sum_k prob(u, v, k).
   [[nodiscard]] double position_mass(int u, int v) const;
+  /// The position marginal of every cell (summed over headings in double), W x H row-major.
+  [[nodiscard]] std::vector<float> position_marginal() const;
 
  private:
   int width_, height_, headings_;

@@ -89,17 +89,13 @@ struct RouteResult {
   double prepare_seconds = 0;
   double filter_seconds = 0;
   double wait_seconds = 0;
-  /// With LocalizeOptions::keep_beliefs (online and seqloc): after each frame, belief_marginal of
+  /// With LocalizeOptions::keep_beliefs (online and seqloc): after each frame, the position marginal of
   /// the belief, (frames, belief_height, belief_width) row-major, and the region pixel of each
   /// frame's window cell (0, 0).
   int belief_width = 0, belief_height = 0;
   std::vector<float> beliefs;
   std::vector<std::array<std::int64_t, 2>> belief_origins;
 };
-
-/// A belief's position marginal: the sum over headings of each cell's probability (summed in
-/// double), row-major over the window.
-[[nodiscard]] std::vector<float> belief_marginal(const filter::BeliefVolume& belief);
 
 /// The route's own frames: its .npy volumes, or the built-in matcher run on its observations
 /// against the cache's class raster. Throws DataError naming the file.

@@ -104,6 +104,10 @@ struct CropWindow {
 /// The window of read_crop (below), validated the same way.
 [[nodiscard]] CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
                                      double max_size_m = kDefaultMaxCropM);
+/// The same for a centre given in the region CRS (metres), as conventions.md section 4's
+/// crop_x, crop_y; throws RequestError (not found) for a point outside the region.
+[[nodiscard]] CropWindow locate_crop_xy(const raster::CacheReader& cache, double x_m, double y_m, double size_m,
+                                        double max_size_m = kDefaultMaxCropM);
 
 /// A square crop of side `size_m` (rounded to whole cells) around a WGS84 point, in region-grid
 /// coordinates: its centre (crop_x, crop_y of conventions.md section 4) is the centre of the
