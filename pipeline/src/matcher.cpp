@@ -54,6 +54,140 @@ cv::Mat spectrum(const cv::Mat& image, int n) {
   return f;
 }
 
+/// The observation's indicator of one code in the body frame, visible cells only, limited to the
+/// inscribed disc so that no rotation clips it.
+std::vector<float> body_indicator(const Observation& observation, int channel, int code) {
+  const int t = observation.size;
+  const double centre = (t - 1) / 2.0;
+  std::vector<float> body(observation.cells(), 0.0f);
+  for (int r = 0; r < t; ++r) {
+    for (int c = 0; c < t; ++c) {
+      const auto i = flat(r, c, t);
+      const double dr = r - centre, dc = c - centre;
+      if (observation.visible[i] && observation.classes[3 * i + static_cast<std::size_t>(channel)] == code &&
+          dr * dr + dc * dc <= centre * centre + 1e-9) {
+        body[i] = 1.0f;
+      }
+    }
+  }
+  return body;
+}
+
+/// Each body turned to grid heading `heading_deg` (clockwise) about the camera and sampled
+/// bilinearly, north-up: the sampling is worked out once per cell for all of them.
+void rotate_bodies(const std::vector<std::vector<float>>& bodies, int t, double heading_deg,
+                   std::vector<std::vector<float>>& out) {
+  const double centre = (t - 1) / 2.0;
+  const auto cells = static_cast<std::size_t>(t) * static_cast<std::size_t>(t);
+  out.resize(bodies.size());
+  for (auto& o : out) o.assign(cells, 0.0f);
+  const double th = heading_deg * M_PI / 180.0, s = std::sin(th), c = std::cos(th);
+  for (int row = 0; row < t; ++row) {
+    for (int col = 0; col < t; ++col) {
+      // North-up cell (east e, north n from the camera) -> body (forward f, right r).
+      const double e = col - centre, n = centre - row;
+      const double f = e * s + n * c, rt = e * c - n * s;
+      const double br = centre - f, bc = centre + rt;
+      const double r0 = std::floor(br), c0 = std::floor(bc);
+      const double wr = br - r0, wc = bc - c0;
+      std::size_t taps[4];
+      double weights[4];
+      int count = 0;
+      for (int dr = 0; dr < 2; ++dr) {
+        for (int dc = 0; dc < 2; ++dc) {
+          const int rr = static_cast<int>(r0) + dr, cc = static_cast<int>(c0) + dc;
+          if (rr < 0 || rr >= t || cc < 0 || cc >= t) continue;
+          taps[count] = flat(rr, cc, t);
+          weights[count++] = (dr ? wr : 1 - wr) * (dc ? wc : 1 - wc);
+        }
+      }
+      const auto i = flat(row, col, t);
+      for (std::size_t b = 0; b < bodies.size(); ++b) {
+        double value = 0;
+        for (int k = 0; k < count; ++k) value += weights[k] * bodies[b][taps[k]];
+        out[b][i] = static_cast<float>(value);
+      }
+    }
+  }
+}
+
+// acc[q] (+)= m[q] * conj(f) for the four quarter turns q, on n x n spectra in OpenCV's CCS
+// packing (n even): cv::mulSpectrums(m[q], f, ., 0, true) followed by an addition, fused so that
+// f is read once for the four products and nothing is written but the sums. `assign` starts the
+// sums instead of adding to them. Columns 1 .. n-2 hold (re, im) pairs; columns 0 and n-1 hold the
+// transforms of the real columns packed down the rows (row 0 and row n-1 real, rows 2k-1, 2k a
+// pair).
+void accumulate_spectra(const cv::Mat& f, const std::array<cv::Mat, 4>& m, std::array<cv::Mat, 4>& acc, int n,
+                        bool assign) {
+  // The (re, im) pairs of columns 1 .. n-2, row by row: plain loops the compiler vectorizes.
+  const auto pairs = [&](auto kAssign) {
+    for (int i = 0; i < n; ++i) {
+      const auto* __restrict fr = f.ptr<float>(i);
+      for (std::size_t q = 0; q < 4; ++q) {
+        const auto* __restrict mr = m[q].ptr<float>(i);
+        auto* __restrict ar = acc[q].ptr<float>(i);
+        for (int j = 1; j < n - 1; j += 2) {
+          const float re = mr[j] * fr[j] + mr[j + 1] * fr[j + 1];
+          const float im = mr[j + 1] * fr[j] - mr[j] * fr[j + 1];
+          if constexpr (decltype(kAssign)::value) {
+            ar[j] = re;
+            ar[j + 1] = im;
+          } else {
+            ar[j] += re;
+            ar[j + 1] += im;
+          }
+        }
+      }
+    }
+  };
+  if (assign) {
+    pairs(std::true_type{});
+  } else {
+    pairs(std::false_type{});
+  }
+  for (const int col : {0, n - 1}) {
+    for (std::size_t q = 0; q < 4; ++q) {
+      auto at = [col](const cv::Mat& x, int row) -> float { return x.ptr<float>(row)[col]; };
+      auto put = [&, col](int row, float value) {
+        float& a = acc[q].ptr<float>(row)[col];
+        a = assign ? value : a + value;
+      };
+      put(0, at(m[q], 0) * at(f, 0));
+      put(n - 1, at(m[q], n - 1) * at(f, n - 1));
+      for (int k = 1; k + 1 < n; k += 2) {
+        const float mre = at(m[q], k), mim = at(m[q], k + 1), fre = at(f, k), fim = at(f, k + 1);
+        put(k, mre * fre + mim * fim);
+        put(k + 1, mim * fre - mre * fim);
+      }
+    }
+  }
+}
+
+/// Writes the s x s top-left of `correlation`, turned clockwise by q quarter turns, row-major to
+/// dst (what rotate_cw of that region would give, without the intermediate matrices).
+void rotated_copy(const cv::Mat& correlation, int q, int s, float* dst) {
+  for (int v = 0; v < s; ++v) {
+    float* out = dst + static_cast<std::size_t>(v) * static_cast<std::size_t>(s);
+    switch (q & 3) {
+      case 0: {
+        const auto* row = correlation.ptr<float>(v);
+        std::copy(row, row + s, out);
+        break;
+      }
+      case 1:  // out(v, u) = in(s - 1 - u, v)
+        for (int u = 0; u < s; ++u) out[u] = correlation.ptr<float>(s - 1 - u)[v];
+        break;
+      case 2: {  // out(v, u) = in(s - 1 - v, s - 1 - u)
+        const auto* row = correlation.ptr<float>(s - 1 - v);
+        for (int u = 0; u < s; ++u) out[u] = row[s - 1 - u];
+        break;
+      }
+      default:  // out(v, u) = in(u, s - 1 - v)
+        for (int u = 0; u < s; ++u) out[u] = correlation.ptr<float>(u)[s - 1 - v];
+    }
+  }
+}
+
 }  // namespace
 
 void MatcherConfig::validate() const {
@@ -132,43 +266,10 @@ std::vector<float> BevMatcher::map_term(int channel, int observed, std::span<con
 
 std::vector<float> BevMatcher::rotated_template(const Observation& observation, int channel, int code,
                                                 double heading_deg) const {
-  const int t = observation.size;
-  const double centre = (t - 1) / 2.0;
-  // The indicator in the body frame, limited to the inscribed disc so that no rotation clips it.
-  std::vector<float> body(observation.cells(), 0.0f);
-  for (int r = 0; r < t; ++r) {
-    for (int c = 0; c < t; ++c) {
-      const auto i = flat(r, c, t);
-      const double dr = r - centre, dc = c - centre;
-      if (observation.visible[i] && observation.classes[3 * i + static_cast<std::size_t>(channel)] == code &&
-          dr * dr + dc * dc <= centre * centre + 1e-9) {
-        body[i] = 1.0f;
-      }
-    }
-  }
-  const double th = heading_deg * M_PI / 180.0, s = std::sin(th), c = std::cos(th);
-  std::vector<float> out(observation.cells(), 0.0f);
-  for (int row = 0; row < t; ++row) {
-    for (int col = 0; col < t; ++col) {
-      // North-up cell (east e, north n from the camera) -> body (forward f, right r).
-      const double e = col - centre, n = centre - row;
-      const double f = e * s + n * c, rt = e * c - n * s;
-      const double br = centre - f, bc = centre + rt;
-      const double r0 = std::floor(br), c0 = std::floor(bc);
-      const double wr = br - r0, wc = bc - c0;
-      double value = 0;
-      for (int dr = 0; dr < 2; ++dr) {
-        for (int dc = 0; dc < 2; ++dc) {
-          const int rr = static_cast<int>(r0) + dr, cc = static_cast<int>(c0) + dc;
-          if (rr < 0 || rr >= t || cc < 0 || cc >= t) continue;
-          const double w = (dr ? wr : 1 - wr) * (dc ? wc : 1 - wc);
-          value += w * body[flat(rr, cc, t)];
-        }
-      }
-      out[flat(row, col, t)] = static_cast<float>(value);
-    }
-  }
-  return out;
+  const std::vector<std::vector<float>> bodies{body_indicator(observation, channel, code)};
+  std::vector<std::vector<float>> out;
+  rotate_bodies(bodies, observation.size, heading_deg, out);
+  return std::move(out[0]);
 }
 
 std::vector<std::array<int, 2>> BevMatcher::observed_codes(const Observation& observation) {
@@ -197,7 +298,9 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
     m << "matcher: the map crop must be " << side << " x " << side << " cells for an observation of side " << t;
     throw std::invalid_argument(m.str());
   }
-  const int n = cv::getOptimalDFTSize(side);
+  // An even transform size: accumulate_spectra reads the CCS packing of even sizes.
+  int n = cv::getOptimalDFTSize(side);
+  while (n % 2) n = cv::getOptimalDFTSize(n + 1);
   const auto codes = observed_codes(observation);
   // The map term of every observed code, turned counter-clockwise by q quarter turns, transformed.
   std::vector<std::array<cv::Mat, 4>> map_spectra(codes.size());
@@ -215,35 +318,35 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
   // cell's run of bins is written whole (one slice at a time would touch every cache line of
   // the volume once per heading).
   constexpr int kBatch = 16;
+  std::vector<std::vector<float>> bodies;
+  bodies.reserve(codes.size());
+  for (const auto& [channel, code] : codes) bodies.push_back(body_indicator(observation, channel, code));
   auto work = [&](int j0, int j1) {
     std::array<cv::Mat, 4> acc;
     for (auto& a : acc) a.create(n, n, CV_32F);
-    cv::Mat product, correlation;
+    cv::Mat correlation, template_spectrum;
+    cv::Mat padded = cv::Mat::zeros(n, n, CV_32F);  // the template's t x t corner is rewritten each time
+    std::vector<std::vector<float>> templates;
     std::vector<float> batch(static_cast<std::size_t>(4 * kBatch) * plane);  // [q][heading - jb][v][u]
     for (int jb = j0; jb < j1; jb += kBatch) {
       const int je = std::min(j1, jb + kBatch);
       for (int j = jb; j < je; ++j) {
-        for (auto& a : acc) a.setTo(0);
-        const double heading = j * 360.0 / n_bins;
+        rotate_bodies(bodies, t, j * 360.0 / n_bins, templates);
         for (std::size_t o = 0; o < codes.size(); ++o) {
-          auto tmpl = rotated_template(observation, codes[o][0], codes[o][1], heading);
-          const cv::Mat fa = spectrum(cv::Mat(t, t, CV_32F, tmpl.data()), n);
-          for (std::size_t q = 0; q < 4; ++q) {
-            cv::mulSpectrums(map_spectra[o][q], fa, product, 0, /*conjB=*/true);
-            acc[q] += product;
-          }
+          cv::Mat(t, t, CV_32F, templates[o].data()).copyTo(padded(cv::Rect(0, 0, t, t)));
+          cv::dft(padded, template_spectrum, 0, t);
+          accumulate_spectra(template_spectrum, map_spectra[o], acc, n, /*assign=*/o == 0);
+        }
+        if (codes.empty()) {
+          for (auto& a : acc) a.setTo(0);
         }
         // corr(R_q A, M) = R_q corr(A, R_q^-1 M): heading + q quarter turns from one template.
         // Only the first s rows of the correlation are wanted.
         for (int q = 0; q < 4; ++q) {
           cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE,
                   s);
-          const cv::Mat slice = rotate_cw(correlation(cv::Rect(0, 0, s, s)), q);
-          float* dst = batch.data() + (static_cast<std::size_t>(q) * kBatch + static_cast<std::size_t>(j - jb)) * plane;
-          for (int v = 0; v < s; ++v) {
-            const auto* row = slice.ptr<float>(v);
-            std::copy(row, row + s, dst + static_cast<std::size_t>(v) * static_cast<std::size_t>(s));
-          }
+          rotated_copy(correlation, q, s,
+                       batch.data() + (static_cast<std::size_t>(q) * kBatch + static_cast<std::size_t>(j - jb)) * plane);
         }
       }
       const auto count = static_cast<std::size_t>(je - jb);
