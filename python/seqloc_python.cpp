@@ -20,11 +20,15 @@
 
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/pipeline/frame_store.hpp"
+#include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/sequential_localizer.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "seqloc/serve/map_layers.hpp"
 
 namespace py = pybind11;
 namespace filter = seqloc::filter;
+namespace pipeline = seqloc::pipeline;
 namespace raster = seqloc::raster;
 namespace serve = seqloc::serve;
 
@@ -191,6 +195,32 @@ py::dict pose_dict(const filter::Pose& p) {
   return d;
 }
 
+/// A volume argument as the filter reads it: (H, W, N) float32 or float16, C order, kept alive by
+/// `holder`.
+filter::FrameVolume volume_view(const py::object& value, bool probabilities, double cell_m, py::array& holder) {
+  const py::array volume = as_array(value, "log_volume");
+  if (volume.ndim() != 3) {
+    throw py::value_error("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) + " dimensions");
+  }
+  filter::FrameVolume view;
+  if (py::isinstance<py::array_t<float>>(volume)) {
+    holder = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(volume);
+    view.type = filter::VolumeType::float32;
+  } else if (volume.dtype().kind() == 'f' && volume.dtype().itemsize() == 2) {
+    holder = py::array::ensure(volume, py::array::c_style);
+    view.type = filter::VolumeType::float16;
+  } else {
+    throw py::value_error("log_volume: expected float32 or float16, got dtype " + std::string(py::str(volume.dtype())));
+  }
+  view.data = holder.data();
+  view.values = probabilities ? filter::VolumeValues::prob : filter::VolumeValues::log_prob;
+  view.height = static_cast<int>(volume.shape(0));
+  view.width = static_cast<int>(volume.shape(1));
+  view.bins = static_cast<int>(volume.shape(2));
+  view.cell_m = cell_m;
+  return view;
+}
+
 class PyFilter {
  public:
   explicit PyFilter(const py::dict& config) : filter_(config_from(config)) {}
@@ -207,25 +237,8 @@ class PyFilter {
 
   py::dict step(const py::object& volume_in, const py::object& odometry_in, const py::object& crop_pose_in,
                 const py::object& road_distance, bool probabilities, double cell_m) {
-    const py::array volume = as_array(volume_in, "log_volume");
-    if (volume.ndim() != 3) throw py::value_error("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) + " dimensions");
-    filter::FrameVolume view;
-    py::array contiguous;
-    if (py::isinstance<py::array_t<float>>(volume)) {
-      contiguous = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(volume);
-      view.type = filter::VolumeType::float32;
-    } else if (volume.dtype().kind() == 'f' && volume.dtype().itemsize() == 2) {
-      contiguous = py::array::ensure(volume, py::array::c_style);
-      view.type = filter::VolumeType::float16;
-    } else {
-      throw py::value_error("log_volume: expected float32 or float16, got dtype " + std::string(py::str(volume.dtype())));
-    }
-    view.data = contiguous.data();
-    view.values = probabilities ? filter::VolumeValues::prob : filter::VolumeValues::log_prob;
-    view.height = static_cast<int>(volume.shape(0));
-    view.width = static_cast<int>(volume.shape(1));
-    view.bins = static_cast<int>(volume.shape(2));
-    view.cell_m = cell_m;
+    py::array holder;
+    const filter::FrameVolume view = volume_view(volume_in, probabilities, cell_m, holder);
     const auto odometry = three_numbers(odometry_in, "odometry", "(forward_m, left_m, yaw_deg)");
     const filter::Odometry odo{odometry[0], odometry[1], odometry[2]};
     // Without a crop pose the volume is centred on the window, north-up (not at its corner).
@@ -275,6 +288,93 @@ class PyFilter {
   filter::SeqLocFilter filter_;
 };
 
+/// seqloc localize's online and seqloc modes, one frame at a time: the window over the region,
+/// its road distances and re-centring, the frames prepared and rounded exactly as localize
+/// prepares a route's (pipeline::SequentialLocalizer, the class localize itself drives).
+class PyLocalizer {
+ public:
+  PyLocalizer(const std::string& cache, const py::dict& config, const std::string& mode, double volume_temperature,
+              double recentre_margin)
+      : cache_(std::make_unique<raster::CacheReader>(cache)) {
+    if (mode != "seqloc" && mode != "online") throw py::value_error("mode: 'seqloc' or 'online', got '" + mode + "'");
+    options_.filter = config_from(config);
+    options_.volume_temperature = volume_temperature;
+    options_.recentre_margin = recentre_margin;
+    options_.validate();
+    localizer_ = std::make_unique<pipeline::SequentialLocalizer>(*cache_, options_.filter, mode == "online",
+                                                                 recentre_margin);
+  }
+
+  py::dict step(const py::object& volume_in, const py::object& odometry_in, const py::object& crop_lat,
+                const py::object& crop_lon, const py::object& crop_x, const py::object& crop_y, const py::object& gps,
+                bool probabilities, double cell_m) {
+    py::array holder;
+    const filter::FrameVolume view = volume_view(volume_in, probabilities, cell_m, holder);
+    const auto odometry = three_numbers(odometry_in, "odometry", "(forward_m, left_m, yaw_deg)");
+    // The frame as a route row would hold it: its crop, lat/lon or region metres.
+    pipeline::RouteFrame f;
+    f.frame = std::to_string(frames_);
+    f.timestamp_s = static_cast<double>(frames_);
+    const bool geo = !crop_lat.is_none() || !crop_lon.is_none(), metres = !crop_x.is_none() || !crop_y.is_none();
+    if (geo == metres || (geo && (crop_lat.is_none() || crop_lon.is_none())) ||
+        (metres && (crop_x.is_none() || crop_y.is_none()))) {
+      throw py::type_error("step: give the crop's centre as crop_lat and crop_lon, or as crop_x and crop_y");
+    }
+    const auto& projection = cache_->metadata().projection();
+    if (geo) {
+      f.crop_geo = seqloc::osm::GeoPoint{crop_lat.cast<double>(), crop_lon.cast<double>()};
+    } else {
+      f.crop_grid = seqloc::osm::GridPoint{crop_x.cast<double>(), crop_y.cast<double>()};
+    }
+    std::optional<pipeline::GridFix> fix;
+    if (!gps.is_none()) {
+      const auto g = three_numbers(gps, "gps", "(lat, lon, sigma_m)");
+      const auto p = projection.forward({g[0], g[1]});
+      fix = pipeline::GridFix{p.x_m, p.y_m, g[2]};
+    }
+    const pipeline::GridCrop crop = pipeline::frame_crop(f, cache_->grid(), projection);
+    pipeline::FrameEstimate e;
+    {
+      py::gil_scoped_release release;
+      filter::PreparedFrame frame = pipeline::prepare_volume(view, options_);
+      pipeline::round_like_frame_store(frame);
+      e = localizer_->step(frame, crop, {odometry[0], odometry[1], odometry[2]}, fix);
+    }
+    const pipeline::FramePose pose = pipeline::frame_pose(f, e, projection);
+    ++frames_;
+    py::dict d;
+    d["lat"] = pose.lat_deg;
+    d["lon"] = pose.lon_deg;
+    d["heading_deg"] = pose.compass_heading_deg;
+    d["x"] = pose.x_m;
+    d["y"] = pose.y_m;
+    d["grid_heading_deg"] = pose.grid_heading_deg;
+    d["entropy"] = pose.entropy;
+    d["etu_weight"] = pose.etu_weight;
+    d["relocalized"] = pose.relocalized;
+    return d;
+  }
+
+  [[nodiscard]] py::object belief_marginal() const {
+    const auto* f = localizer_->filter();
+    if (!f) return py::none();
+    const auto& b = f->belief();
+    return adopt(b.position_marginal(), {b.height(), b.width()});
+  }
+
+  [[nodiscard]] py::tuple window_origin() const {
+    return py::make_tuple(localizer_->window().origin_u(), localizer_->window().origin_v());
+  }
+
+  [[nodiscard]] py::dict config() const { return config_dict(localizer_->config()); }
+
+ private:
+  std::unique_ptr<raster::CacheReader> cache_;
+  pipeline::LocalizeOptions options_;
+  std::unique_ptr<pipeline::SequentialLocalizer> localizer_;
+  long frames_ = 0;
+};
+
 }  // namespace
 
 PYBIND11_MODULE(seqloc, m) {
@@ -314,4 +414,27 @@ PYBIND11_MODULE(seqloc, m) {
       .def("recentre", &PyFilter::recentre, py::arg("du"), py::arg("dv"), "Move the window by whole cells")
       .def("belief_marginal", &PyFilter::belief_marginal,
            "The belief summed over headings: (height, width) float32, a probability per window cell");
+
+  py::class_<PyLocalizer>(m, "Localizer",
+                          "seqloc localize's seqloc (or online) mode one frame at a time over a region cache: it "
+                          "owns the window, its road distances and re-centring (docs/serve.md)")
+      .def(py::init<const std::string&, const py::dict&, const std::string&, double, double>(), py::arg("cache"),
+           py::arg("config") = py::dict(), py::arg("mode") = "seqloc",
+           py::arg("volume_temperature") = pipeline::LocalizeOptions{}.volume_temperature,
+           py::arg("recentre_margin") = pipeline::LocalizeOptions{}.recentre_margin,
+           "cache: a region cache; config: filter settings by name (Filter.settings()); mode: 'seqloc' or 'online'")
+      .def("step", &PyLocalizer::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
+           py::kw_only(), py::arg("crop_lat") = py::none(), py::arg("crop_lon") = py::none(),
+           py::arg("crop_x") = py::none(), py::arg("crop_y") = py::none(), py::arg("gps") = py::none(),
+           py::arg("probabilities") = false, py::arg("cell_m") = 0.5,
+           "One frame: its (H, W, N) volume (NumPy, DLPack such as a CPU torch tensor, or __array__), the "
+           "odometry since the last frame (forward_m, left_m, yaw_deg), the crop's centre (crop_lat/crop_lon, "
+           "north-up at true north, or crop_x/crop_y in region metres, grid north), optionally gps=(lat, lon, "
+           "sigma_m). Returns the pose: lat, lon, heading_deg (compass), x, y (region metres), grid_heading_deg, "
+           "entropy, etu_weight, relocalized.")
+      .def("belief_marginal", &PyLocalizer::belief_marginal,
+           "The belief summed over headings, (height, width) float32 (None before the first frame)")
+      .def_property_readonly("window_origin", &PyLocalizer::window_origin,
+                             "Region pixel (u, v) of the window's cell (0, 0)")
+      .def_property_readonly("config", &PyLocalizer::config, "The filter settings in use, by name");
 }

@@ -98,6 +98,10 @@ void FrameStore::release(Slot& slot) {
   std::vector<std::uint16_t>().swap(slot.memory);
 }
 
+void round_like_frame_store(filter::PreparedFrame& frame) {
+  for (float& v : frame.log_prob) v = filter::half_to_float(filter::float_to_half(v));
+}
+
 void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
   Slot& slot = slots_[i];
   const bool again = slot.released;

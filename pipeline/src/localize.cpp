@@ -92,21 +92,26 @@ std::vector<float> match_frame(const RouteFrame& f, raster::CacheReader& cache, 
   return matcher.match(obs, map);
 }
 
+filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options) {
+  const int threads = options.filter.threads;
+  // temper_frame passes power 1 through.
+  return filter::temper_frame(filter::prepare_frame(volume, options.filter.headings, threads),
+                              1.0 / options.volume_temperature, threads);
+}
+
 FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
   auto matcher = std::make_shared<const BevMatcher>(options.matcher);
-  const int headings = options.filter.headings, threads = options.filter.threads;
-  const double power = 1.0 / options.volume_temperature;
-  auto prepared = [power, threads](filter::PreparedFrame frame) {  // temper_frame passes power 1 through
-    return std::make_shared<const filter::PreparedFrame>(filter::temper_frame(std::move(frame), power, threads));
+  auto prepared = [&options](const filter::FrameVolume& volume) {
+    return std::make_shared<const filter::PreparedFrame>(prepare_volume(volume, options));
   };
-  return [&route, &cache, matcher, headings, threads, prepared](std::size_t i) {
+  return [&route, &cache, matcher, prepared](std::size_t i) {
     const RouteFrame& f = route.frames[i];
     if (f.observation.empty()) {
       const NpyVolume npy(f.volume);
       std::vector<unsigned char> transposed;
       const filter::FrameVolume volume = volume_view(route, f, npy, transposed);
       try {
-        return prepared(filter::prepare_frame(volume, headings, threads));
+        return prepared(volume);
       } catch (const filter::FilterError& e) {
         // The filter checks the values (NaN, infinities, negative probabilities); the user needs
         // to know which file holds them.
@@ -121,7 +126,7 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
     }
     const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
                                      size, size, matcher->config().headings, kCellM};
-    return prepared(filter::prepare_frame(volume, headings, threads));
+    return prepared(volume);
   };
 }
 
@@ -228,9 +233,6 @@ double heading_difference_deg(double a, double b) {
   return std::min(d, 360.0 - d);
 }
 
-namespace {
-
-// The pose a mode estimated, in every form the outputs take, with its errors against ground truth.
 FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::RegionProjection& projection) {
   FramePose pose;
   pose.entropy = e.entropy;
@@ -263,7 +265,6 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
   return pose;
 }
 
-}  // namespace
 
 RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                            const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {

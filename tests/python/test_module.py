@@ -2,8 +2,11 @@
 own analytic behaviour. Run by ctest with PYTHONPATH set to the built module and SEQLOC_TEST_CACHE
 to a region cache."""
 
+import csv
 import math
 import os
+import subprocess
+import tempfile
 import unittest
 
 import numpy as np
@@ -12,6 +15,7 @@ from osgeo import gdal
 import seqloc
 
 CACHE = os.environ["SEQLOC_TEST_CACHE"]
+SEQLOC = os.environ.get("SEQLOC_BINARY")
 gdal.UseExceptions()
 
 
@@ -220,6 +224,75 @@ class FilterOnline(unittest.TestCase):
         self.assertAlmostEqual(r["argmax"]["u"], 18.0)
         self.assertAlmostEqual(r["argmax"]["v"], 16.0)
         self.assertAlmostEqual(r["argmax"]["heading_deg"], 90.0)
+
+
+class LocalizerAsLocalize(unittest.TestCase):
+    """seqloc.Localizer fed a route's volumes in a Python loop gives seqloc localize's poses."""
+
+    def write_route(self, d, frames=12):
+        """A route of .npy volumes with lat/lon crops: a peak (with noise) that drives east 5 m a
+        frame from near the region's centre, crops off the truth by a few metres."""
+        cache = seqloc.Cache(CACHE)
+        x0, y0 = cache.to_grid(cache.info["centre_lat"], cache.info["centre_lon"])
+        rng = np.random.default_rng(7)
+        route = os.path.join(d, "route")
+        os.makedirs(route)
+        with open(os.path.join(route, "route.json"), "w") as f:
+            f.write('{"format": "seqloc-route", "version": 1, "name": "py"}')
+        rows = []
+        for t in range(frames):
+            x, y = x0 + 5.0 * t, y0 + 0.25
+            dx, dy = rng.integers(-6, 7, size=2)  # the crop is off the truth by whole cells
+            crop_lat, crop_lon = cache.from_grid(x - 0.5 * dx, y - 0.5 * dy)
+            vol = (rng.normal(0.0, 1.0, (31, 31, 64)) - 6.0).astype(np.float32)
+            vol[15 - dy, 15 + dx, 16] = 0.0  # east: compass 90 degrees, bin 16 of 64
+            np.save(os.path.join(route, f"v{t}.npy"), vol)
+            rows.append((f"f{t}", float(t), f"v{t}.npy", f"{crop_lat:.12f}", f"{crop_lon:.12f}", 5.0 if t else 0.0,
+                         0.0, 0.0))
+        with open(os.path.join(route, "frames.csv"), "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["frame", "timestamp", "volume", "crop_lat", "crop_lon", "odo_forward_m", "odo_left_m",
+                        "odo_yaw_deg"])
+            w.writerows(rows)
+        return route, rows
+
+    @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
+    def test_a_numpy_loop_gives_the_poses_of_seqloc_localize(self):
+        with tempfile.TemporaryDirectory() as d:
+            route, rows = self.write_route(d)
+            out = os.path.join(d, "out")
+            for mode in ("seqloc", "online"):
+                r = subprocess.run([SEQLOC, "localize", CACHE, route, "-o", out, "--overwrite", "--window", "96",
+                                    "--headings", "64", "--mode", mode], capture_output=True, text=True)
+                self.assertEqual(r.returncode, 0, r.stderr)
+                with open(os.path.join(out, "py", mode, "poses.csv")) as f:
+                    expected = list(csv.DictReader(f))
+                loc = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": 64}, mode=mode)
+                for row, want in zip(rows, expected):
+                    vol = np.load(os.path.join(route, row[2]))
+                    got = loc.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
+                    where = f"{mode} frame {want['frame']}"
+                    self.assertAlmostEqual(got["lat"], float(want["lat"]), places=8, msg=where)
+                    self.assertAlmostEqual(got["lon"], float(want["lon"]), places=8, msg=where)
+                    self.assertAlmostEqual(got["x"], float(want["x_m"]), delta=0.002, msg=where)
+                    self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=where)
+                    self.assertAlmostEqual(got["heading_deg"], float(want["heading_deg"]), delta=0.002, msg=where)
+                    self.assertAlmostEqual(got["entropy"], float(want["entropy"]), delta=2e-6, msg=where)
+                    self.assertEqual(int(got["relocalized"]), int(want["relocalized"]), where)
+                self.assertEqual(len(expected), len(rows))
+                marginal = loc.belief_marginal()
+                self.assertEqual(marginal.shape, (96, 96))
+                self.assertAlmostEqual(float(marginal.sum()), 1.0, places=4)
+
+    def test_bad_arguments_are_short_errors(self):
+        with self.assertRaises(ValueError):
+            seqloc.Localizer(CACHE, mode="offline")
+        loc = seqloc.Localizer(CACHE, {"width": 64, "height": 64, "headings": 16})
+        vol = np.zeros((9, 9, 16), np.float32)
+        with self.assertRaises(TypeError):
+            loc.step(vol)  # no crop
+        with self.assertRaises(TypeError):
+            loc.step(vol, crop_lat=1.0, crop_x=2.0, crop_y=3.0)
 
 
 if __name__ == "__main__":

@@ -97,6 +97,11 @@ struct RouteResult {
   std::vector<std::array<std::int64_t, 2>> belief_origins;
 };
 
+/// A frame's volume made ready for the filter as localize makes every frame: prepared for
+/// options.filter.headings, tempered by options.volume_temperature. Throws filter::FilterError
+/// for bad values (NaN, infinities, negative probabilities) or shapes.
+[[nodiscard]] filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options);
+
 /// The route's own frames: its .npy volumes, or the built-in matcher run on its observations
 /// against the cache's class raster. Throws DataError naming the file.
 [[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);

@@ -24,6 +24,11 @@ struct FrameEstimate {
   bool relocalized = false;
 };
 
+/// The pose a mode estimated for frame `f`, in every form the outputs take (region metres,
+/// lat/lon, compass and grid heading), with its errors against the frame's ground truth.
+[[nodiscard]] FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e,
+                                   const osm::RegionProjection& projection);
+
 /// What a mode works on: one route against one region cache. The references outlive the mode.
 struct RouteContext {
   const Route& route;
