@@ -284,6 +284,33 @@ class LocalizerAsLocalize(unittest.TestCase):
                 self.assertEqual(marginal.shape, (96, 96))
                 self.assertAlmostEqual(float(marginal.sum()), 1.0, places=4)
 
+    @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
+    def test_a_pytorch_loop_gives_the_poses_of_seqloc_localize(self):
+        try:
+            import torch  # python3-torch, Debian's (scripts/deps test installs it)
+        except ImportError:
+            self.skipTest("python3-torch is not installed")
+        with tempfile.TemporaryDirectory() as d:
+            route, rows = self.write_route(d, frames=8)
+            out = os.path.join(d, "out")
+            r = subprocess.run([SEQLOC, "localize", CACHE, route, "-o", out, "--window", "96", "--headings", "64"],
+                               capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            with open(os.path.join(out, "py", "seqloc", "poses.csv")) as f:
+                expected = list(csv.DictReader(f))
+            loc = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": 64})
+            with torch.no_grad():
+                for row, want in zip(rows, expected):
+                    # What a backbone's output looks like: a CPU tensor, log-softmax over all cells.
+                    logits = torch.from_numpy(np.load(os.path.join(route, row[2])))
+                    log_probs = torch.log_softmax(logits.reshape(-1), 0).reshape(logits.shape)
+                    pose = loc.step(log_probs, (row[5], row[6], row[7]), crop_lat=float(row[3]),
+                                    crop_lon=float(row[4]))
+                    self.assertAlmostEqual(pose["x"], float(want["x_m"]), delta=0.002, msg=want["frame"])
+                    self.assertAlmostEqual(pose["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
+                    self.assertAlmostEqual(pose["heading_deg"], float(want["heading_deg"]), delta=0.002,
+                                           msg=want["frame"])
+
     def test_bad_arguments_are_short_errors(self):
         with self.assertRaises(ValueError):
             seqloc.Localizer(CACHE, mode="offline")
