@@ -145,13 +145,23 @@ def bad_addresses(count, per_address):
     return [f"127.0.1.{1 + i // per_address}" for i in range(count)]
 
 
+def connections_allowed(wanted):
+    """`wanted`, or fewer when this process's open-file limit cannot hold that many sockets (said)."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    allowed = min(wanted, soft - 200)
+    if allowed < wanted:
+        print(f"  the open-file limit ({soft}) allows {allowed} connections, not {wanted}")
+    return allowed
+
+
 def case_slowloris(args, failures):
     label = "slowloris"
-    print(f"{label}: 1000 connections, each half a request head")
+    count = connections_allowed(1000)
+    print(f"{label}: {count} connections, each half a request head")
     server, port, region = start_server(args, "--header-timeout", "60")
     held = []
     try:
-        for source in bad_addresses(1000, 125):
+        for source in bad_addresses(count, 125):
             s = connect(port, source)
             s.sendall(b"GET /health HTTP/1.1\r\nHost: slo")
             held.append(s)
@@ -168,12 +178,13 @@ def case_slowloris(args, failures):
 
 def case_idle(args, failures):
     label = "idle keep-alive"
-    print(f"{label}: 2000 connections, idle after one answered request")
+    count = connections_allowed(2000)
+    print(f"{label}: {count} connections, idle after one answered request")
     server, port, region = start_server(args, "--keep-alive", "60")
     held = []
     try:
         rss_before = memory_kb(server.pid, "VmRSS")
-        for source in bad_addresses(2000, 125):
+        for source in bad_addresses(count, 125):
             s = connect(port, source)
             s.sendall(b"GET /health HTTP/1.1\r\nHost: idle\r\n\r\n")
             held.append(s)
@@ -183,8 +194,8 @@ def case_idle(args, failures):
                 failures.append(f"{label}: an idle client's first request got {status}")
                 break
         rss_after = memory_kb(server.pid, "VmRSS")
-        print(f"  server memory: {rss_before / 1024:.1f} MiB before, {rss_after / 1024:.1f} MiB with 2000 open "
-              f"({(rss_after - rss_before) / 2000:.1f} KiB each)")
+        print(f"  server memory: {rss_before / 1024:.1f} MiB before, {rss_after / 1024:.1f} MiB with {count} open "
+              f"({(rss_after - rss_before) / count:.1f} KiB each)")
         check_legit(label, port, region, failures)
         alive = still_open(held)
         print(f"  {alive} of {len(held)} idle connections still open")
@@ -260,7 +271,7 @@ def main():
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     wanted = 4096
     if soft < wanted:
-        resource.setrlimit(resource.RLIMIT_NOFILE, (min(wanted, hard), hard))
+        resource.setrlimit(resource.RLIMIT_NOFILE, (wanted if hard == resource.RLIM_INFINITY else min(wanted, hard), hard))
     failures = []
     cases = {"slowloris": case_slowloris, "idle": case_idle, "hostile": case_hostile}
     for name in args.case or cases:
