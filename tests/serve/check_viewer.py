@@ -84,8 +84,12 @@ def check_page(chromium_binary, url, d, label):
     outline = ((r < 30) & (g < 30) & (b < 30)).sum()
     if outline < 50:
         failures.append("no track outline (black) pixels on the map")
+    # The ground truth (the simulated route has it): a dashed green line, rgb(0, 140, 60).
+    truth = ((r < 60) & (g > 110) & (g < 170) & (b > 30) & (b < 90)).sum()
+    if truth < 20:
+        failures.append(f"no ground-truth (green) pixels on the map ({truth})")
     print(f"viewer, {label}: {tiles} tiles, {errors} errors, {points} track points, {distinct} colours, "
-          f"{outline} dark px")
+          f"{outline} dark px, {truth} ground-truth px")
     return failures
 
 
