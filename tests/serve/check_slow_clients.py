@@ -112,12 +112,23 @@ def still_open(sockets):
     return alive
 
 
-def wait_until_accepted(server, count, baseline):
-    """Waits (at most 30 s) until the server holds `count` more open files than `baseline`: every
-    bad connection accepted, not waiting in the kernel's queue ahead of the timed requests."""
+def open_sockets(pid):
+    """The sockets a process holds (its listener included)."""
+    count = 0
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            count += os.readlink(f"/proc/{pid}/fd/{fd}").startswith("socket:")
+        except OSError:
+            pass  # closed meanwhile
+    return count
+
+
+def wait_until_accepted(server, count):
+    """Waits (at most 30 s) until the server holds `count` connections besides its listener: every
+    bad connection accepted, none waiting in the kernel's queue ahead of the timed requests."""
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
-        if len(os.listdir(f"/proc/{server.pid}/fd")) >= baseline + count:
+        if open_sockets(server.pid) >= count + 1:
             return True
         time.sleep(0.01)
     return False
@@ -179,12 +190,11 @@ def case_slowloris(args, failures):
     server, port, region = start_server(args, "--header-timeout", "60")
     held = []
     try:
-        baseline = len(os.listdir(f"/proc/{server.pid}/fd"))
         for source in bad_addresses(count, 125):
             s = connect(port, source)
             s.sendall(b"GET /health HTTP/1.1\r\nHost: slo")
             held.append(s)
-        if not wait_until_accepted(server, count, baseline):
+        if not wait_until_accepted(server, count):
             failures.append(f"{label}: the server did not accept the {count} connections within 30 s")
         check_legit(label, port, region, failures)
         alive = still_open(held)
