@@ -78,16 +78,11 @@ Response Service::xyz_tile(Region& region, std::string_view layer_text, std::str
     return error_response(404, "no layer '" + std::string(layer_text).substr(0, 100) + "' (classes, road_distance, road_prior)");
   }
   // {y}.png (256 px) or {y}@2x.png (512 px, the same ground).
-  constexpr std::string_view kPng = ".png", kRetina = "@2x";
-  if (file.size() <= kPng.size() || file.substr(file.size() - kPng.size()) != kPng) {
-    return error_response(404, "XYZ tiles are PNG: {y}.png or {y}@2x.png");
-  }
-  std::string_view y_text = file.substr(0, file.size() - kPng.size());
-  int tile_px = 256;
-  if (y_text.size() > kRetina.size() && y_text.substr(y_text.size() - kRetina.size()) == kRetina) {
-    y_text.remove_suffix(kRetina.size());
-    tile_px = 512;
-  }
+  const auto stem = detail::strip_suffix(file, ".png");
+  if (!stem) return error_response(404, "XYZ tiles are PNG: {y}.png or {y}@2x.png");
+  const auto retina = detail::strip_suffix(*stem, "@2x");
+  const std::string_view y_text = retina.value_or(*stem);
+  const int tile_px = retina ? 512 : 256;
   std::int64_t z = 0, x = 0, y = 0;
   if (!detail::parse_index(z_text, z) || !detail::parse_index(x_text, x) || !detail::parse_index(y_text, y) || z > 30) {
     return error_response(400, "z, x and y must be non-negative integers (z at most 30): " + request.path.substr(0, 200));
@@ -336,20 +331,13 @@ Response Service::wmts(const Region& region, const Request& request) const {
     << "<MatrixWidth>" << g.tiles_wide() << "</MatrixWidth><MatrixHeight>" << g.tiles_high() << "</MatrixHeight>"
     << "</TileMatrix></TileMatrixSet>\n"
     << "  </Contents>\n</Capabilities>\n";
-  Response r;
-  r.content_type = "application/xml";
-  r.body = std::make_shared<const std::string>(x.str());
-  r.headers.emplace_back("Cache-Control", "no-cache");
-  return r;
+  return detail::xml_response(x.str());
 }
 
 Response Service::gdal_wmts(const Region& region, std::string_view file, const Request& request) const {
   // GDAL's WMTS client reads every layer as 4 bands of Byte unless a service description says
   // otherwise: this one names the layer, its format, band count and type, and no local cache.
-  constexpr std::string_view kSuffix = ".xml";
-  const std::string_view name =
-      file.size() > kSuffix.size() && file.substr(file.size() - kSuffix.size()) == kSuffix ? file.substr(0, file.size() - kSuffix.size()) : "";
-  const auto layer = parse_layer(name);
+  const auto layer = parse_layer(detail::strip_suffix(file, ".xml").value_or(""));
   if (!layer) {
     return error_response(404, "no GDAL service description '" + std::string(file).substr(0, 100) +
                                    "': wmts/classes.xml, wmts/road_distance.xml or wmts/road_prior.xml");
@@ -365,11 +353,7 @@ Response Service::gdal_wmts(const Region& region, std::string_view file, const R
     << "  <BandsCount>" << (classes ? 3 : 1) << "</BandsCount>\n"
     << "  <DataType>" << (classes ? "Byte" : "Float32") << "</DataType>\n"
     << "</GDAL_WMTS>\n";
-  Response r;
-  r.content_type = "application/xml";
-  r.body = std::make_shared<const std::string>(x.str());
-  r.headers.emplace_back("Cache-Control", "no-cache");
-  return r;
+  return detail::xml_response(x.str());
 }
 
 }  // namespace seqloc::serve

@@ -18,6 +18,19 @@ Response json_response(const ordered_json& j) {
   return r;
 }
 
+Response xml_response(std::string xml) {
+  Response r;
+  r.content_type = "application/xml";
+  r.body = std::make_shared<const std::string>(std::move(xml));
+  r.headers.emplace_back("Cache-Control", "no-cache");
+  return r;
+}
+
+std::optional<std::string_view> strip_suffix(std::string_view text, std::string_view suffix) {
+  if (text.size() <= suffix.size() || text.substr(text.size() - suffix.size()) != suffix) return std::nullopt;
+  return text.substr(0, text.size() - suffix.size());
+}
+
 // FNV-1a, 64 bits: ETags need a stable fingerprint, not a cryptographic one.
 std::uint64_t fnv1a(std::string_view s, std::uint64_t h) {
   for (unsigned char c : s) h = (h ^ c) * 0x100000001b3ull;

@@ -39,6 +39,10 @@ struct FileIdentity {
 };
 
 Response json_response(const ordered_json& j);
+/// An XML document (capabilities, service descriptions), not cached by clients.
+Response xml_response(std::string xml);
+/// `text` without `suffix`, when it ends with it and has more before it.
+std::optional<std::string_view> strip_suffix(std::string_view text, std::string_view suffix);
 std::string hex(std::uint64_t v);
 std::vector<std::string_view> split_path(std::string_view path);
 /// Percent-decodes one component of a target; `what` names it in errors.
