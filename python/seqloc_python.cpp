@@ -69,6 +69,21 @@ std::array<double, 3> three_numbers(const py::object& value, const char* name, c
   }
 }
 
+/// A point given either as (lat, lon) or as region metres (x, y), exactly one pair of the two.
+struct PointArgument {
+  bool geo = false;
+  double a = 0, b = 0;  ///< lat, lon or x, y
+};
+PointArgument point_argument(const py::object& lat, const py::object& lon, const py::object& x, const py::object& y,
+                             const char* message) {
+  const bool geo = !lat.is_none() || !lon.is_none(), metres = !x.is_none() || !y.is_none();
+  if (geo == metres || (geo && (lat.is_none() || lon.is_none())) || (metres && (x.is_none() || y.is_none()))) {
+    throw py::type_error(message);
+  }
+  return geo ? PointArgument{true, lat.cast<double>(), lon.cast<double>()}
+             : PointArgument{false, x.cast<double>(), y.cast<double>()};
+}
+
 class PyCache {
  public:
   PyCache(const std::string& path, std::size_t lru_tiles) : cache_(std::make_unique<raster::CacheReader>(path, lru_tiles)) {}
@@ -77,19 +92,13 @@ class PyCache {
   /// float32, plus the crop's georeference}.
   py::dict crop(const py::object& lat, const py::object& lon, double size_m, const std::vector<std::string>& layers,
                 double prior_sigma_m, double max_size_m, const py::object& x, const py::object& y) {
-    const bool geo = !lat.is_none() || !lon.is_none(), metres = !x.is_none() || !y.is_none();
-    if (geo == metres || (geo && (lat.is_none() || lon.is_none())) || (metres && (x.is_none() || y.is_none()))) {
-      throw py::type_error("crop: give lat and lon (WGS84), or x and y (region CRS metres)");
-    }
+    const PointArgument at =
+        point_argument(lat, lon, x, y, "crop: give lat and lon (WGS84), or x and y (region CRS metres)");
     serve::CropWindow w;
-    if (geo) {
-      const auto la = lat.cast<double>(), lo = lon.cast<double>();
+    {
       py::gil_scoped_release release;
-      w = serve::locate_crop(*cache_, la, lo, size_m, max_size_m);
-    } else {
-      const auto xm = x.cast<double>(), ym = y.cast<double>();
-      py::gil_scoped_release release;
-      w = serve::locate_crop_xy(*cache_, xm, ym, size_m, max_size_m);
+      w = at.geo ? serve::locate_crop(*cache_, at.a, at.b, size_m, max_size_m)
+                 : serve::locate_crop_xy(*cache_, at.a, at.b, size_m, max_size_m);
     }
     const auto n = static_cast<py::ssize_t>(w.size);
     py::dict out;
@@ -315,16 +324,14 @@ class PyLocalizer {
     pipeline::RouteFrame f;
     f.frame = std::to_string(frames_);
     f.timestamp_s = static_cast<double>(frames_);
-    const bool geo = !crop_lat.is_none() || !crop_lon.is_none(), metres = !crop_x.is_none() || !crop_y.is_none();
-    if (geo == metres || (geo && (crop_lat.is_none() || crop_lon.is_none())) ||
-        (metres && (crop_x.is_none() || crop_y.is_none()))) {
-      throw py::type_error("step: give the crop's centre as crop_lat and crop_lon, or as crop_x and crop_y");
-    }
+    const PointArgument centre =
+        point_argument(crop_lat, crop_lon, crop_x, crop_y,
+                       "step: give the crop's centre as crop_lat and crop_lon, or as crop_x and crop_y");
     const auto& projection = cache_->metadata().projection();
-    if (geo) {
-      f.crop_geo = seqloc::osm::GeoPoint{crop_lat.cast<double>(), crop_lon.cast<double>()};
+    if (centre.geo) {
+      f.crop_geo = seqloc::osm::GeoPoint{centre.a, centre.b};
     } else {
-      f.crop_grid = seqloc::osm::GridPoint{crop_x.cast<double>(), crop_y.cast<double>()};
+      f.crop_grid = seqloc::osm::GridPoint{centre.a, centre.b};
     }
     std::optional<pipeline::GridFix> fix;
     if (!gps.is_none()) {
