@@ -134,6 +134,14 @@ def wait_until_accepted(server, count):
     return False
 
 
+def require_held(label, held, kind, failures):
+    """The case is only a case if the server kept every bad connection open while it was timed."""
+    alive = still_open(held)
+    print(f"  {alive} of {len(held)} {kind} connections still open")
+    if alive != len(held):
+        failures.append(f"{label}: only {alive} of {len(held)} {kind} connections were held (the case needs them)")
+
+
 def memory_kb(pid, field):
     with open(f"/proc/{pid}/status") as f:
         for line in f:
@@ -197,10 +205,7 @@ def case_slowloris(args, failures):
         if not wait_until_accepted(server, count):
             failures.append(f"{label}: the server did not accept the {count} connections within 30 s")
         check_legit(label, port, region, failures)
-        alive = still_open(held)
-        print(f"  {alive} of {len(held)} slow connections still open")
-        if alive != len(held):
-            failures.append(f"{label}: only {alive} of {len(held)} slow connections were held (the case needs them)")
+        require_held(label, held, "slow", failures)
     finally:
         sigterm_and_wait(server, label, failures)
         for s in held:
@@ -228,10 +233,7 @@ def case_idle(args, failures):
         print(f"  server memory: {rss_before / 1024:.1f} MiB before, {rss_after / 1024:.1f} MiB with {count} open "
               f"({(rss_after - rss_before) / count:.1f} KiB each)")
         check_legit(label, port, region, failures)
-        alive = still_open(held)
-        print(f"  {alive} of {len(held)} idle connections still open")
-        if alive != len(held):
-            failures.append(f"{label}: only {alive} of {len(held)} idle connections were held")
+        require_held(label, held, "idle", failures)
     finally:
         sigterm_and_wait(server, label, failures)
         for s in held:
