@@ -101,7 +101,7 @@ filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const Lo
 
 FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
   auto matcher = std::make_shared<const BevMatcher>(options.matcher);
-  auto prepared = [&options](const filter::FrameVolume& volume) {
+  auto prepared = [options](const filter::FrameVolume& volume) {  // a copy: the source may outlive the call
     return std::make_shared<const filter::PreparedFrame>(prepare_volume(volume, options));
   };
   return [&route, &cache, matcher, prepared](std::size_t i) {
@@ -257,14 +257,13 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
     if (f.truth->heading_deg) {
       pose.truth->grid_heading_deg = wrap360(*f.truth->heading_deg - gamma_true);
       pose.heading_error_deg = heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
-      const double h = (*f.truth->heading_deg - gamma_true) * M_PI / 180.0;  // true grid heading
+      const double h = *pose.truth->grid_heading_deg * M_PI / 180.0;
       pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);
       pose.lateral_error_m = -ex * std::cos(h) + ey * std::sin(h);
     }
   }
   return pose;
 }
-
 
 RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                            const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
