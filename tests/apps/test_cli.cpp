@@ -59,7 +59,9 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(serve.find(option), std::string::npos) << option;
   }
   const auto exporter = run_seqloc({"export", "--help"}).out;
-  for (const char* option : {"--layer", "--bbox", "-o", "--overwrite"}) EXPECT_NE(exporter.find(option), std::string::npos) << option;
+  for (const char* option : {"--layer", "--bbox", "--float", "-o", "--overwrite"}) {
+    EXPECT_NE(exporter.find(option), std::string::npos) << option;
+  }
   EXPECT_NE(run_seqloc({"--version"}).out.find("seqloc "), std::string::npos);
 }
 
