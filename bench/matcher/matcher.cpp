@@ -31,7 +31,7 @@ int main(int argc, char** argv) {
   std::vector<pipeline::Observation> observations;
   std::vector<std::vector<std::uint8_t>> maps;
   pipeline::MatcherConfig config;
-  std::size_t codes = 0;
+  std::size_t codes = 0, templates = 0;
   for (std::size_t r = 0; r < roads.size() && observations.size() < 16; r += std::max<std::size_t>(1, roads.size() / 16)) {
     const auto& pts = roads[r].points;
     if (pts.size() < 2) continue;
@@ -39,15 +39,20 @@ int main(int argc, char** argv) {
     const auto& b = pts[1];
     const pipeline::GridPose pose{a.x_m, a.y_m, std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * 180 / M_PI};
     observations.push_back(pipeline::render_observation(cache, pose, camera));
-    codes += pipeline::BevMatcher::observed_codes(observations.back()).size();
+    // The matcher transforms one template for the visible disc and one per code beyond the first
+    // of each channel (matcher.cpp), per heading in a quarter turn.
+    const auto observed = pipeline::BevMatcher::observed_codes(observations.back());
+    codes += observed.size();
+    for (std::size_t o = 0; o < observed.size(); ++o) templates += o == 0 || observed[o - 1][0] == observed[o][0];
     const int side = config.size + observations.back().size - 1;
     const auto u = std::llround(cache.grid().region_u(a.x_m) + 0.5), v = std::llround(cache.grid().region_v(a.y_m) + 0.5);
     maps.emplace_back();
     cache.read_classes(u - side / 2, v - side / 2, side, side, maps.back(), true);
   }
   const double mean_codes = static_cast<double>(codes) / static_cast<double>(observations.size());
-  std::printf("%zu observations of %d x %d cells, %.1f observed codes (channels) on average\n", observations.size(),
-              observations[0].size, observations[0].size, mean_codes);
+  const double mean_templates = static_cast<double>(templates) / static_cast<double>(observations.size());
+  std::printf("%zu observations of %d x %d cells, %.1f observed codes (channels) on average, %.1f templates per heading\n",
+              observations.size(), observations[0].size, observations[0].size, mean_codes, mean_templates);
 
   double fps[2] = {};
   for (int threads : {1, 2}) {
@@ -95,9 +100,9 @@ int main(int argc, char** argv) {
   std::printf("peer: 256 forward + inverse FFTs of %d x %d, 1 thread: %.1f ms; matcher (1 thread) / peer = %.2f\n", n, n,
               peer_ms, 1000.0 / fps[0] / peer_ms);
   std::printf("{\"benchmark\": \"matcher\", \"volume\": \"128x128x256\", \"observation\": %d, \"mean_channels\": %.1f, "
-              "\"fps_1_thread\": %.2f, \"fps_2_threads\": %.2f, \"peer_256_fft_pairs_ms\": %.1f, \"ratio_to_peer\": %.2f, "
+              "\"mean_templates\": %.1f, \"fps_1_thread\": %.2f, \"fps_2_threads\": %.2f, \"peer_256_fft_pairs_ms\": %.1f, \"ratio_to_peer\": %.2f, "
               "\"calibration_ms_1_thread\": %.1f, \"calibration_ms_2_threads\": %.1f}\n",
-              observations[0].size, mean_codes, fps[0], fps[1], peer_ms, 1000.0 / fps[0] / peer_ms, calibration_ms[0],
+              observations[0].size, mean_codes, mean_templates, fps[0], fps[1], peer_ms, 1000.0 / fps[0] / peer_ms, calibration_ms[0],
               calibration_ms[1]);
   return 0;
 }
