@@ -70,8 +70,9 @@ class CacheMergeCommand : public Command, public WithOverwrite {
     add_overwrite_option(app, "output");
   }
 
+  void check() override { check_overwrite(out_); }
+
   int run() override {
-    check_overwrite(out_);
     raster::merge_shards(shards_, out_);
     std::printf("merged %zu shards into %s\n", shards_.size(), out_.c_str());
     return kExitOk;

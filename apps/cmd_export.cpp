@@ -25,15 +25,13 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
     add_progress_option(app);
   }
 
-  int run() override {
+  void check() override {
     check_overwrite(out_);
-    raster::CacheReader cache(cache_, 256);
     const std::string ext = out_.extension().string();
-    if (ext == ".vrt") {
+    vrt_ = ext == ".vrt";
+    if (vrt_) {
       if (!bbox_.empty()) throw pipeline::UsageError("--bbox: a VRT covers the whole cache; export a .tif for a box");
-      serve::write_region_vrt(cache, out_);
-      std::printf("wrote %s (classes: bands 1-3, road distance in metres: band 4)\n", out_.c_str());
-      return kExitOk;
+      return;
     }
     if (ext != ".tif" && ext != ".tiff") throw pipeline::UsageError(out_.string() + ": the output must end in .tif or .vrt");
     const auto layer = serve::parse_layer(layer_);
@@ -44,6 +42,15 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
       options_.validate();  // --prior-sigma, --bbox
     } catch (const serve::ExportError& e) {
       throw pipeline::UsageError(e.what());
+    }
+  }
+
+  int run() override {
+    raster::CacheReader cache(cache_, 256);
+    if (vrt_) {
+      serve::write_region_vrt(cache, out_);
+      std::printf("wrote %s (classes: bands 1-3, road distance in metres: band 4)\n", out_.c_str());
+      return kExitOk;
     }
     ProgressBar bar(show_progress(), "export");
     options_.progress = [&](long long done, long long total) { bar.update(done, total); };
@@ -58,6 +65,7 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
   std::string layer_ = "classes";
   std::string bbox_;
   serve::ExportOptions options_;
+  bool vrt_ = false;  // check(): the output is a VRT of the whole cache
 };
 
 }  // namespace

@@ -37,25 +37,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     app.add_option("--offline-window", options_.offline_half_window,
                    "Offline mode: frames within K of each frame are aligned and summed (-1: all)")
         ->capture_default_str();
-    auto& f = options_.filter;
-    app.add_flag("!--no-etu", f.etu, "Switch off Entropy-Tempered Uncertainty");
-    app.add_flag("!--no-mgr", f.mgr, "Switch off Map-Guided Relocalization");
-    app.add_flag("!--no-pas", f.pas, "Switch off Peak-Anchored Smoothing");
-    app.add_option("--etu-reference", f.etu_reference_entropy,
-                   "ETU relative to this normalized entropy: w = min(1, (1 - H) / (1 - H_ref)); 0: the paper's 1 - H")
-        ->capture_default_str();
-    app.add_option("--epsilon", f.mgr_epsilon, "MGR's eps")->capture_default_str();
-    app.add_option("--sigma", f.mgr_sigma_m, "MGR's road-prior sigma in metres")->capture_default_str();
-    app.add_option("--pas-radius", f.pas_radius, "PAS radius in cells")->capture_default_str();
-    app.add_option("--outside-crop-nats", f.outside_crop_nats,
-                   "Window cells outside a frame's crop get log(1/M) minus this (0: the paper's rule)")
-        ->capture_default_str();
-    app.add_flag("--subbin-heading", f.subbin_heading, "Refine the heading between bins (beyond the paper)");
-    app.add_flag("--motion-noise", f.motion_noise, "Diffuse the belief with the step length (beyond the paper)");
-    app.add_flag("--gps-prior", f.gps_prior, "Use every frame's GPS fix as a prior term (beyond the paper)");
+    // Every filter setting from the filter's field table; the window and threads have their own.
+    add_filter_options(app, options_.filter, {"width", "height", "threads"});
     app.add_option("--window", window_, "Belief window, cells of 0.5 m each way")->capture_default_str();
-    app.add_option("--headings", f.headings, "Heading bins R")->capture_default_str();
-    app.add_option("--threads", f.threads, "Threads: routes run side by side, or one route's filter uses them all")
+    app.add_option("--threads", options_.filter.threads, "Threads: routes run side by side, or one route's filter uses them all")
         ->default_val(default_threads());
     app.add_option("--odometry-noise", noise_, "SIGMA_T_PCT,SIGMA_R_DEG_PER_M: perturb the odometry (KITTI style)");
     app.add_option("--seed", seed_, "Seed of the odometry noise")->default_val(1);
@@ -105,7 +90,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
                "and prints the recall table. Any bad input stops the run with nothing written.");
   }
 
-  int run() override {
+  void check() override {
     options_.filter.width = options_.filter.height = window_;
     try {
       options_.validate();
@@ -119,39 +104,39 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     if (!fs::is_directory(parent, ec)) {
       throw pipeline::UsageError(out_.string() + ": output directory '" + parent.string() + "' does not exist");
     }
-    double noise_t = 0, noise_r = 0;
     if (!noise_.empty()) {
       const auto v = parse_numbers<double>(noise_, ',', 2);
-      if (v) noise_t = (*v)[0], noise_r = (*v)[1];
-      if (!v || noise_t < 0 || noise_r < 0) {
+      if (v) noise_t_ = (*v)[0], noise_r_ = (*v)[1];
+      if (!v || noise_t_ < 0 || noise_r_ < 0) {
         throw pipeline::UsageError("--odometry-noise '" + noise_ + "': expected SIGMA_T_PCT,SIGMA_R_DEG_PER_M >= 0");
       }
     }
-    std::vector<pipeline::Mode> modes;
     if (mode_ == "all") {
-      modes = {pipeline::Mode::single, pipeline::Mode::offline, pipeline::Mode::online, pipeline::Mode::seqloc};
+      modes_ = {pipeline::Mode::single, pipeline::Mode::offline, pipeline::Mode::online, pipeline::Mode::seqloc};
     } else if (mode_ == "single") {
-      modes = {pipeline::Mode::single};
+      modes_ = {pipeline::Mode::single};
     } else if (mode_ == "offline") {
-      modes = {pipeline::Mode::offline};
+      modes_ = {pipeline::Mode::offline};
     } else if (mode_ == "online") {
-      modes = {pipeline::Mode::online};
+      modes_ = {pipeline::Mode::online};
     } else {
-      modes = {pipeline::Mode::seqloc};
+      modes_ = {pipeline::Mode::seqloc};
     }
-
-    int shard_index = 0, shard_count = 1;
     if (!shard_.empty()) {
       const auto v = parse_numbers<int>(shard_, '/', 2);
       if (!v || (*v)[1] < 1 || (*v)[0] < 0 || (*v)[0] >= (*v)[1]) {
         throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N with 0 <= I < N, e.g. 0/4");
       }
-      shard_index = (*v)[0];
-      shard_count = (*v)[1];
+      shard_index_ = (*v)[0];
+      shard_count_ = (*v)[1];
     }
+  }
 
+  int run() override {
+    std::error_code ec;
     // Everything is read and checked before any work, the other shards' routes too (a shard's
-    // route names do not depend on which shard runs).
+    // route names and errors do not depend on which shard runs); localize_routes checks the
+    // crops of this shard's routes before its first job.
     raster::CacheReader cache(cache_path_, 256);
     std::vector<fs::path> dirs = route_dirs_;
     std::sort(dirs.begin(), dirs.end());
@@ -160,16 +145,18 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     long long total_frames = 0;
     for (std::size_t k = 0; k < dirs.size(); ++k) {
       auto route = pipeline::read_route(dirs[k], limits_);
-      pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
       if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
       names.insert(route.name);
-      if (static_cast<int>(k % static_cast<std::size_t>(shard_count)) != shard_index) continue;
-      if (noise_t > 0 || noise_r > 0) pipeline::perturb_odometry(route, noise_t, noise_r, seed_);
-      total_frames += static_cast<long long>(route.frames.size() * modes.size());
+      if (static_cast<int>(k % static_cast<std::size_t>(shard_count_)) != shard_index_) {
+        pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
+        continue;
+      }
+      if (noise_t_ > 0 || noise_r_ > 0) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);
+      total_frames += static_cast<long long>(route.frames.size() * modes_.size());
       routes.push_back(std::move(route));
     }
-    if (shard_count > 1) {
-      log("shard %d/%d: %zu of %zu routes", shard_index, shard_count, routes.size(), dirs.size());
+    if (shard_count_ > 1) {
+      log("shard %d/%d: %zu of %zu routes", shard_index_, shard_count_, routes.size(), dirs.size());
     }
     log("localize %zu routes, %lld frames in all", routes.size(), total_frames);
 
@@ -179,14 +166,14 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       ProgressBar bar(show_progress(), "frames");
       std::atomic<long long> done{0};
       std::mutex progress_mutex;
-      const auto batch = pipeline::localize_routes(routes, cache, options_, modes, [&] {
+      const auto batch = pipeline::localize_routes(routes, cache, options_, modes_, [&] {
         const long long d = ++done;
         std::lock_guard lock(progress_mutex);
         bar.update(d, total_frames);
       });
       bar.done();
       log("%zu volumes scored or read once for %zu modes; %zu spilled to a temporary file; at most %.0f MB per route",
-          batch.frames_made, modes.size(), batch.frames_spilled,
+          batch.frames_made, modes_.size(), batch.frames_spilled,
           static_cast<double>(batch.peak_frame_memory_bytes) / (1 << 20));
       std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
       std::vector<std::string> route_names;
@@ -231,6 +218,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
   std::string shard_;
   std::uint64_t seed_ = 1;
   pipeline::RouteLimits limits_;
+  // What check() made of the options.
+  std::vector<pipeline::Mode> modes_;
+  int shard_index_ = 0, shard_count_ = 1;
+  double noise_t_ = 0, noise_r_ = 0;
 };
 
 class EvaluateCommand : public Command {

@@ -44,7 +44,7 @@ class PreprocessCommand : public Command, public WithProgress {
         "partial file when rerun with the same input and options. See docs/cache-format.md.");
   }
 
-  int run() override {
+  void check() override {
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
     if (!shard_.empty()) {
       const auto v = parse_numbers<int>(shard_, '/', 2);
@@ -53,6 +53,9 @@ class PreprocessCommand : public Command, public WithProgress {
       options_.shard_count = (*v)[1];
     }
     options_.validate();
+  }
+
+  int run() override {
     log("preprocess %s -> %s", options_.input.c_str(), options_.output.c_str());
     ProgressBar bar(show_progress(), "tiles");
     const auto report = pipeline::preprocess_region(

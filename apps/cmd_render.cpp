@@ -32,7 +32,7 @@ class RenderCommand : public Command {
                "truth as a star), entropy_route.png and error_over_time.png (docs/render.md).");
   }
 
-  int run() override {
+  void check() override {
     options_.localize.filter.width = options_.localize.filter.height = window_;
     options_.localize.matcher.threads = options_.localize.filter.threads;
     try {
@@ -40,6 +40,13 @@ class RenderCommand : public Command {
     } catch (const std::exception& e) {
       throw pipeline::UsageError(e.what());
     }
+    if (frame_ == "collapse" && localized_.empty()) {
+      throw pipeline::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
+    }
+    if (frame_ != "collapse" && frame_ != "sharpest") options_.frame = parse_frame(frame_);
+  }
+
+  int run() override {
     raster::CacheReader cache(cache_path_, 256);
     const pipeline::Route route = pipeline::read_route(route_dir_);
     std::vector<std::pair<std::string, std::vector<pipeline::FramePose>>> poses;
@@ -59,12 +66,12 @@ class RenderCommand : public Command {
       for (auto& result : batch.results) poses.emplace_back(pipeline::mode_name(result.mode), std::move(result.poses));
     }
     if (frame_ == "collapse") {
-      if (localized_.empty() || !fs::exists(options_.beliefs_dir / "beliefs.npy")) {
+      if (!fs::exists(options_.beliefs_dir / "beliefs.npy")) {
         throw pipeline::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
       }
       options_.frame = pipeline::collapse_frame(options_.beliefs_dir, route.frames.size());
-    } else {
-      options_.frame = frame_ == "sharpest" ? sharpest_frame(poses) : parse_frame(frame_);
+    } else if (frame_ == "sharpest") {
+      options_.frame = sharpest_frame(poses);
     }
     for (const auto& file : pipeline::render_route(cache, route, poses, options_, out_)) std::printf("wrote %s\n", file.c_str());
     return kExitOk;

@@ -48,21 +48,20 @@ class ServeCommand : public Command {
     app.add_flag("--access-log", server_.access_log, "One line per request on stderr");
   }
 
-  int run() override {
+  void check() override {
     try {
       service_.validate();  // --max-crop-m, --prior-sigma, ...
+      server_.validate();
     } catch (const serve::ServiceError& e) {
       throw pipeline::UsageError(e.what());
     }
+  }
+
+  int run() override {
     if (!web_.empty()) {
       service_.web_root = web_;
     } else if (std::error_code ec; std::filesystem::is_regular_file(std::filesystem::path(SEQLOC_WEB_DIR) / "index.html", ec)) {
       service_.web_root = SEQLOC_WEB_DIR;
-    }
-    try {
-      server_.validate();
-    } catch (const serve::ServiceError& e) {
-      throw pipeline::UsageError(e.what());
     }
     // SIGINT and SIGTERM are taken by one thread with sigwait, which stops the server cleanly;
     // every other thread inherits the blocked mask.

@@ -42,7 +42,7 @@ class SimulateCommand : public Command, public WithOverwrite, public WithProgres
                "ground truth, BEV observations for the built-in matcher and a GPS-like crop (docs/simulate.md).");
   }
 
-  int run() override {
+  void check() override {
     if (clean_) {
       auto& c = options_.camera;
       c.class_miss = c.cell_dropout = c.spurious_blobs = c.jitter_m = c.jitter_deg = c.wrong_frame = 0;
@@ -53,6 +53,9 @@ class SimulateCommand : public Command, public WithOverwrite, public WithProgres
       throw pipeline::UsageError(e.what());
     }
     check_overwrite(out_);
+  }
+
+  int run() override {
     raster::CacheReader cache(cache_path_, 256);
     ProgressBar bar(show_progress(), "routes");
     pipeline::simulate_routes(cache, options_, out_, [&](int done, int total) { bar.update(done, total); });

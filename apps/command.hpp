@@ -1,6 +1,7 @@
 #pragma once
-// One class per subcommand (osmium-tool's Command): setup() declares and validates options only,
-// run() does the work. main() turns exceptions into one line on stderr and an exit code.
+// One class per subcommand (osmium-tool's Command): setup() declares the options, check()
+// validates what was parsed (before any work: a usage error never leaves output behind), run()
+// does the work. main() turns exceptions into one line on stderr and an exit code.
 
 #include <charconv>
 #include <chrono>
@@ -15,6 +16,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "seqloc/filter/config.hpp"
 #include "seqloc/osm/features.hpp"
 
 namespace seqloc::app {
@@ -32,8 +34,12 @@ struct GlobalOptions {
 class Command {
  public:
   virtual ~Command() = default;
-  /// Declares the subcommand's options on `app`.
-  virtual void setup(CLI::App& app) = 0;
+  /// Declares the subcommand's options on `app` (setup) and has the parse validate them (check):
+  /// a usage error comes out of CLI::App::parse, before run() is called.
+  void declare(CLI::App& app) {
+    setup(app);
+    app.final_callback([this] { check(); });
+  }
   /// Does the work; returns the exit code. Throws on failure.
   virtual int run() = 0;
 
@@ -56,8 +62,19 @@ class Command {
     std::fputc('\n', stderr);
   }
 
+  /// Declares the subcommand's options on `app`.
+  virtual void setup(CLI::App& app) = 0;
+  /// Validates the parsed options (their values, and whether the output may be written); throws
+  /// pipeline::UsageError naming the option. Reads no input, writes nothing.
+  virtual void check() {}
+
   const GlobalOptions* global_ = nullptr;
 };
+
+/// An option for every field of `config` but those named in `skip`, from the filter's field table
+/// (filter::filter_config_fields): --NAME in kebab case (and the shorter name of earlier releases),
+/// with the field's help and its default; a switch that is on by default is --no-NAME.
+void add_filter_options(CLI::App& app, filter::FilterConfig& config, std::initializer_list<std::string_view> skip);
 
 /// --overwrite for the commands that write an output (osmium-tool's option mixins).
 class WithOverwrite {

@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
   auto add = [&](CLI::App* parent, const char* name, const char* description, std::unique_ptr<app::Command> command) {
     CLI::App* sub = parent->add_subcommand(name, description);
     command->set_global(&global);
-    command->setup(*sub);
+    command->declare(*sub);
     commands.emplace_back(sub, std::move(command));
   };
   add(&cli, "preprocess", "Build a region cache (GeoPackage) from an OSM file", app::make_preprocess_command());
@@ -84,12 +84,12 @@ int main(int argc, char** argv) {
   add(cache, "merge", "Merge the shards of a sharded build into one cache", app::make_cache_merge_command());
 
   try {
-    cli.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int code = cli.exit(e);
-    return code == 0 ? app::kExitOk : app::kExitUsage;
-  }
-  try {
+    try {
+      cli.parse(argc, argv);  // and each parsed command's check()
+    } catch (const CLI::ParseError& e) {
+      const int code = cli.exit(e);
+      return code == 0 ? app::kExitOk : app::kExitUsage;
+    }
     for (auto& [sub, command] : commands) {
       if (sub->parsed()) return command->run();
     }

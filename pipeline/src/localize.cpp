@@ -265,11 +265,12 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
   return pose;
 }
 
-RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
-                           const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
-  options.validate();
+namespace {
+
+// localize_route once the options and the route's crops are checked.
+RouteResult run_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
+                      const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   const auto& projection = cache.metadata().projection();
-  check_crops(route, cache.grid(), projection, options);
   if (!source) source = stored_route_frames(route, cache, options);
   const auto estimator = make_mode(mode, {route, cache, options, inspect});
   FramePrefetcher frames(std::move(source), route.frames.size(), estimator->lookahead());
@@ -287,10 +288,20 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
   return result;
 }
 
+}  // namespace
+
+RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
+                           const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
+  options.validate();
+  check_crops(route, cache.grid(), cache.metadata().projection(), options);
+  return run_route(route, cache, options, mode, on_frame, std::move(source), inspect);
+}
+
 BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
                             const LocalizeOptions& options, const std::vector<Mode>& modes,
                             const std::function<void()>& on_frame) {
   options.validate();
+  for (const auto& route : routes) check_crops(route, cache.grid(), cache.metadata().projection(), options);
   struct Job {
     std::size_t route;
     Mode mode;
@@ -341,7 +352,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
       for (std::size_t j = next_job++; j < jobs.size() && !failed; j = next_job++) {
         const auto store = store_for(jobs[j].route);
         batch.results[j] =
-            localize_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, on_frame, store->source());
+            run_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, on_frame, store->source(), {});
         done_with(jobs[j].route);
       }
     } catch (...) {

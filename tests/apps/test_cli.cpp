@@ -6,6 +6,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "seqloc/filter/config.hpp"
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/raster/cache.hpp"
@@ -63,6 +64,37 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(exporter.find(option), std::string::npos) << option;
   }
   EXPECT_NE(run_seqloc({"--version"}).out.find("seqloc "), std::string::npos);
+}
+
+// localize's filter options come from the filter's field table: each setting has its option, and
+// each option sets its own field (-1 breaks every numeric field's rule, and the usage error names
+// the field that validate() found, before the cache or routes are read).
+TEST(Cli, LocalizeHasAnOptionForEachFilterSetting) {
+  const auto help = run_seqloc({"localize", "--help"}).out;
+  const filter::FilterConfig defaults;
+  int numeric = 0;
+  for (const auto& field : filter::filter_config_fields()) {
+    const std::string name = field.name;
+    if (name == "width" || name == "height" || name == "threads") continue;  // --window, --threads
+    std::string flag = name;
+    std::replace(flag.begin(), flag.end(), '_', '-');
+    const bool* on = std::holds_alternative<bool filter::FilterConfig::*>(field.member)
+                         ? &(defaults.*std::get<bool filter::FilterConfig::*>(field.member))
+                         : nullptr;
+    const std::string option = on != nullptr && *on ? "--no-" + flag : "--" + flag;
+    EXPECT_NE(help.find(option), std::string::npos) << option;
+    if (on != nullptr) continue;
+    ++numeric;
+    const auto bad = run_seqloc({"localize", "/nonexistent.gpkg", "/nonexistent-route", "-o", "/tmp/never", option + "=-1"});
+    EXPECT_EQ(bad.exit_code, 2) << option;
+    EXPECT_NE(bad.err.find(name + " = -1"), std::string::npos) << option << ": " << bad.err;
+  }
+  EXPECT_GE(numeric, 9);
+  // The names of earlier releases still work.
+  EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--epsilon", "2"}).err.find("mgr_epsilon = 2"),
+            std::string::npos);
+  EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--sigma=-1"}).err.find("mgr_sigma_m = -1"),
+            std::string::npos);
 }
 
 TEST(Cli, ServeRefusesWhatItCannotServe) {

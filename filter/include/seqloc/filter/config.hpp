@@ -55,7 +55,8 @@ struct FilterConfig {
 };
 
 /// One field of FilterConfig for the tools that set fields by name (the Python module's config
-/// dict and its help): its name, the member, and a line saying what it is.
+/// dict and its help, the command line's options): its name, the member, and a line saying what it
+/// is (for a switch: what it turns on).
 struct FilterConfigField {
   const char* name;
   std::variant<int FilterConfig::*, double FilterConfig::*, bool FilterConfig::*> member;

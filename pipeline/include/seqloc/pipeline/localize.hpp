@@ -157,7 +157,8 @@ struct BatchResult {
   std::size_t peak_frame_memory_bytes = 0;  ///< the largest float16 memory one route's frames took
 };
 
-/// Runs every mode on every route: (route, mode) jobs side by side on options.filter.threads
+/// Runs every mode on every route: every route's crops are checked (check_crops) before any job
+/// starts, then (route, mode) jobs run side by side on options.filter.threads
 /// threads (one filter thread each when there are several jobs, all of them for a single job).
 /// The modes of a route share its frames through a FrameStore, so each volume is scored or read
 /// once. `on_frame` (optional) is called after each frame of each job, from the worker threads.
