@@ -6,20 +6,18 @@
 //   bench_paper_tables --work DIR --out DIR [--window 160] [--threads 2]
 // DIR/<region>.gpkg and DIR/<region>-routes/route_* must exist (bench/paper_tables/run makes them).
 
-#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <mutex>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "seqloc/pipeline/job_pool.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/render.hpp"
@@ -193,22 +191,14 @@ int main(int argc, char** argv) {
       }
       // Every configuration, side by side, one filter thread each.
       std::vector<pipeline::RouteResult> results(all.size());
-      std::atomic<std::size_t> next{0};
-      auto work_on = [&] {
-        for (std::size_t c = next++; c < all.size(); c = next++) {
-          pipeline::LocalizeOptions o = options;
-          o.filter.threads = 1;
-          all[c].tweak(o.filter);
-          pipeline::Route r = route;
-          if (all[c].noise_t > 0) pipeline::perturb_odometry(r, all[c].noise_t, all[c].noise_r, 1000 + c);
-          results[c] = pipeline::localize_route(r, cache, o, all[c].mode, {}, all[c].sharpen != 1 ? sharpened : shared);
-        }
-      };
-      {
-        std::vector<std::jthread> pool;
-        for (int t = 1; t < threads; ++t) pool.emplace_back(work_on);
-        work_on();
-      }
+      pipeline::run_jobs(all.size(), threads, [&](std::size_t c) {
+        pipeline::LocalizeOptions o = options;
+        o.filter.threads = 1;
+        all[c].tweak(o.filter);
+        pipeline::Route r = route;
+        if (all[c].noise_t > 0) pipeline::perturb_odometry(r, all[c].noise_t, all[c].noise_r, 1000 + c);
+        results[c] = pipeline::localize_route(r, cache, o, all[c].mode, {}, all[c].sharpen != 1 ? sharpened : shared);
+      });
       for (std::size_t c = 0; c < all.size(); ++c) {
         auto& g = poses[all[c].name][group];
         g.insert(g.end(), results[c].poses.begin(), results[c].poses.end());

@@ -1,12 +1,10 @@
 #include "seqloc/pipeline/localize.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <iomanip>
 #include <mutex>
-#include <thread>
 #include <random>
 #include <sstream>
 
@@ -15,6 +13,7 @@
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/frame_store.hpp"
+#include "seqloc/pipeline/job_pool.hpp"
 #include "seqloc/pipeline/modes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/observation.hpp"
@@ -326,7 +325,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
   for (auto& s : shared) s.jobs_left = modes.size();
   BatchResult batch;
   batch.results.resize(jobs.size());
-  std::mutex mutex;  // guards shared, batch's counters and error
+  std::mutex mutex;  // guards shared and batch's counters
   auto store_for = [&](std::size_t r) {
     std::lock_guard lock(mutex);
     if (!shared[r].store) {
@@ -344,29 +343,11 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
     batch.peak_frame_memory_bytes = std::max(batch.peak_frame_memory_bytes, stats.peak_memory_bytes);
     shared[r].store.reset();
   };
-  std::atomic<std::size_t> next_job{0};
-  std::exception_ptr error;
-  std::atomic<bool> failed{false};
-  auto work = [&] {
-    try {
-      for (std::size_t j = next_job++; j < jobs.size() && !failed; j = next_job++) {
-        const auto store = store_for(jobs[j].route);
-        batch.results[j] =
-            run_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, on_frame, store->source(), {});
-        done_with(jobs[j].route);
-      }
-    } catch (...) {
-      std::lock_guard lock(mutex);
-      if (!error) error = std::current_exception();
-      failed = true;
-    }
-  };
-  {
-    std::vector<std::jthread> pool;
-    for (int w = 1; w < workers; ++w) pool.emplace_back(work);
-    work();
-  }
-  if (error) std::rethrow_exception(error);
+  run_jobs(jobs.size(), workers, [&](std::size_t j) {
+    const auto store = store_for(jobs[j].route);
+    batch.results[j] = run_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, on_frame, store->source(), {});
+    done_with(jobs[j].route);
+  });
   return batch;
 }
 
