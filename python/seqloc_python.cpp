@@ -24,13 +24,12 @@
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
 #include "seqloc/raster/cache.hpp"
-#include "seqloc/serve/map_layers.hpp"
+#include "seqloc/raster/crop_window.hpp"
 
 namespace py = pybind11;
 namespace filter = seqloc::filter;
 namespace pipeline = seqloc::pipeline;
 namespace raster = seqloc::raster;
-namespace serve = seqloc::serve;
 
 namespace {
 
@@ -94,11 +93,11 @@ class PyCache {
                 double prior_sigma_m, double max_size_m, const py::object& x, const py::object& y) {
     const PointArgument at =
         point_argument(lat, lon, x, y, "crop: give lat and lon (WGS84), or x and y (region CRS metres)");
-    serve::CropWindow w;
+    raster::CropWindow w;
     {
       py::gil_scoped_release release;
-      w = at.geo ? serve::locate_crop(*cache_, at.a, at.b, size_m, max_size_m)
-                 : serve::locate_crop_xy(*cache_, at.a, at.b, size_m, max_size_m);
+      w = at.geo ? raster::locate_crop(*cache_, at.a, at.b, size_m, max_size_m)
+                 : raster::locate_crop_xy(*cache_, at.a, at.b, size_m, max_size_m);
     }
     const auto n = static_cast<py::ssize_t>(w.size);
     py::dict out;
@@ -110,11 +109,14 @@ class PyCache {
     out["cell_m"] = raster::kCellM;
     out["geotransform"] = py::make_tuple(west, raster::kCellM, 0.0, north, 0.0, -raster::kCellM);
     out["crs_wkt"] = cache_->metadata().projection().wkt();
-    std::vector<std::uint16_t> cm;
     for (const auto& name : layers) {
-      const auto layer = serve::parse_layer(name);
-      if (!layer) throw py::value_error("unknown layer '" + name + "' (classes, road_distance, road_prior)");
-      if (*layer == serve::MapLayer::classes) {
+      if (name != "classes" && name != "road_distance" && name != "road_prior") {
+        throw py::value_error("unknown layer '" + name + "' (classes, road_distance, road_prior)");
+      }
+    }
+    std::vector<float> metres;
+    for (const auto& name : layers) {
+      if (name == "classes") {
         std::vector<std::uint8_t> rgb;
         {
           py::gil_scoped_release release;
@@ -123,13 +125,13 @@ class PyCache {
         out["classes"] = adopt(std::move(rgb), {n, n, 3});
         continue;
       }
-      if (cm.empty()) {
+      if (metres.empty()) {
         py::gil_scoped_release release;
-        cache_->read_road_distance(w.u0, w.v0, w.size, w.size, cm, true);
+        cache_->read_road_distance_m(w.u0, w.v0, w.size, w.size, metres, true);
       }
-      std::vector<float> values = *layer == serve::MapLayer::road_distance ? serve::road_distance_m(cm)
-                                                                           : serve::road_prior(cm, prior_sigma_m);
-      out[py::str(name)] = adopt(std::move(values), {n, n});
+      // The served layers' values: raster's metres, the filter's g.
+      out[py::str(name)] = name == "road_distance" ? adopt(std::vector<float>(metres), {n, n})
+                                                   : adopt(filter::road_prior_g(metres, prior_sigma_m), {n, n});
     }
     return out;
   }
@@ -389,13 +391,13 @@ PYBIND11_MODULE(seqloc, m) {
   m.attr("__version__") = SEQLOC_VERSION;
   py::register_exception<raster::CacheError>(m, "CacheError", PyExc_OSError);
   py::register_exception<filter::FilterError>(m, "FilterError", PyExc_ValueError);
-  py::register_exception<serve::RequestError>(m, "RequestError", PyExc_ValueError);
+  py::register_exception<raster::CropError>(m, "RequestError", PyExc_ValueError);
 
   py::class_<PyCache>(m, "Cache", "A region cache (GeoPackage) opened read-only")
       .def(py::init<const std::string&, std::size_t>(), py::arg("path"), py::arg("lru_tiles") = 64)
       .def("crop", &PyCache::crop, py::arg("lat") = py::none(), py::arg("lon") = py::none(), py::arg("size_m") = 128.0,
            py::arg("layers") = std::vector<std::string>{"classes", "road_distance", "road_prior"},
-           py::arg("prior_sigma_m") = serve::LayerOptions{}.prior_sigma_m, py::arg("max_size_m") = serve::kDefaultMaxCropM,
+           py::arg("prior_sigma_m") = filter::FilterConfig{}.mgr_sigma_m, py::arg("max_size_m") = raster::kDefaultMaxCropM,
            py::kw_only(), py::arg("x") = py::none(), py::arg("y") = py::none(),
            "North-up crop in region-grid cells (conventions.md section 4: crop_x, crop_y) around a WGS84 point "
            "(lat, lon) or a region point in metres (x=, y=)")

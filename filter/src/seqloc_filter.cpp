@@ -204,6 +204,19 @@ Pose single_frame_pose(const PreparedFrame& frame, const CropPose& crop) {
   return volume_cell_pose(frame, crop, frame.argmax_v, frame.argmax_u, frame.argmax_bin);
 }
 
+std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_m) {
+  std::vector<float> g(distance_m.size());
+  float last = 0, value = 1.0f;
+  for (std::size_t i = 0; i < distance_m.size(); ++i) {
+    if (i == 0 || distance_m[i] != last) {
+      last = distance_m[i];
+      value = static_cast<float>(road_prior_g(static_cast<double>(last), sigma_m));
+    }
+    g[i] = value;
+  }
+  return g;
+}
+
 std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int height, int headings, double sigma_m) {
   const std::size_t n = static_cast<std::size_t>(width) * height;
   std::vector<double> g(n);

@@ -4,7 +4,6 @@
 #include <array>
 #include <bit>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 
 #include "seqloc/filter/seqloc_filter.hpp"
@@ -80,19 +79,7 @@ void LayerOptions::validate() const {
 }
 
 std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m) {
-  // filter::road_prior_g; runs of equal distances (far from roads, the clamp) reuse the last
-  // value instead of another exp.
-  std::vector<float> g(cm.size());
-  std::uint16_t last = 0;
-  float last_value = 1.0f;
-  for (std::size_t i = 0; i < cm.size(); ++i) {
-    if (i == 0 || cm[i] != last) {
-      last = cm[i];
-      last_value = static_cast<float>(filter::road_prior_g(cm[i] * 0.01, sigma_m));
-    }
-    g[i] = last_value;
-  }
-  return g;
+  return filter::road_prior_g(road_distance_m(cm), sigma_m);
 }
 
 MapBlock describe_block(const raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
@@ -165,73 +152,29 @@ MapBlock read_tile(raster::CacheReader& cache, MapLayer layer, std::int64_t col,
 }
 
 namespace {
-std::string metres(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-}  // namespace
 
-namespace {
-
-// The crop side in cells, after checking it.
-int crop_cells(double size_m, double max_size_m) {
-  using Kind = RequestError::Kind;
-  if (!std::isfinite(size_m) || size_m < raster::kCellM) {
-    throw RequestError(Kind::bad_request, "size_m: must be at least one cell (0.5 m)");
+// raster's crop placement, its errors as HTTP's.
+template <class F>
+CropWindow placed(F&& locate) {
+  try {
+    return locate();
+  } catch (const raster::CropError& e) {
+    throw RequestError(e.kind() == raster::CropError::Kind::outside ? RequestError::Kind::not_found
+                                                                    : RequestError::Kind::bad_request,
+                       e.what());
   }
-  if (size_m > max_size_m) {
-    throw RequestError(Kind::bad_request, "size_m: " + metres(size_m) + " m is above the limit of " +
-                                              metres(max_size_m) + " m");
-  }
-  return static_cast<int>(std::lround(size_m / raster::kCellM));
-}
-
-bool inside(const raster::RegionGrid& grid, double x_m, double y_m) {
-  return x_m >= grid.min_x() && x_m < grid.max_x() && y_m >= grid.min_y() && y_m < grid.max_y();
-}
-
-// Region pixel coordinates are integral at cell centres: an odd side centres on the cell holding
-// the point, an even side on the cell corner nearest to it (corner c lies at c - 0.5).
-CropWindow window_around(const raster::RegionGrid& grid, double x_m, double y_m, int n) {
-  const double u = grid.region_u(x_m), v = grid.region_v(y_m);
-  const auto centre = [n](double t) {
-    return n % 2 ? static_cast<std::int64_t>(std::floor(t + 0.5)) : static_cast<std::int64_t>(std::floor(t + 1.0));
-  };
-  return {centre(u) - n / 2, centre(v) - n / 2, n};
 }
 
 }  // namespace
 
 CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
                        double max_size_m) {
-  using Kind = RequestError::Kind;
-  if (!std::isfinite(lat_deg) || !std::isfinite(lon_deg) || std::abs(lat_deg) > 90 || std::abs(lon_deg) > 180) {
-    throw RequestError(Kind::bad_request, "lat/lon: not a WGS84 coordinate");
-  }
-  const int n = crop_cells(size_m, max_size_m);
-  const osm::GridPoint p = cache.metadata().projection().forward({lat_deg, lon_deg});
-  if (!inside(cache.grid(), p.x_m, p.y_m)) {
-    throw RequestError(Kind::not_found, "the point (lat " + metres(lat_deg) + ", lon " + metres(lon_deg) +
-                                            ") is outside the region of " + cache.path().filename().string());
-  }
-  return window_around(cache.grid(), p.x_m, p.y_m, n);
-}
-
-CropWindow locate_crop_xy(const raster::CacheReader& cache, double x_m, double y_m, double size_m, double max_size_m) {
-  using Kind = RequestError::Kind;
-  if (!std::isfinite(x_m) || !std::isfinite(y_m)) throw RequestError(Kind::bad_request, "x/y: not finite");
-  const int n = crop_cells(size_m, max_size_m);
-  if (!inside(cache.grid(), x_m, y_m)) {
-    throw RequestError(Kind::not_found, "the point (x " + metres(x_m) + " m, y " + metres(y_m) +
-                                            " m) is outside the region of " + cache.path().filename().string());
-  }
-  return window_around(cache.grid(), x_m, y_m, n);
+  return placed([&] { return raster::locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m); });
 }
 
 MapBlock read_crop(raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
                    const std::vector<MapLayer>& layers, const LayerOptions& options, double max_size_m) {
-  const CropWindow w = locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m);
+  const CropWindow w = serve::locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m);
   if (layers.empty()) throw RequestError(RequestError::Kind::bad_request, "layers: no layer requested");
   return read_block(cache, w.u0, w.v0, w.size, w.size, layers, options, /*fill_outside=*/true);
 }

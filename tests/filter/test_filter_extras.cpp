@@ -285,5 +285,19 @@ TEST(FilterConfigFields, EachNameReachesItsOwnMember) {
   }
 }
 
+// The block form of g (the served road_prior layer, the Python module's crops): each value is the
+// scalar g of its distance, runs of equal distances included; g(0) = 1, g(sigma) = e^-1/2.
+TEST(RoadPrior, TheBlockFormIsTheScalarGOfEachDistance) {
+  const std::vector<float> d = {0.0f, 0.0f, 3.0f, 3.0f, 3.0f, 1.25f, 100.0f, 100.0f, 0.0f, 2.5f};
+  const auto g = road_prior_g(d, 3.0);
+  ASSERT_EQ(g.size(), d.size());
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    EXPECT_EQ(g[i], static_cast<float>(road_prior_g(static_cast<double>(d[i]), 3.0))) << i;
+  }
+  EXPECT_EQ(g[0], 1.0f);
+  EXPECT_FLOAT_EQ(g[2], static_cast<float>(std::exp(-0.5)));
+  EXPECT_TRUE(road_prior_g(std::vector<float>{}, 3.0).empty());
+}
+
 }  // namespace
 }  // namespace seqloc::filter

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "seqloc/raster/cache.hpp"
+#include "seqloc/raster/crop_window.hpp"
 #include "seqloc/raster/tile_renderer.hpp"
 #include "support/test_support.hpp"
 
@@ -190,6 +191,60 @@ TEST_F(CacheTest, OutsideTheRegionIsAnErrorNamingTheTile) {
   EXPECT_EQ(cm[0], 10000) << "outside the region: the clamp";
   reader.read_classes(1530, 1530, 20, 20, rgb, true);
   EXPECT_EQ(rgb.back(), 0) << "outside the region: background";
+}
+
+// A crop of an odd side is centred on the cell holding the point, of an even side on the nearest
+// cell corner: counted here from the grid's edges, independently of the region-pixel arithmetic.
+TEST_F(CacheTest, CropWindowsCentreOnTheCellOrCornerOfThePoint) {
+  build(dir / "r.gpkg", renderer, features, test_metadata());
+  const CacheReader reader(dir / "r.gpkg");
+  const auto& grid = reader.grid();
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> x(grid.min_x(), grid.max_x()), y(grid.min_y(), grid.max_y());
+  for (int k = 0; k < 200; ++k) {
+    const double px = x(rng), py = y(rng);
+    for (const double size_m : {0.5, 10.0, 10.5, 64.0, 333.5}) {
+      const CropWindow w = locate_crop_xy(reader, px, py, size_m);
+      const int n = static_cast<int>(std::lround(size_m / kCellM));
+      ASSERT_EQ(w.size, n);
+      const double west = grid.min_x() + static_cast<double>(w.u0) * kCellM;
+      const double north = grid.max_y() - static_cast<double>(w.v0) * kCellM;
+      const double cx = west + n * kCellM / 2, cy = north - n * kCellM / 2;
+      if (n % 2) {
+        EXPECT_DOUBLE_EQ(cx, grid.min_x() + (std::floor((px - grid.min_x()) / kCellM) + 0.5) * kCellM) << px;
+        EXPECT_DOUBLE_EQ(cy, grid.max_y() - (std::floor((grid.max_y() - py) / kCellM) + 0.5) * kCellM) << py;
+      } else {
+        EXPECT_DOUBLE_EQ(cx, grid.min_x() + std::round((px - grid.min_x()) / kCellM) * kCellM) << px;
+        EXPECT_DOUBLE_EQ(cy, grid.max_y() - std::round((grid.max_y() - py) / kCellM) * kCellM) << py;
+      }
+    }
+  }
+  // By lat/lon: the same window as by the point's region coordinates.
+  const auto& projection = reader.metadata().projection();
+  const osm::GridPoint p = projection.forward({47.5005, 10.5003});
+  const CropWindow by_geo = locate_crop(reader, 47.5005, 10.5003, 64.0);
+  const CropWindow by_xy = locate_crop_xy(reader, p.x_m, p.y_m, 64.0);
+  EXPECT_EQ(by_geo.u0, by_xy.u0);
+  EXPECT_EQ(by_geo.v0, by_xy.v0);
+  // What cannot be placed, and why.
+  const auto kind_of = [](auto&& locate) {
+    try {
+      (void)locate();
+    } catch (const CropError& e) {
+      return e.kind();
+    }
+    ADD_FAILURE() << "no CropError";
+    return CropError::Kind::bad_argument;
+  };
+  using Kind = CropError::Kind;
+  EXPECT_EQ(kind_of([&] { return locate_crop_xy(reader, grid.max_x() + 1, 0, 64); }), Kind::outside);
+  EXPECT_EQ(kind_of([&] { return locate_crop_xy(reader, 0, grid.min_y() - 0.01, 64); }), Kind::outside);
+  EXPECT_EQ(kind_of([&] { return locate_crop(reader, 0.0, 0.0, 64); }), Kind::outside);
+  EXPECT_EQ(kind_of([&] { return locate_crop_xy(reader, 0, 0, 0.2); }), Kind::bad_argument);
+  EXPECT_EQ(kind_of([&] { return locate_crop_xy(reader, 0, 0, 2000); }), Kind::bad_argument);  // above 1,024 m
+  EXPECT_EQ(kind_of([&] { return locate_crop_xy(reader, 0, 0, 200, 100); }), Kind::bad_argument);
+  EXPECT_EQ(kind_of([&] { return locate_crop_xy(reader, std::nan(""), 0, 64); }), Kind::bad_argument);
+  EXPECT_EQ(kind_of([&] { return locate_crop(reader, 91.0, 10.5, 64); }), Kind::bad_argument);
 }
 
 TEST_F(CacheTest, ForeignAndOtherVersionFilesAreRefused) {

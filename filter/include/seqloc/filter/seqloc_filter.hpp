@@ -19,6 +19,7 @@
 #include <cmath>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "seqloc/filter/belief.hpp"
@@ -70,6 +71,10 @@ struct PreparedFrame {
 [[nodiscard]] inline double road_prior_g(double distance_m, double sigma_m) {
   return std::exp(-distance_m * distance_m / (2 * sigma_m * sigma_m));
 }
+
+/// g of each distance, as float: the road_prior layer of a block of road distances (runs of equal
+/// distances, as far from roads, reuse one exp).
+[[nodiscard]] std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_m);
 
 /// The road prior of MGR over the window: log q(x) for every cell (one heading's share).
 /// `road_distance_m` is W x H, row-major (v, u).

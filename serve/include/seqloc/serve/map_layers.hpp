@@ -17,6 +17,7 @@
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/raster/cache.hpp"
+#include "seqloc/raster/crop_window.hpp"
 
 namespace seqloc::serve {
 
@@ -93,22 +94,13 @@ void require_tile(const raster::CacheReader& cache, std::int64_t col, std::int64
                                  const LayerOptions& options);
 
 /// Largest crop side served unless configured otherwise: 1,024 m (2,048 cells).
-inline constexpr double kDefaultMaxCropM = 1024;
+using raster::kDefaultMaxCropM;
+using raster::CropWindow;
 
-/// Where a crop lies: its north-west region pixel and its side in cells.
-struct CropWindow {
-  std::int64_t u0 = 0, v0 = 0;
-  int size = 0;
-};
-
-/// The window of read_crop (below), validated the same way.
+/// The window of read_crop (below): raster::locate_crop, its errors as RequestError (bad request,
+/// or not found for a point outside the region).
 [[nodiscard]] CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
                                      double max_size_m = kDefaultMaxCropM);
-/// The same for a centre given in the region CRS (metres), as conventions.md section 4's
-/// crop_x, crop_y; throws RequestError (not found) for a point outside the region.
-[[nodiscard]] CropWindow locate_crop_xy(const raster::CacheReader& cache, double x_m, double y_m, double size_m,
-                                        double max_size_m = kDefaultMaxCropM);
-
 /// A square crop of side `size_m` (rounded to whole cells) around a WGS84 point, in region-grid
 /// coordinates: its centre (crop_x, crop_y of conventions.md section 4) is the centre of the
 /// cell holding the point (odd sides) or the cell corner nearest to it (even sides), so the crop's
