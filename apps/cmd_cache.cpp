@@ -7,7 +7,6 @@
 #include <nlohmann/json.hpp>
 
 #include "command.hpp"
-#include "seqloc/pipeline/errors.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::app {

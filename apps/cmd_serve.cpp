@@ -1,7 +1,6 @@
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
-#include <pthread.h>
 #include <string>
 #include <thread>
 #include <vector>

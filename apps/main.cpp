@@ -8,9 +8,7 @@
 #include <vector>
 
 #include "command.hpp"
-#include "seqloc/osm/errors.hpp"
 #include "seqloc/pipeline/errors.hpp"
-#include "seqloc/raster/cache.hpp"
 
 namespace seqloc::app {
 

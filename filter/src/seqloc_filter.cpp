@@ -1,7 +1,6 @@
 #include "seqloc/filter/seqloc_filter.hpp"
 
 #include <algorithm>
-#include <cassert>
 #include <cmath>
 #include <limits>
 #include <sstream>

@@ -6,8 +6,6 @@
 #include <osmium/builder/osm_object_builder.hpp>
 #include <osmium/io/any_output.hpp>
 #include <osmium/memory/buffer.hpp>
-#include <osmium/object_pointer_collection.hpp>
-#include <osmium/osm/object_comparisons.hpp>
 
 #include "seqloc/osm/errors.hpp"
 

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <fstream>
 #include <iterator>
-#include <sstream>
 
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/errors.hpp"

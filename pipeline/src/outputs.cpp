@@ -9,7 +9,6 @@
 #include <cstdio>   // ::renameat2, RENAME_EXCHANGE (glibc)
 #include <cstring>
 #include <fstream>
-#include <sstream>
 
 #include <nlohmann/json.hpp>
 

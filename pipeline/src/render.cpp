@@ -8,16 +8,12 @@
 #include <fstream>
 #include <functional>
 #include <limits>
-#include <sstream>
 #include <stdexcept>
 
-#include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/pipeline/volume_shape.hpp"
 #include "seqloc/raster/palette.hpp"
 #include "seqloc/raster/png_codec.hpp"

@@ -8,7 +8,6 @@
 #include <locale>
 #include <map>
 #include <random>
-#include <sstream>
 #include <stdexcept>
 
 #include <nlohmann/json.hpp>

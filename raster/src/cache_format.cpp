@@ -3,8 +3,6 @@
 
 #include <algorithm>
 #include <bit>
-#include <cassert>
-#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <ctime>

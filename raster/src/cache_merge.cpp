@@ -3,7 +3,6 @@
 
 #include <set>
 
-#include "seqloc/raster/png_codec.hpp"
 #include "cache_format.hpp"
 #include "sqlite.hpp"
 

@@ -3,11 +3,8 @@
 
 #include <algorithm>
 #include <cassert>
-#include <chrono>
-#include <ctime>
 #include <utility>
 
-#include "seqloc/osm/classes.hpp"
 #include "seqloc/raster/png_codec.hpp"
 #include "cache_format.hpp"
 #include "sqlite.hpp"

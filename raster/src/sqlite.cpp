@@ -1,5 +1,7 @@
 #include "sqlite.hpp"
 
+#include "seqloc/raster/cache.hpp"
+
 namespace seqloc::raster::detail {
 
 Database::Database(const std::string& path, int flags) : path_(path) {

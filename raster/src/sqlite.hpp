@@ -8,7 +8,6 @@
 
 #include <sqlite3.h>
 
-#include "seqloc/raster/cache.hpp"
 
 namespace seqloc::raster::detail {
 

@@ -5,12 +5,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <mutex>
 #include <unistd.h>
 
 #include <cpl_conv.h>
 #include <cpl_error.h>
-#include <cpl_string.h>
 #include <cpl_vsi.h>
 #include <gdal.h>
 

@@ -2,13 +2,10 @@
 #include "seqloc/serve/service.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <optional>
-#include <sstream>
 
-#include "seqloc/osm/classes.hpp"
 #include "service_internal.hpp"
 
 namespace seqloc::serve {

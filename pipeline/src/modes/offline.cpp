@@ -2,7 +2,6 @@
 // own crop and aligned to t by the relative motion, their log-likelihoods summed
 // (filter::OfflineAggregator, which keeps each frame's placement while it stays in range).
 #include <algorithm>
-#include <optional>
 
 #include "factories.hpp"
 #include "seqloc/filter/offline.hpp"

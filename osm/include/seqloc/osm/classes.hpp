@@ -2,7 +2,6 @@
 // The semantic classes of the raster (conventions.md section 2): three channels, each a list of
 // groups. A pixel stores 0 for background, otherwise 1 + the group's index in its channel's list.
 
-#include <array>
 #include <cstdint>
 #include <optional>
 #include <span>

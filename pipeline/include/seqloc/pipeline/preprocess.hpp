@@ -1,7 +1,6 @@
 #pragma once
 // Region preprocessing: an OSM file becomes a region cache (conventions.md sections 1-3).
 
-#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <functional>

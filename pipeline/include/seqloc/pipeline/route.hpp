@@ -9,7 +9,7 @@
 
 #include "seqloc/filter/types.hpp"
 #include "seqloc/osm/projection.hpp"
-#include "seqloc/pipeline/npy.hpp"
+#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::pipeline {
 

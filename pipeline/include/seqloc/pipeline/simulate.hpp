@@ -7,8 +7,6 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
-#include <string>
-#include <vector>
 
 #include "seqloc/pipeline/observation.hpp"
 #include "seqloc/raster/cache.hpp"
