@@ -66,20 +66,10 @@ std::int64_t count_outside(const raster::RegionGrid& grid, std::int64_t u0, std:
 
 }  // namespace
 
-std::vector<float> road_distance_m(std::span<const std::uint16_t> cm) {
-  std::vector<float> metres(cm.size());
-  std::transform(cm.begin(), cm.end(), metres.begin(), raster::road_distance_metres);
-  return metres;
-}
-
 void LayerOptions::validate() const {
   if (!(prior_sigma_m > 0) || !std::isfinite(prior_sigma_m)) {
     throw RequestError(RequestError::Kind::bad_request, "layer options: prior_sigma_m = " + std::to_string(prior_sigma_m) + ": must be finite and > 0");
   }
-}
-
-std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m) {
-  return filter::road_prior_g(road_distance_m(cm), sigma_m);
 }
 
 MapBlock describe_block(const raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int width, int height,
@@ -107,9 +97,10 @@ MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0
   MapBlock block = describe_block(cache, u0, v0, width, height, layers);
   const std::size_t n = cells(width, height);
 
-  std::vector<std::uint16_t> cm;
+  // Road distances in metres (raster's conversion), read once for both layers made from them.
+  std::vector<float> metres;
   const bool wants_distance = std::any_of(layers.begin(), layers.end(), [](MapLayer l) { return l != MapLayer::classes; });
-  if (wants_distance) cache.read_road_distance(u0, v0, width, height, cm, fill_outside);
+  if (wants_distance) cache.read_road_distance_m(u0, v0, width, height, metres, fill_outside);
 
   auto band = block.bands.begin();  // in the order describe_block named them
   for (MapLayer layer : layers) {
@@ -124,10 +115,10 @@ MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0
         break;
       }
       case MapLayer::road_distance:
-        (band++)->f32 = road_distance_m(cm);
+        (band++)->f32 = metres;
         break;
       case MapLayer::road_prior:
-        (band++)->f32 = road_prior(cm, options.prior_sigma_m);
+        (band++)->f32 = filter::road_prior_g(metres, options.prior_sigma_m);
         break;
     }
   }

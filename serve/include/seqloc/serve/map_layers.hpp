@@ -42,10 +42,6 @@ inline constexpr MapLayer kAllLayers[] = {MapLayer::classes, MapLayer::road_dist
 /// Throws RequestError naming the unknown or repeated name.
 [[nodiscard]] std::vector<MapLayer> parse_layer_list(std::string_view names);
 
-/// The cache's road distance (UInt16 centimetres) as metres, and as the road prior g.
-[[nodiscard]] std::vector<float> road_distance_m(std::span<const std::uint16_t> cm);
-[[nodiscard]] std::vector<float> road_prior(std::span<const std::uint16_t> cm, double sigma_m);
-
 /// One band of a block: its name and its values, row-major.
 struct Band {
   std::string name;  ///< e.g. "classes.areas", "road_distance"
@@ -101,6 +97,7 @@ using raster::CropWindow;
 /// or not found for a point outside the region).
 [[nodiscard]] CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
                                      double max_size_m = kDefaultMaxCropM);
+
 /// A square crop of side `size_m` (rounded to whole cells) around a WGS84 point, in region-grid
 /// coordinates: its centre (crop_x, crop_y of conventions.md section 4) is the centre of the
 /// cell holding the point (odd sides) or the cell corner nearest to it (even sides), so the crop's
