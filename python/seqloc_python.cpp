@@ -205,6 +205,11 @@ py::dict pose_dict(const filter::Pose& p) {
   return d;
 }
 
+/// A belief's position marginal as a (height, width) float32 array.
+py::array_t<float> marginal_array(const filter::BeliefVolume& belief) {
+  return adopt(belief.position_marginal(), {belief.height(), belief.width()});
+}
+
 /// A volume argument as the filter reads it: (H, W, N) float32 or float16, C order, kept alive by
 /// `holder`.
 filter::FrameVolume volume_view(const py::object& value, bool probabilities, double cell_m, py::array& holder) {
@@ -289,10 +294,7 @@ class PyFilter {
   void recentre(int du, int dv) { filter_.recentre(du, dv); }
 
   /// The belief summed over headings, (height, width) float32: a probability per window cell.
-  py::array_t<float> belief_marginal() const {
-    const auto& b = filter_.belief();
-    return adopt(b.position_marginal(), {b.height(), b.width()});
-  }
+  py::array_t<float> belief_marginal() const { return marginal_array(filter_.belief()); }
 
  private:
   filter::SeqLocFilter filter_;
@@ -366,8 +368,7 @@ class PyLocalizer {
   [[nodiscard]] py::object belief_marginal() const {
     const auto* f = localizer_->filter();
     if (!f) return py::none();
-    const auto& b = f->belief();
-    return adopt(b.position_marginal(), {b.height(), b.width()});
+    return marginal_array(f->belief());
   }
 
   [[nodiscard]] py::tuple window_origin() const {

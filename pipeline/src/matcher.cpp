@@ -307,7 +307,7 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
   // indicator T_o. The indicators of one channel's codes partition the visible disc V, so with one
   // reference code r(c) per channel, sum_o T_o s(o) = V * sum_c s(r(c)) + sum_{o != r} T_o (s(o) -
   // s(r(c))): a frame costs one template for V plus one per code beyond the first of each channel
-  // (about 3 instead of 5 on rural frames), exactly.
+  // (about 3 instead of 5 on rural frames); the same sum, up to float rounding.
   const auto codes = observed_codes(observation);
   std::vector<std::vector<float>> bodies;  // [0]: V; then the non-reference codes
   std::vector<std::vector<float>> terms;   // the map term each body is correlated with

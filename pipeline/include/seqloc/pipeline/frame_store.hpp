@@ -26,10 +26,6 @@ namespace seqloc::pipeline {
 /// Every consumer receives the same values, the float16 ones, so a mode gives the same poses
 /// whether it runs alone or beside others. A frame asked for more than `readers` times is made
 /// again. An error of `source` reaches the consumer that asks for that frame (each one that does).
-/// What a frame's log-probabilities become in a FrameStore (float16, NumPy's rounding): a loop
-/// that feeds frames itself applies this to get localize's poses exactly.
-void round_like_frame_store(filter::PreparedFrame& frame);
-
 class FrameStore {
  public:
   struct Stats {
@@ -82,5 +78,9 @@ class FrameStore {
   std::size_t memory_bytes_ = 0;
   Stats stats_;
 };
+
+/// What a frame's log-probabilities become in a FrameStore (float16, NumPy's rounding): a loop
+/// that feeds frames itself applies this to get localize's poses exactly.
+void round_like_frame_store(filter::PreparedFrame& frame);
 
 }  // namespace seqloc::pipeline
