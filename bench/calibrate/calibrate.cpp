@@ -89,15 +89,15 @@ EtuFit report_etu(std::vector<TemperedFrame> frames) {
     return sum / static_cast<double>(n);
   };
   std::printf("\nETU on the calibrated frames, mean NLL of the true cell in normalize(p^w(H)):\n  %-18s", "H_ref");
-  for (const double r : kReferences) std::printf(" %11s", reference_label(r).c_str());
+  for (const double r : kReferences) std::printf(" %13s", reference_label(r).c_str());
   std::printf("\n  %-18s", "all frames");
   for (std::size_t k = 0; k < kReferences.size(); ++k) {
     fit.nll.push_back(mean_nll(k, -1));
-    std::printf(" %11.3f", fit.nll.back());
+    std::printf(" %13.3f", fit.nll.back());
   }
   fit.best_reference = kReferences[static_cast<std::size_t>(std::min_element(fit.nll.begin(), fit.nll.end()) - fit.nll.begin())];
   std::printf("\n  %-18s", "alternate frames");
-  for (std::size_t k = 0; k < kReferences.size(); ++k) std::printf(" %5.3f/%5.3f", mean_nll(k, 0), mean_nll(k, 1));
+  for (std::size_t k = 0; k < kReferences.size(); ++k) std::printf(" %6.3f/%6.3f", mean_nll(k, 0), mean_nll(k, 1));
   std::printf("\n  per fifth by entropy, at fixed w:\n  %-18s", "entropy");
   for (const double w : kWeights) std::printf(" w=%-6.3g", w);
   std::printf("\n");
