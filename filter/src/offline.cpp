@@ -190,24 +190,14 @@ Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::si
     const double p = motion.yaw_deg * R / 360.0, floor_p = std::floor(p);
     const auto a = static_cast<float>(p - floor_p);
     const int shift = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
-    // As when frames were placed in the window itself: a source point outside the window is
-    // unobserved, whatever the canvas holds there.
+    // The whole canvas counts, wherever the frame's crop lies: the window only bounds where t's
+    // pose is sought. (Reading only the part of a crop inside the window, as if the frames were
+    // placed in it, dropped every frame whose crop lay beyond it, so aggregating more frames made
+    // the poses worse: 38.6 % R@5m with all frames against 45.3 % with +-10 on a development set.)
     auto translated = [&](int j, float* dst) {
       double du = 0, dv = 0;
       detail::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
       detail::translate(values.slice(j), values.width(), values.height(), dst, bw, bh, ou - du, ov - dv, nan);
-      // Box cell (x, y) reads the window at (x + bu0 - du, y + bv0 - dv).
-      const int x_lo = static_cast<int>(std::ceil(du - bu0)), x_hi = static_cast<int>(std::floor(W - 1 + du - bu0));
-      const int y_lo = static_cast<int>(std::ceil(dv - bv0)), y_hi = static_cast<int>(std::floor(H - 1 + dv - bv0));
-      for (int y = 0; y < bh; ++y) {
-        float* row = dst + static_cast<std::size_t>(y) * bw;
-        if (y < y_lo || y > y_hi) {
-          std::fill(row, row + bw, nan);
-          continue;
-        }
-        std::fill(row, row + std::clamp(x_lo, 0, bw), nan);
-        std::fill(row + std::clamp(x_hi + 1, 0, bw), row + bw, nan);
-      }
     };
     detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
       std::vector<float> buffer_a(box), buffer_b(box), mixed(box);

@@ -106,6 +106,42 @@ TEST(Baselines, OfflineRecoversAStraightRoute) {
   }
 }
 
+// Offline sums all frames, not only those whose crops fall in the window where t's pose is
+// sought. The vehicle drives north 4 m a frame; every frame but the first sees two parallel
+// "roads", the false one (3 cells east) a little likelier; only the first frame tells them apart.
+// Its crop lies beyond the window centred on the last frames, whose poses need it all the same.
+TEST(Baselines, OfflineUsesFramesWhoseCropsLieBeyondTheWindow) {
+  const FilterConfig c = config(40, 48, 16);
+  const int n = 8;
+  std::vector<std::vector<float>> volumes;
+  volumes.reserve(static_cast<std::size_t>(n));
+  for (int t = 0; t < n; ++t) {
+    auto vol = bump(9, 9, 16, 4, 4, 0);
+    if (t > 0) {
+      const auto parallel = bump(9, 9, 16, 4, 7, 0);
+      for (std::size_t i = 0; i < vol.size(); ++i) vol[i] = std::max(vol[i], parallel[i] + 0.3f);
+    }
+    volumes.push_back(vol);
+  }
+  std::vector<PreparedFrame> frames;
+  frames.reserve(static_cast<std::size_t>(n));
+  for (const auto& v : volumes) frames.push_back(prepare_frame(view(v, 9, 9, 16), 16));
+  std::vector<OfflineFrame> input;
+  input.reserve(static_cast<std::size_t>(n));
+  for (int t = 0; t < n; ++t) {
+    // Window rows 76 (beyond the 48-row window) to 20: 8 cells north a frame.
+    input.push_back({&frames[static_cast<std::size_t>(t)], CropPose{20, 76.0 - 8 * t, 0},
+                     Odometry{t == 0 ? 0.0 : 4.0, 0, 0}});
+  }
+  ASSERT_EQ(single_frame_pose(frames[n - 1], input[n - 1].crop).u, 23) << "the last frame alone takes the false road";
+  const auto poses = offline_poses(input, c);
+  for (int t = 5; t < n; ++t) {  // the frames whose own crops lie in the window
+    EXPECT_EQ(poses[static_cast<std::size_t>(t)].u, 20) << t;
+    EXPECT_EQ(poses[static_cast<std::size_t>(t)].v, 76 - 8 * t) << t;
+    EXPECT_EQ(poses[static_cast<std::size_t>(t)].heading_deg, 0) << t;
+  }
+}
+
 // The aggregator keeps each frame's placement while the frame stays in range and moves it with
 // the window when the window moved by whole cells; every pose must equal a fresh placement's
 // (offline_pose_at places every frame anew), for straight and rotated crops, and a window moved

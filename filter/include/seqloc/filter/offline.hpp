@@ -36,8 +36,8 @@ struct OfflineFrame {
 /// resampled at every window heading on a canvas over its crop) rather than once per frame and
 /// neighbour: a placement is kept under the frame's key while the frame stays in range, and
 /// serves again when the window moved by whole cells. The sum of frame t is formed only over the
-/// cells of t's own crop (where its argmax is sought). The poses are those of placing every frame
-/// in the window and warping it whole, as the method is stated.
+/// cells of t's own crop (where its argmax is sought). Every frame in range counts whole, wherever
+/// its crop lies: the window bounds only where t's pose is sought, not which evidence is summed.
 class OfflineAggregator {
  public:
   explicit OfflineAggregator(const FilterConfig& config);
@@ -48,7 +48,8 @@ class OfflineAggregator {
   OfflineAggregator& operator=(const OfflineAggregator&) = delete;
 
   /// The pose of frame t from the frames s with |s - t| <= half_window (all when < 0), their
-  /// crops given in a window of the config (the caller may centre one on frame t).
+  /// crops given in the cells of a window of the config (the caller may centre one on frame t;
+  /// other frames' crops may lie beyond it).
   [[nodiscard]] Pose pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, int half_window = -1);
 
  private:
@@ -59,8 +60,9 @@ class OfflineAggregator {
   std::unique_ptr<Impl> impl_;
 };
 
-/// The pose of frame `t` alone: the frames' crops must be given in a window of `config` (the
-/// caller may centre one on frame t); frames s with |s - t| <= half_window (all when < 0) count.
+/// The pose of frame `t` alone: the frames' crops must be given in the cells of a window of
+/// `config` (the caller may centre one on frame t; other crops may lie beyond it); frames s with
+/// |s - t| <= half_window (all when < 0) count.
 [[nodiscard]] Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,
                                    int half_window = -1);
 
