@@ -14,6 +14,7 @@
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/filter/types.hpp"
 #include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 
@@ -47,9 +48,12 @@ TemperedFrame temper(std::vector<float> scores, double temperature, const pl::Vo
   for (float& s : scores) s = static_cast<float>(s / temperature);
   pl::calibrate_volume(scores, size, size, bins, calibration, 2);
   TemperedFrame f;
-  double h = 0;
-  for (const float x : scores) h -= std::exp(static_cast<double>(x)) * x;
-  f.entropy = std::clamp(h / std::log(static_cast<double>(scores.size())), 0.0, 1.0);
+  // The entropy ETU reads, as the filter's intake computes it.
+  namespace sf = seqloc::filter;
+  f.entropy = sf::prepare_frame(sf::FrameVolume{scores.data(), sf::VolumeType::float32, sf::VolumeValues::log_prob,
+                                                size, size, bins, 0.5},
+                                bins, 2)
+                  .entropy;
   for (const double r : kReferences) {
     const double w = r >= 1 ? 1.0 : seqloc::filter::etu_weight(f.entropy, r);
     f.at_reference.push_back(log_tempered_at(scores, truth, w));
