@@ -35,30 +35,27 @@ struct TemperedFrame {
   std::vector<double> at_weight;     // per kWeights
 };
 
-double log_tempered_at(const std::vector<float>& log_p, std::size_t truth, double w) {
-  double top = -1e300;
-  for (const float x : log_p) top = std::max(top, w * x);
-  double sum = 0;
-  for (const float x : log_p) sum += std::exp(w * x - top);
-  return w * log_p[truth] - top - std::log(sum);
+// The log of normalize(p^w) at the true cell, as the filter tempers a frame (filter::temper_frame).
+double log_tempered_at(const seqloc::filter::PreparedFrame& frame, std::size_t truth, double w) {
+  return seqloc::filter::temper_frame(frame, w).log_prob[truth];
 }
 
+// truth: the true cell's index in the filter's [bin][v][u] layout.
 TemperedFrame temper(std::vector<float> scores, double temperature, const pl::VolumeCalibration& calibration,
                      int size, int bins, std::size_t truth) {
+  namespace sf = seqloc::filter;
   for (float& s : scores) s = static_cast<float>(s / temperature);
   pl::calibrate_volume(scores, size, size, bins, calibration, 2);
+  // The frame as the filter's intake prepares it: its entropy is what ETU reads.
+  const sf::PreparedFrame frame = sf::prepare_frame(
+      sf::FrameVolume{scores.data(), sf::VolumeType::float32, sf::VolumeValues::log_prob, size, size, bins, 0.5}, bins, 2);
   TemperedFrame f;
-  // The entropy ETU reads, as the filter's intake computes it.
-  namespace sf = seqloc::filter;
-  f.entropy = sf::prepare_frame(sf::FrameVolume{scores.data(), sf::VolumeType::float32, sf::VolumeValues::log_prob,
-                                                size, size, bins, 0.5},
-                                bins, 2)
-                  .entropy;
+  f.entropy = frame.entropy;
   for (const double r : kReferences) {
-    const double w = r >= 1 ? 1.0 : seqloc::filter::etu_weight(f.entropy, r);
-    f.at_reference.push_back(log_tempered_at(scores, truth, w));
+    const double w = r >= 1 ? 1.0 : sf::etu_weight(f.entropy, r);
+    f.at_reference.push_back(log_tempered_at(frame, truth, w));
   }
-  for (const double w : kWeights) f.at_weight.push_back(log_tempered_at(scores, truth, w));
+  for (const double w : kWeights) f.at_weight.push_back(log_tempered_at(frame, truth, w));
   return f;
 }
 
@@ -168,8 +165,8 @@ int main(int argc, char** argv) {
         const int b = static_cast<int>(((std::lround(grid_heading * bins / 360.0) % bins) + bins) % bins);
         fit.add(scores, size, size, bins, v, u, b);
         if (u >= 0 && u < size && v >= 0 && v < size) {
-          const auto true_cell = (static_cast<std::size_t>(v) * size + static_cast<std::size_t>(u)) * bins +
-                             static_cast<std::size_t>(b);
+          const auto true_cell = (static_cast<std::size_t>(b) * size + static_cast<std::size_t>(v)) * size +
+                                 static_cast<std::size_t>(u);
           tempered.push_back(temper(scores, defaults.temperature, defaults.calibration, size, bins, true_cell));
         }
         ++frames;
