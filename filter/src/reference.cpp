@@ -53,7 +53,7 @@ void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
 }
 
 FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& crop, const Odometry& odo,
-                                  const float* road_distance_m, const GpsFix* gps) {
+                                  const float* road_distance_m, const GpsFix* gps, double volume_power) {
   const int W = c_.width, H = c_.height, R = c_.headings;
   const int vh = volume.height, vw = volume.width, vn = volume.bins;
 
@@ -99,7 +99,8 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
     b_ = hat;
   }
 
-  // 2. ETU: the frame normalized over its own M cells, its normalized entropy and weight.
+  // 2. ETU: the frame raised to the given power (self-calibration's), normalized over its own M
+  //    cells, its normalized entropy and weight.
   const std::size_t m_cells = static_cast<std::size_t>(vh) * vw * vn;
   std::vector<double> logp(m_cells);  // [bin][v][u]
   double max = -std::numeric_limits<double>::infinity();
@@ -111,6 +112,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
                                                      : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
         if (volume.values == VolumeValues::prob) x = x > 0 ? std::log(x) : -std::numeric_limits<double>::infinity();
         if (std::isinf(x)) x = kLogZero;  // the filter's stand-in for log(0)
+        if (x > kLogZero) x *= volume_power;
         logp[(static_cast<std::size_t>(j) * vh + v) * vw + u] = x;
         max = std::max(max, x);
       }
@@ -200,6 +202,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
   FrameResult r;
   r.frame_entropy = h_hat;
   r.etu_weight = w;
+  r.volume_power = volume_power;
   int bu = 0, bv = 0, bk = 0;
   double best = -std::numeric_limits<double>::infinity();
   for (int k = 0; k < R; ++k)

@@ -175,16 +175,20 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   return f;
 }
 
-PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
+void temper_frame_in_place(PreparedFrame& frame, double power, int threads) {
   if (!(power > 0) || !std::isfinite(power)) {
     throw FilterError("temper_frame: the power must be finite and > 0, not " + std::to_string(power));
   }
-  if (power == 1.0) return frame;
+  if (power == 1.0) return;
   ArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
   // Zero cells stay zero; the peak's value is log p* scaled, and the log-softmax shifts it back.
   x = (x > kLogZero).select(x * static_cast<float>(power), kLogZero);
   const float max = x.maxCoeff();
   normalize(frame, max, std::max(1, std::min(threads, frame.bins)));
+}
+
+PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
+  temper_frame_in_place(frame, power, threads);
   return frame;
 }
 
@@ -364,16 +368,53 @@ Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, 
 struct SeqLocFilter::Impl {
   BeliefVolume scratch;          // the other buffer of predict
   AlignedVector<float> tempered;  // the frame's p^w / max, heading-major
+  PreparedFrame calibrated;       // the frame raised to self-calibration's power
+  PowerEstimator estimator;
   struct Worker {
-    std::vector<float> sample, blend;
+    std::vector<float> sample, blend, depth;
+    DepthHistogram frame_cells, belief_in_crop;  // self-calibration's evidence, this worker's share
+    double belief_outside = 0;
   };
   std::vector<Worker> workers;
 
   explicit Impl(const FilterConfig& c)
-      : scratch(c.width, c.height, c.headings), workers(static_cast<std::size_t>(c.threads)) {
-    for (auto& w : workers) w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
+      : scratch(c.width, c.height, c.headings),
+        estimator(c.self_calibration_prior_octaves),
+        workers(static_cast<std::size_t>(c.threads)) {
+    for (auto& w : workers) {
+      w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
+      if (c.self_calibrate) w.depth.resize(w.sample.size());
+    }
   }
 };
+
+namespace {
+
+// Self-calibration's evidence from one window slice, before the update multiplies it in: the
+// predicted belief's mass binned by the frame's depth r = log(s) / exponent at each cell of the
+// crop (`sample` holds s = exp(exponent * r), or a negative value outside the crop, which is then
+// replaced by `outside`). A cell whose s underflowed to 0 is counted at the deepest depth float
+// can show, so that smaller powers are not credited with less mass than they would see.
+void collect_evidence(const float* belief, float* sample, std::size_t n, double exponent, float outside,
+                      std::vector<float>& depth, DepthHistogram& in_crop, double& belief_outside) {
+  const auto count = static_cast<Eigen::Index>(n);
+  Eigen::Map<Eigen::ArrayXf> s(sample, count);
+  const auto inverse = static_cast<float>(1.0 / exponent);
+  const auto underflow = static_cast<float>(std::log(std::numeric_limits<float>::denorm_min()) / exponent);
+  Eigen::Map<Eigen::ArrayXf>(depth.data(), count) = (s > 0.0f).select(s.log() * inverse, underflow);
+  double outside_mass = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (sample[i] < 0) {
+      outside_mass += belief[i];
+    } else {
+      in_crop.add(depth[i], belief[i]);
+    }
+  }
+  belief_outside += outside_mass;
+  s = (s < 0.0f).select(outside, s);
+}
+
+}  // namespace
 
 SeqLocFilter::SeqLocFilter(const FilterConfig& config)
     : config_((config.validate(), config)),
@@ -387,6 +428,7 @@ void SeqLocFilter::reset_uniform() {
   cached_min_.reset();
   first_ = true;
   last_estimate_.reset();
+  impl_->estimator.reset();
 }
 
 void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
@@ -394,7 +436,10 @@ void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
   cached_min_.reset();
   first_ = true;
   last_estimate_.reset();
+  impl_->estimator.reset();
 }
+
+const PowerEstimator& SeqLocFilter::calibration() const { return impl_->estimator; }
 
 void SeqLocFilter::recentre(int du, int dv) {
   belief_.recentre(du, dv);
@@ -471,7 +516,7 @@ void SeqLocFilter::predict(const Odometry& odometry) {
   }
 }
 
-FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
+FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop, const Odometry& odometry,
                                const float* road_distance_m, const GpsFix* gps) {
   if (config_.mgr && road_distance_m == nullptr) throw FilterError("MGR is on but no road-distance window was given");
   const int W = config_.width, H = config_.height, R = config_.headings;
@@ -479,7 +524,17 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
   const auto N = static_cast<Eigen::Index>(n);
   if (!first_) predict(odometry);
 
+  // Self-calibration: the frame raised to the power the frames before it favour.
   FrameResult result;
+  const bool calibrating = config_.self_calibrate;
+  result.volume_power = calibrating ? impl_->estimator.power() : 1.0;
+  const PreparedFrame* used = &given;
+  if (result.volume_power != 1.0) {
+    impl_->calibrated = given;
+    temper_frame_in_place(impl_->calibrated, result.volume_power, config_.threads);
+    used = &impl_->calibrated;
+  }
+  const PreparedFrame& frame = *used;
   result.frame_entropy = frame.entropy;
   result.etu_weight = config_.etu ? etu_weight(frame.entropy, config_.etu_reference_entropy) : 1.0;
   const auto w = static_cast<float>(result.etu_weight);
@@ -488,12 +543,27 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
   // normalization); log(1/M) - outside_crop_nats outside the crop.
   const float log_p_max = frame.max_log_prob;
   impl_->tempered.resize(frame.log_prob.size());
+  if (calibrating) {
+    for (auto& worker : impl_->workers) {
+      worker.frame_cells.clear();
+      worker.belief_in_crop.clear();
+      worker.belief_outside = 0;
+    }
+  }
   const std::size_t frame_slice = static_cast<std::size_t>(frame.width) * frame.height;
-  detail::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
+  detail::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int t) {
     const std::size_t begin = static_cast<std::size_t>(j0) * frame_slice;
     const auto length = static_cast<Eigen::Index>(static_cast<std::size_t>(j1 - j0) * frame_slice);
     ConstArrayMap log_p(frame.log_prob.data() + begin, length);
     ArrayMap(impl_->tempered.data() + begin, length) = (log_p > kLogZero).select((w * (log_p - log_p_max)).exp(), 0.0f);
+    if (calibrating) {
+      // The given frame's own cells by depth, for Z(kappa).
+      auto& cells = impl_->workers[static_cast<std::size_t>(t)].frame_cells;
+      const float* raw = given.log_prob.data() + begin;
+      for (Eigen::Index i = 0; i < length; ++i) {
+        if (raw[i] > kLogZero) cells.add(static_cast<double>(raw[i] - given.max_log_prob), 1.0);
+      }
+    }
   });
   const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
 
@@ -509,14 +579,22 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
       }
   }
 
-  // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum.
+  // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum. The first
+  // pass also collects self-calibration's evidence from the predicted belief.
   std::vector<double> slice_sum(static_cast<std::size_t>(R));
+  const double exponent = static_cast<double>(w) * result.volume_power;  // s = exp(exponent * r)
   auto update_slices = [&](bool with_prior) {
+    const bool collect = calibrating && with_prior;
     detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
       auto& worker = impl_->workers[static_cast<std::size_t>(t)];
       for (int k = k0; k < k1; ++k) {
         detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
-                             belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
+                             belief_.bin_heading_deg(k), W, H, collect ? -1.0f : outside, worker.blend,
+                             worker.sample.data());
+        if (collect) {
+          collect_evidence(belief_.slice(k), worker.sample.data(), n, exponent, outside, worker.depth,
+                           worker.belief_in_crop, worker.belief_outside);
+        }
         ArrayMap b(belief_.slice(k), N);
         ConstArrayMap sample(worker.sample.data(), N);
         if (with_prior) {
@@ -530,6 +608,16 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
     });
   };
   update_slices(true);
+  if (calibrating) {
+    CalibrationEvidence evidence;
+    evidence.log_outside = -given.log_cells - config_.outside_crop_nats;
+    for (const auto& worker : impl_->workers) {
+      evidence.frame_cells.merge(worker.frame_cells);
+      evidence.belief_in_crop.merge(worker.belief_in_crop);
+      evidence.belief_outside += worker.belief_outside;
+    }
+    impl_->estimator.add(evidence);
+  }
   double total = 0;
   for (double x : slice_sum) total += x;
   if (!(total > 0) || !std::isfinite(total)) {

@@ -69,6 +69,10 @@ std::span<const FilterConfigField> filter_config_fields() {
       {"pas_radius", &C::pas_radius, "PAS radius in cells"},
       {"outside_crop_nats", &C::outside_crop_nats,
        "Window cells outside a frame's crop get log(1/M) minus this (0: the paper's rule)"},
+      {"self_calibrate", &C::self_calibrate,
+       "self-calibration: raise each volume to the power its predecessors' predictive likelihood favours"},
+      {"self_calibration_prior_octaves", &C::self_calibration_prior_octaves,
+       "Self-calibration: sigma of the prior on log2 of the power (octaves)"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},
@@ -79,6 +83,14 @@ std::span<const FilterConfigField> filter_config_fields() {
       {"threads", &C::threads, "Worker threads of one filter step"},
   };
   return kFields;
+}
+
+FilterConfig paper_config() {
+  FilterConfig c;
+  c.etu_reference_entropy = 0;
+  c.outside_crop_nats = 0;
+  c.self_calibrate = false;
+  return c;
 }
 
 void FilterConfig::validate() const {
@@ -105,6 +117,9 @@ void FilterConfig::validate() const {
   }
   if (!(motion_noise_xy_per_m >= 0)) fail("motion_noise_xy_per_m", motion_noise_xy_per_m, "must be >= 0");
   if (!(motion_noise_deg_per_m >= 0)) fail("motion_noise_deg_per_m", motion_noise_deg_per_m, "must be >= 0");
+  if (!(self_calibration_prior_octaves > 0 && self_calibration_prior_octaves <= 16)) {
+    fail("self_calibration_prior_octaves", self_calibration_prior_octaves, "must be in (0, 16]");
+  }
   if (threads < 1 || threads > 256) fail("threads", threads, "must be in [1, 256]");
 }
 

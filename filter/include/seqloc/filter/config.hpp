@@ -36,6 +36,14 @@ struct FilterConfig {
   /// (docs/filter.md, "Outside the crop").
   double outside_crop_nats = 1.0;
 
+  /// Self-calibration at test time (ours; self_calibration.hpp): each frame is raised to the power
+  /// kappa that maximizes the predictive likelihood of the frames before it under the belief, so
+  /// that an overconfident (or timid) backbone is tempered without ground truth.
+  bool self_calibrate = true;
+  /// The prior on kappa: Gaussian in log2 kappa around 0 with this sigma (octaves). It holds the
+  /// estimate near 1 until the frames' evidence outweighs it.
+  double self_calibration_prior_octaves = 2.0;
+
   /// A frame whose argmax lands farther than this from the previous estimate moved by the
   /// odometry is flagged "relocalized".
   double relocalization_jump_m = 10.0;
@@ -53,6 +61,10 @@ struct FilterConfig {
   /// Throws FilterError naming the field, its value and the constraint it breaks.
   void validate() const;
 };
+
+/// The seed paper's configuration (conventions.md section 6 as written): ETU w = 1 - H, unobserved
+/// cells at log(1/M), no self-calibration; the other fields as in FilterConfig{}.
+[[nodiscard]] FilterConfig paper_config();
 
 /// One field of FilterConfig for the tools that set fields by name (the Python module's config
 /// dict and its help, the command line's options): its name, the member, and a line saying what it

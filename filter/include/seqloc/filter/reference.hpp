@@ -18,8 +18,11 @@ class ReferenceFilter {
 
   void reset_uniform();
   void reset_gaussian(double u, double v, double sigma_m);
+  /// One step with the frame raised to `volume_power` first (self-calibration's estimate is not
+  /// made here: the tests hand in the power the fast filter reports, and check the estimator
+  /// against its own brute-force reference).
   FrameResult step(const FrameVolume& volume, const CropPose& crop, const Odometry& odometry,
-                   const float* road_distance_m, const GpsFix* gps = nullptr);
+                   const float* road_distance_m, const GpsFix* gps = nullptr, double volume_power = 1.0);
 
   [[nodiscard]] double at(int u, int v, int k) const { return b_[index(u, v, k)]; }
 

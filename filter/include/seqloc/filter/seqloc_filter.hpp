@@ -24,6 +24,7 @@
 
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/config.hpp"
+#include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/types.hpp"
 
 namespace seqloc::filter {
@@ -48,6 +49,9 @@ struct PreparedFrame {
 /// NaN, +inf, negative probabilities or a volume without mass (naming the first bad cell by its
 /// index in (H, W, N) order); a -inf log-probability is a valid zero.
 [[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1);
+
+/// temper_frame in place (the frame's storage is reused).
+void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
 
 /// The frame's volume raised to `power` and renormalized: p^k / sum p^k, i.e. its log-probabilities
 /// divided by a temperature T = 1 / k. k > 1 sharpens (a backbone more confident than it should
@@ -91,8 +95,11 @@ struct FrameResult {
   Pose pose;     ///< the estimate: PAS's x_hat with th* (or the argmax when PAS is off)
   Pose argmax;   ///< (x*, th*)
   float peak_log_belief = 0;
-  double frame_entropy = 0;  ///< H_hat of the frame's own volume
+  double frame_entropy = 0;  ///< H_hat of the frame's own volume, after self-calibration's power
   double etu_weight = 1;     ///< the weight used (1 with ETU off)
+  /// The power self-calibration raised the frame to before ETU (1 with it off): the estimate from
+  /// the frames before this one. For volumes sharpened as p^k it tends to 1 / k.
+  double volume_power = 1;
   bool relocalized = false;  ///< the argmax jumped farther than the configured threshold
 };
 
@@ -109,8 +116,8 @@ class SeqLocFilter {
     return belief_;
   }
 
-  /// Starts a sequence: the next step() does not predict. Uniform belief, or a Gaussian around a
-  /// GPS fix (sigma in metres).
+  /// Starts a sequence: the next step() does not predict, and self-calibration starts again from
+  /// its prior. Uniform belief, or a Gaussian around a GPS fix (sigma in metres).
   void reset_uniform();
   void reset_gaussian(double u, double v, double sigma_m);
 
@@ -123,6 +130,9 @@ class SeqLocFilter {
   /// The stages, exposed for tests and for callers that move the window between frames.
   void predict(const Odometry& odometry);
   void recentre(int du, int dv);
+
+  /// Self-calibration's estimator (its power is what the next step uses).
+  [[nodiscard]] const PowerEstimator& calibration() const;
 
  private:
   struct Impl;

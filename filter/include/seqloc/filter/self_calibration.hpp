@@ -1,0 +1,94 @@
+#pragma once
+// Self-calibration at test time: how far to trust a backbone's volumes, estimated from the
+// sequence alone (no ground truth).
+//
+// A volume is calibrated when, raised to the power 1, it is the probability of the true pose. A
+// backbone out of its domain is overconfident (its log-probabilities are k times what they should
+// be) or timid (k < 1). The filter raises every frame to a power kappa and renormalizes,
+// q_kappa = p^kappa / Z(kappa), and chooses kappa by the predictive likelihood of each new frame
+// under the belief predicted from the frames before it:
+//
+//   P_t(kappa) = sum_x b_hat_t(x) L_kappa,t(x),   S_t(kappa) = sum_{s <= t} log P_s(kappa),
+//
+// L being the likelihood the update multiplies in (q_kappa inside the crop, e^-delta / M outside).
+// Frame t is filtered with kappa_t = argmax over kappa of S_{t-1}(kappa) + log prior(kappa): it
+// depends on frames before t only. For Gaussian evidence the maximizer is the calibrated power:
+// P_t is the density of the frame's peak under N(belief mean, sigma_b^2 + sigma_p^2 / kappa), whose
+// expected log is largest where sigma_p^2 / kappa is the frame's true error variance. A uniform
+// belief gives the same P for every kappa: frames the belief cannot judge do not move the estimate.
+//
+// Cost: P_t is needed at every kappa of a grid, but depends on the frame only through its cells'
+// depths r = log p - log p_max. The filter bins the belief's mass by depth while it multiplies the
+// frame in (one log per window cell), and the frame's own cells by depth for Z; each kappa is
+// then a sum over a few hundred bins.
+
+#include <span>
+#include <vector>
+
+namespace seqloc::filter {
+
+/// Weights binned by depth r <= 0 (nats below a frame's peak), each bin keeping its weighted mean
+/// depth, so that sum_i w_i exp(kappa r_i) is exact to second order in the bin's width.
+class DepthHistogram {
+ public:
+  static constexpr double kBinNats = 0.05;
+  static constexpr double kMaxDepthNats = 200;  ///< deeper cells are counted at this depth
+
+  DepthHistogram();
+  void clear();
+  /// Adds weight w at depth r (r > 0 is taken as 0, r < -kMaxDepthNats as -kMaxDepthNats).
+  void add(double r, double w) {
+    const double d = r < 0 ? -r : 0.0;
+    const auto i = d < kMaxDepthNats ? static_cast<std::size_t>(d * (1 / kBinNats)) : weight_.size() - 1;
+    weight_[i] += w;
+    depth_sum_[i] += w * d;
+  }
+  void merge(const DepthHistogram& other);
+  [[nodiscard]] double total() const;
+  /// log sum_i w_i exp(kappa r_i) for each kappa (-inf where the histogram is empty).
+  [[nodiscard]] std::vector<double> log_sum_exp(std::span<const double> kappas) const;
+
+ private:
+  std::vector<double> weight_, depth_sum_;
+};
+
+/// One frame's evidence about the power: its own cells by depth (for Z), the predicted belief's
+/// mass inside the crop by the depth of the frame there, and the belief's mass outside the crop
+/// with the log-likelihood the update gives it there (log(1/M) - outside_crop_nats).
+struct CalibrationEvidence {
+  DepthHistogram frame_cells;
+  DepthHistogram belief_in_crop;
+  double belief_outside = 0;
+  double log_outside = 0;
+};
+
+/// The running estimate of kappa from frames' evidence, on a grid log2 kappa = -6 .. 4 in steps
+/// of 1/8 with a Gaussian prior on log2 kappa around 0, refined by a parabola through the best
+/// grid point and its neighbours.
+class PowerEstimator {
+ public:
+  /// prior_sigma_log2: the prior's sigma in octaves of kappa (> 0).
+  explicit PowerEstimator(double prior_sigma_log2);
+
+  /// kappa for the next frame: from the frames added so far and the prior (1 before any).
+  [[nodiscard]] double power() const { return power_; }
+  [[nodiscard]] int frames() const { return frames_; }
+  /// Adds log P_t(kappa) at every grid kappa and updates power().
+  void add(const CalibrationEvidence& evidence);
+  /// log P(kappa) of one frame at each kappa (for tests and diagnostics), up to a constant that
+  /// does not depend on kappa (the belief's total mass).
+  [[nodiscard]] static std::vector<double> log_predictive(const CalibrationEvidence& evidence,
+                                                          std::span<const double> kappas);
+  [[nodiscard]] std::span<const double> grid() const { return kappas_; }
+  /// S(kappa) + log prior at each grid point.
+  [[nodiscard]] std::span<const double> score() const { return score_; }
+  void reset();
+
+ private:
+  double prior_sigma_log2_;
+  std::vector<double> kappas_, log_prior_, score_;
+  double power_ = 1;
+  int frames_ = 0;
+};
+
+}  // namespace seqloc::filter

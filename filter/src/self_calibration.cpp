@@ -1,0 +1,117 @@
+#include "seqloc/filter/self_calibration.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "seqloc/filter/types.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+constexpr double kLog2MinPower = -6, kLog2MaxPower = 4, kLog2Step = 0.125;
+
+// log(exp(a) + exp(b)), either may be -inf.
+double log_add(double a, double b) {
+  if (a == kNegInf) return b;
+  if (b == kNegInf) return a;
+  const double m = std::max(a, b);
+  return m + std::log(std::exp(a - m) + std::exp(b - m));
+}
+
+}  // namespace
+
+DepthHistogram::DepthHistogram() {
+  const auto bins = static_cast<std::size_t>(kMaxDepthNats / kBinNats) + 1;
+  weight_.assign(bins, 0.0);
+  depth_sum_.assign(bins, 0.0);
+}
+
+void DepthHistogram::clear() {
+  std::fill(weight_.begin(), weight_.end(), 0.0);
+  std::fill(depth_sum_.begin(), depth_sum_.end(), 0.0);
+}
+
+void DepthHistogram::merge(const DepthHistogram& other) {
+  for (std::size_t i = 0; i < weight_.size(); ++i) {
+    weight_[i] += other.weight_[i];
+    depth_sum_[i] += other.depth_sum_[i];
+  }
+}
+
+double DepthHistogram::total() const {
+  double s = 0;
+  for (double w : weight_) s += w;
+  return s;
+}
+
+std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) const {
+  // The non-empty bins as (log weight, mean depth), summed stably (shifted by the largest term).
+  std::vector<std::pair<double, double>> bins;
+  for (std::size_t i = 0; i < weight_.size(); ++i) {
+    if (weight_[i] > 0) bins.emplace_back(std::log(weight_[i]), depth_sum_[i] / weight_[i]);
+  }
+  std::vector<double> out(kappas.size(), kNegInf);
+  if (bins.empty()) return out;
+  for (std::size_t k = 0; k < kappas.size(); ++k) {
+    const double kappa = kappas[k];
+    double shift = kNegInf;
+    for (const auto& [log_w, d] : bins) shift = std::max(shift, log_w - kappa * d);
+    double sum = 0;
+    for (const auto& [log_w, d] : bins) sum += std::exp(log_w - kappa * d - shift);
+    out[k] = shift + std::log(sum);
+  }
+  return out;
+}
+
+PowerEstimator::PowerEstimator(double prior_sigma_log2) : prior_sigma_log2_(prior_sigma_log2) {
+  if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
+    throw FilterError("self-calibration: the prior's sigma must be finite and > 0, not " +
+                      std::to_string(prior_sigma_log2));
+  }
+  for (double l = kLog2MinPower; l <= kLog2MaxPower + 1e-9; l += kLog2Step) {
+    kappas_.push_back(std::exp2(l));
+    log_prior_.push_back(-0.5 * (l / prior_sigma_log2) * (l / prior_sigma_log2));
+  }
+  reset();
+}
+
+void PowerEstimator::reset() {
+  score_ = log_prior_;
+  power_ = 1;
+  frames_ = 0;
+}
+
+std::vector<double> PowerEstimator::log_predictive(const CalibrationEvidence& e, std::span<const double> kappas) {
+  // P(kappa) = sum_in b(x) exp(kappa r(x)) / Z(kappa) + b_out exp(log_outside), with
+  // Z(kappa) = sum over the frame's cells of exp(kappa r).
+  const auto log_a = e.belief_in_crop.log_sum_exp(kappas);
+  const auto log_z = e.frame_cells.log_sum_exp(kappas);
+  const double log_out = e.belief_outside > 0 ? std::log(e.belief_outside) + e.log_outside : kNegInf;
+  std::vector<double> out(kappas.size());
+  for (std::size_t k = 0; k < kappas.size(); ++k) {
+    const double inside = log_z[k] == kNegInf ? kNegInf : log_a[k] - log_z[k];
+    out[k] = log_add(inside, log_out);
+  }
+  return out;
+}
+
+void PowerEstimator::add(const CalibrationEvidence& evidence) {
+  const auto log_p = log_predictive(evidence, kappas_);
+  // A frame with no finite predictive (no belief mass anywhere it can see) says nothing.
+  if (std::any_of(log_p.begin(), log_p.end(), [](double x) { return !std::isfinite(x); })) return;
+  for (std::size_t k = 0; k < score_.size(); ++k) score_[k] += log_p[k];
+  ++frames_;
+  const auto best = static_cast<std::size_t>(std::max_element(score_.begin(), score_.end()) - score_.begin());
+  double log2_power = std::log2(kappas_[best]);
+  if (best > 0 && best + 1 < score_.size()) {
+    // The vertex of the parabola through the best point and its neighbours (a concave triple).
+    const double a = score_[best - 1], b = score_[best], c = score_[best + 1];
+    const double curvature = a - 2 * b + c;
+    if (curvature < 0) log2_power += 0.5 * kLog2Step * (a - c) / curvature;
+  }
+  power_ = std::exp2(log2_power);
+}
+
+}  // namespace seqloc::filter

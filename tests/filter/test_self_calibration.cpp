@@ -1,0 +1,241 @@
+// Self-calibration (self_calibration.hpp): the predictive likelihood against a brute-force sum,
+// the power recovered from volumes whose calibration is known, causality, and degenerate routes.
+
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/filter/self_calibration.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+double circular_bins(double a, double b, int bins) {
+  const double d = std::fmod(std::abs(a - b), bins);
+  return std::min(d, bins - d);
+}
+
+// A generator whose calibration is known: the vehicle drives north one cell (0.5 m) a frame with
+// exact odometry; each frame's volume is a Gaussian in position and heading around a peak drawn
+// from N(truth, sigma^2), so that given the volume the truth is distributed as the volume says
+// (calibrated, up to the crop's edges and the cells' discreteness). `sharpen` k gives k log p.
+struct Generator {
+  int window = 96, bins = 16, crop = 40;
+  double sigma_cells = 4, sigma_bins = 1;
+  double sharpen = 1;
+  std::mt19937 rng;
+
+  explicit Generator(unsigned seed, double k = 1) : sharpen(k), rng(seed) {}
+
+  struct Frame {
+    std::vector<float> values;  // (crop, crop, bins) log-probabilities
+    CropPose pose;
+    double truth_u = 0, truth_v = 0;
+  };
+
+  Frame frame(int t) {
+    std::normal_distribution<double> peak(0, 1);
+    std::uniform_real_distribution<double> offset(-4, 4);
+    Frame f;
+    f.truth_u = window / 2.0;
+    f.truth_v = 80 - t;
+    const double mu = f.truth_u + sigma_cells * peak(rng), mv = f.truth_v + sigma_cells * peak(rng);
+    const double mh = sigma_bins * peak(rng);  // the truth's heading is bin 0 (north)
+    // Whole-cell crop centres, so that window cells fall on volume cells.
+    f.pose = {std::round(f.truth_u + offset(rng)) + 0.5, std::round(f.truth_v + offset(rng)) + 0.5, 0};
+    f.values.resize(static_cast<std::size_t>(crop) * crop * bins);
+    for (int v = 0; v < crop; ++v)
+      for (int u = 0; u < crop; ++u)
+        for (int j = 0; j < bins; ++j) {
+          const double wu = f.pose.centre_u + (u - (crop - 1) / 2.0), wv = f.pose.centre_v + (v - (crop - 1) / 2.0);
+          const double dh = circular_bins(j, mh, bins);
+          const double log_p = -((wu - mu) * (wu - mu) + (wv - mv) * (wv - mv)) / (2 * sigma_cells * sigma_cells) -
+                               dh * dh / (2 * sigma_bins * sigma_bins);
+          f.values[(static_cast<std::size_t>(v) * crop + u) * bins + j] = static_cast<float>(sharpen * log_p);
+        }
+    return f;
+  }
+
+  [[nodiscard]] FrameVolume view(const Frame& f) const {
+    return {f.values.data(), VolumeType::float32, VolumeValues::log_prob, crop, crop, bins, 0.5};
+  }
+
+  [[nodiscard]] FilterConfig config() const {
+    FilterConfig c;
+    c.width = c.height = window;
+    c.headings = bins;
+    return c;
+  }
+};
+
+// Runs `frames` frames of a generator through a filter; returns each frame's result.
+std::vector<FrameResult> run(Generator& g, const FilterConfig& c, int frames) {
+  SeqLocFilter filter(c);
+  filter.reset_uniform();
+  const std::vector<float> road(static_cast<std::size_t>(c.width) * c.height, 0.0f);  // a flat road prior
+  std::vector<FrameResult> results;
+  for (int t = 0; t < frames; ++t) {
+    const auto f = g.frame(t);
+    const Odometry odo{t == 0 ? 0.0 : 0.5, 0, 0};
+    results.push_back(filter.step(prepare_frame(g.view(f), c.headings), f.pose, odo, road.data()));
+  }
+  return results;
+}
+
+TEST(SelfCalibration, PredictiveLikelihoodEqualsTheBruteForceSum) {
+  // One step from a known belief onto a crop whose cells are window cells: the estimator's score
+  // minus its prior must be log sum_x b(x) L_kappa(x) at every kappa, summed here cell by cell.
+  FilterConfig c;
+  c.width = 20;
+  c.height = 18;
+  c.headings = 8;
+  c.etu = c.mgr = c.pas = false;
+  c.outside_crop_nats = 1.5;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal(0, 3);
+  std::uniform_real_distribution<double> unit(0, 1);
+  const int h = 9, w = 11, n = 8;
+  std::vector<float> volume(static_cast<std::size_t>(h) * w * n);
+  for (auto& x : volume) x = static_cast<float>(normal(rng));
+  SeqLocFilter filter(c);
+  filter.reset_uniform();
+  BeliefVolume& b = filter.belief();
+  double sum = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    b.data()[i] = static_cast<float>(std::exp(2 * normal(rng) / 3));
+    sum += b.data()[i];
+  }
+  for (std::size_t i = 0; i < b.size(); ++i) b.data()[i] = static_cast<float>(b.data()[i] / sum);
+  std::vector<double> belief(b.data(), b.data() + b.size());
+  const CropPose crop{7, 6, 0};  // volume cell (v, u) is window cell (u + 2, v + 2)
+  const FrameVolume view{volume.data(), VolumeType::float32, VolumeValues::log_prob, h, w, n, 0.5};
+  (void)filter.step(prepare_frame(view, c.headings), crop, {}, nullptr);
+
+  const PowerEstimator prior(c.self_calibration_prior_octaves);
+  const auto kappas = filter.calibration().grid();
+  const double log_m = std::log(static_cast<double>(volume.size()));
+  const double max = *std::max_element(volume.begin(), volume.end());
+  for (std::size_t k = 0; k < kappas.size(); ++k) {
+    const double kappa = kappas[k];
+    if (kappa > 8) continue;  // the bins' width matters beyond (kappa^2 * 0.05^2 / 24 > 0.7 %)
+    double z = 0;
+    for (float x : volume) z += std::exp(kappa * (x - max));
+    double p = 0;
+    for (int j = 0; j < n; ++j)
+      for (int v = 0; v < c.height; ++v)
+        for (int u = 0; u < c.width; ++u) {
+          const int vu = u - 2, vv = v - 2;
+          const double bel = belief[(static_cast<std::size_t>(j) * c.height + v) * c.width + u];
+          if (vu < 0 || vv < 0 || vu >= w || vv >= h) {
+            p += bel * std::exp(-log_m - c.outside_crop_nats);
+          } else {
+            p += bel * std::exp(kappa * (volume[(static_cast<std::size_t>(vv) * w + vu) * n + j] - max)) / z;
+          }
+        }
+    const double got = filter.calibration().score()[k] - prior.score()[k];
+    EXPECT_NEAR(got, std::log(p), 5e-3) << "kappa " << kappa;
+  }
+}
+
+class Recovers : public ::testing::TestWithParam<double> {};
+
+TEST_P(Recovers, ThePowerThatUndoesAKnownSharpening) {
+  // Volumes tempered by k (k log p): the estimate tends to 1 / k; on calibrated volumes (k = 1)
+  // it stays near 1. Three routes of 60 frames, each judged on its own.
+  const double k = GetParam();
+  for (unsigned seed : {11u, 12u, 13u}) {
+    Generator g(seed, k);
+    const auto results = run(g, g.config(), 60);
+    // The estimate after the last frame is the power the next frame would get: the last frame's
+    // own power lags it by one frame, which is what can be read from a result.
+    const double estimate = results.back().volume_power;
+    EXPECT_NEAR(estimate * k, 1.0, 0.2) << "k = " << k << ", seed " << seed << ": estimate " << estimate;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(SelfCalibration, Recovers, ::testing::Values(0.25, 0.5, 1.0, 2.0, 4.0, 8.0),
+                         [](const auto& p) { return "k" + std::to_string(static_cast<int>(p.param * 100)); });
+
+TEST(SelfCalibration, IsCausal) {
+  // Frames after t change nothing at t: two routes equal up to frame 19 and different after.
+  Generator a(21, 4), b(21, 4);
+  const FilterConfig c = a.config();
+  const auto ra = run(a, c, 20);
+  SeqLocFilter filter(c);
+  filter.reset_uniform();
+  const std::vector<float> road(static_cast<std::size_t>(c.width) * c.height, 0.0f);
+  std::mt19937 noise(5);
+  std::normal_distribution<float> normal(0, 3);
+  for (int t = 0; t < 30; ++t) {
+    auto f = b.frame(t);
+    if (t >= 20) {
+      for (auto& x : f.values) x = normal(noise);  // different frames from here on
+    }
+    const Odometry odo{t == 0 ? 0.0 : 0.5, 0, 0};
+    const auto r = filter.step(prepare_frame(b.view(f), c.headings), f.pose, odo, road.data());
+    if (t < 20) {
+      EXPECT_EQ(r.volume_power, ra[static_cast<std::size_t>(t)].volume_power) << "frame " << t;
+      EXPECT_EQ(r.pose.u, ra[static_cast<std::size_t>(t)].pose.u) << "frame " << t;
+      EXPECT_EQ(r.pose.v, ra[static_cast<std::size_t>(t)].pose.v) << "frame " << t;
+    }
+  }
+}
+
+TEST(SelfCalibration, OneFrameAndPureNoiseNeitherCrashNorRunAway) {
+  Generator g(31, 4);
+  const FilterConfig c = g.config();
+  const auto one = run(g, c, 1);
+  ASSERT_EQ(one.size(), 1u);
+  EXPECT_EQ(one[0].volume_power, 1.0) << "no frame before the first: the prior's mode";
+
+  // Volumes of pure noise, unrelated to the motion: nothing to trust, so the power must not grow,
+  // and everything stays finite.
+  SeqLocFilter filter(c);
+  filter.reset_uniform();
+  const std::vector<float> road(static_cast<std::size_t>(c.width) * c.height, 0.0f);
+  std::mt19937 rng(3);
+  std::normal_distribution<float> normal(0, 2);
+  std::vector<float> values(static_cast<std::size_t>(g.crop) * g.crop * g.bins);
+  for (int t = 0; t < 40; ++t) {
+    for (auto& x : values) x = normal(rng);
+    const FrameVolume view{values.data(), VolumeType::float32, VolumeValues::log_prob, g.crop, g.crop, g.bins, 0.5};
+    const auto r = filter.step(prepare_frame(view, c.headings), {48, 48, 0}, {0.5, 0, 0}, road.data());
+    ASSERT_TRUE(std::isfinite(r.volume_power) && r.volume_power > 0) << "frame " << t;
+    EXPECT_LE(r.volume_power, 1.0) << "frame " << t << ": noise must not be sharpened";
+    ASSERT_TRUE(std::isfinite(r.pose.u) && std::isfinite(r.pose.v)) << "frame " << t;
+  }
+  double mass = 0;
+  for (std::size_t i = 0; i < filter.belief().size(); ++i) mass += filter.belief().data()[i];
+  EXPECT_NEAR(mass, 1.0, 1e-3);
+  EXPECT_LT(filter.calibration().power(), 0.5) << "forty frames of noise should flatten it well below 1";
+}
+
+TEST(SelfCalibration, OffLeavesEveryFrameAsGiven) {
+  Generator g(41, 4);
+  FilterConfig c = g.config();
+  c.self_calibrate = false;
+  for (const auto& r : run(g, c, 10)) EXPECT_EQ(r.volume_power, 1.0);
+  EXPECT_FALSE(paper_config().self_calibrate) << "the paper's configuration has no self-calibration";
+}
+
+TEST(SelfCalibration, ResetStartsFromThePrior) {
+  PowerEstimator e(2.0);
+  CalibrationEvidence evidence;
+  evidence.frame_cells.add(0, 1);
+  evidence.frame_cells.add(-3, 10);
+  evidence.belief_in_crop.add(-3, 1);  // the belief sits where the frame is 3 nats below its peak
+  e.add(evidence);
+  EXPECT_LT(e.power(), 1.0) << "a frame whose peak the belief does not share is trusted less";
+  EXPECT_EQ(e.frames(), 1);
+  e.reset();
+  EXPECT_EQ(e.power(), 1.0);
+  EXPECT_EQ(e.frames(), 0);
+  EXPECT_THROW(PowerEstimator(0.0), FilterError);
+}
+
+}  // namespace
+}  // namespace seqloc::filter
