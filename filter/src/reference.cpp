@@ -36,6 +36,7 @@ ReferenceFilter::ReferenceFilter(const FilterConfig& config)
 void ReferenceFilter::reset_uniform() {
   std::fill(b_.begin(), b_.end(), -std::log(static_cast<double>(b_.size())));
   first_ = true;
+  entropies_.clear();
 }
 
 void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
@@ -50,6 +51,7 @@ void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
         b_[index(u, v, k)] = std::log(g / sum / c_.headings);
       }
   first_ = true;
+  entropies_.clear();
 }
 
 FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& crop, const Odometry& odo,
@@ -103,7 +105,6 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
   //    cells, its normalized entropy and weight.
   const std::size_t m_cells = static_cast<std::size_t>(vh) * vw * vn;
   std::vector<double> logp(m_cells);  // [bin][v][u]
-  double max = -std::numeric_limits<double>::infinity();
   for (int v = 0; v < vh; ++v)
     for (int u = 0; u < vw; ++u)
       for (int j = 0; j < vn; ++j) {
@@ -112,26 +113,45 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
                                                      : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
         if (volume.values == VolumeValues::prob) x = x > 0 ? std::log(x) : -std::numeric_limits<double>::infinity();
         if (std::isinf(x)) x = kLogZero;  // the filter's stand-in for log(0)
-        if (x > kLogZero) x *= volume_power;
         logp[(static_cast<std::size_t>(j) * vh + v) * vw + u] = x;
-        max = std::max(max, x);
       }
-  double sum = 0;
-  for (double x : logp) sum += std::exp(x - max);
-  const double lse_frame = max + std::log(sum);
-  double entropy = 0;
-  for (double& x : logp) {
-    if (x <= kLogZero) continue;
-    x -= lse_frame;
-    entropy -= std::exp(x) * x;
-  }
   const double log_m = std::log(static_cast<double>(m_cells));
-  const double h_hat = std::clamp(entropy / log_m, 0.0, 1.0);
-  // Written out here, not by etu_weight(), so the reference states the rule itself.
-  const double w = !c_.etu ? 1.0
-                   : c_.etu_reference_entropy > 0
-                       ? std::clamp((1 - h_hat) / (1 - c_.etu_reference_entropy), 1e-3, 1.0)
-                       : std::max(1 - h_hat, 1e-3);
+  // Normalizes `values` raised to `power` in place; returns the normalized entropy.
+  const auto normalize = [log_m](std::vector<double>& values, double power) {
+    double max = -std::numeric_limits<double>::infinity();
+    for (double& x : values) {
+      if (x > kLogZero) x *= power;
+      max = std::max(max, x);
+    }
+    double sum = 0;
+    for (double x : values) sum += std::exp(x - max);
+    const double lse_frame = max + std::log(sum);
+    double entropy = 0;
+    for (double& x : values) {
+      if (x <= kLogZero) continue;
+      x -= lse_frame;
+      entropy -= std::exp(x) * x;
+    }
+    return std::clamp(entropy / log_m, 0.0, 1.0);
+  };
+  std::vector<double> given = logp;
+  const double h_given = normalize(given, 1.0);
+  const double h_hat = normalize(logp, volume_power);
+  // Written out here, not by etu_weight(), so the reference states the rule itself: relative to
+  // the median of the route's given entropies (the upper one of an even count), or to the
+  // configured reference, or the paper's 1 - H.
+  double w = 1;
+  if (c_.etu && c_.etu_route_reference) {
+    entropies_.push_back(h_given);
+    std::vector<double> sorted(entropies_.end() - static_cast<std::ptrdiff_t>(std::min<std::size_t>(entropies_.size(), 256)),
+                               entropies_.end());
+    std::sort(sorted.begin(), sorted.end());
+    const double h_ref = std::min(sorted[sorted.size() / 2], 1.0 - 1e-9);
+    w = h_ref > 0 ? std::clamp((1 - h_given) / (1 - h_ref), 1e-3, 1.0) : std::max(1 - h_given, 1e-3);
+  } else if (c_.etu) {
+    w = c_.etu_reference_entropy > 0 ? std::clamp((1 - h_hat) / (1 - c_.etu_reference_entropy), 1e-3, 1.0)
+                                     : std::max(1 - h_hat, 1e-3);
+  }
 
   // 3. Update: b = log_softmax(w log p + b_hat). The tempered likelihood p^w is sampled at every
   //    window cell and bin by linear interpolation of p^w (bilinear in space, linear between the

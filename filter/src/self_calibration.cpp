@@ -65,10 +65,14 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
   return out;
 }
 
-PowerEstimator::PowerEstimator(double prior_sigma_log2) : prior_sigma_log2_(prior_sigma_log2) {
+PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share)
+    : prior_sigma_log2_(prior_sigma_log2), outlier_share_(outlier_share) {
   if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
     throw FilterError("self-calibration: the prior's sigma must be finite and > 0, not " +
                       std::to_string(prior_sigma_log2));
+  }
+  if (!(outlier_share >= 0 && outlier_share < 1)) {
+    throw FilterError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share));
   }
   for (double l = kLog2MinPower; l <= kLog2MaxPower + 1e-9; l += kLog2Step) {
     kappas_.push_back(std::exp2(l));
@@ -83,16 +87,22 @@ void PowerEstimator::reset() {
   frames_ = 0;
 }
 
-std::vector<double> PowerEstimator::log_predictive(const CalibrationEvidence& e, std::span<const double> kappas) {
+std::vector<double> PowerEstimator::log_predictive(const CalibrationEvidence& e, std::span<const double> kappas) const {
   // P(kappa) = sum_in b(x) exp(kappa r(x)) / Z(kappa) + b_out exp(log_outside), with
-  // Z(kappa) = sum over the frame's cells of exp(kappa r).
+  // Z(kappa) = sum over the frame's cells of exp(kappa r); mixed with the same for a uniform
+  // belief, (1 + outside_cells exp(log_outside)) / window_cells (the crop's q summing to 1).
   const auto log_a = e.belief_in_crop.log_sum_exp(kappas);
   const auto log_z = e.frame_cells.log_sum_exp(kappas);
   const double log_out = e.belief_outside > 0 ? std::log(e.belief_outside) + e.log_outside : kNegInf;
+  const double log_uniform =
+      outlier_share_ > 0 && e.window_cells > 0
+          ? std::log(outlier_share_) + log_add(0.0, std::log(e.outside_cells) + e.log_outside) - std::log(e.window_cells)
+          : kNegInf;
+  const double log_keep = std::log1p(-outlier_share_);
   std::vector<double> out(kappas.size());
   for (std::size_t k = 0; k < kappas.size(); ++k) {
     const double inside = log_z[k] == kNegInf ? kNegInf : log_a[k] - log_z[k];
-    out[k] = log_add(inside, log_out);
+    out[k] = log_add(log_keep + log_add(inside, log_out), log_uniform);
   }
   return out;
 }
@@ -106,7 +116,7 @@ void PowerEstimator::add(const CalibrationEvidence& evidence) {
   const auto best = static_cast<std::size_t>(std::max_element(score_.begin(), score_.end()) - score_.begin());
   double log2_power = std::log2(kappas_[best]);
   if (best > 0 && best + 1 < score_.size()) {
-    // The vertex of the parabola through the best point and its neighbours (a concave triple).
+    // The vertex of the parabola through the best point and its neighbours (within half a step).
     const double a = score_[best - 1], b = score_[best], c = score_[best + 1];
     const double curvature = a - 2 * b + c;
     if (curvature < 0) log2_power += 0.5 * kLog2Step * (a - c) / curvature;

@@ -25,8 +25,9 @@ double wrap_degrees(double d) {
 }
 
 /// Log-softmax of f.log_prob in place (max: its largest value), with the normalized entropy and
-/// the argmax; `chunks` workers.
-void normalize(PreparedFrame& f, float max, int chunks) {
+/// the argmax; `chunks` workers. With `shift` false the values stay as they are and only the
+/// summary (entropy under their own normalizer, peak, argmax) is computed.
+void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
   const std::size_t slice = static_cast<std::size_t>(f.height) * static_cast<std::size_t>(f.width);
   const std::size_t cells = f.log_prob.size();
   const int W = f.width;
@@ -58,6 +59,14 @@ void normalize(PreparedFrame& f, float max, int chunks) {
   }
   const double lse = max + std::log(sum);
   f.entropy = std::clamp((lse - ex / sum) / f.log_cells, 0.0, 1.0);
+  if (!shift) {
+    f.max_log_prob = max;
+    const std::size_t best = static_cast<std::size_t>(std::find(f.log_prob.begin(), f.log_prob.end(), max) - f.log_prob.begin());
+    f.argmax_bin = static_cast<int>(best / slice);
+    f.argmax_v = static_cast<int>(best % slice / static_cast<std::size_t>(W));
+    f.argmax_u = static_cast<int>(best % static_cast<std::size_t>(W));
+    return;
+  }
   detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int) {
     const Eigen::Index start = b0 * kBlock;
     const Eigen::Index stop = std::min<Eigen::Index>(static_cast<Eigen::Index>(b1) * kBlock, static_cast<Eigen::Index>(cells));
@@ -187,9 +196,22 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads) {
   normalize(frame, max, std::max(1, std::min(threads, frame.bins)));
 }
 
+void summarize_frame(PreparedFrame& frame, int threads) {
+  if (frame.log_prob.empty()) throw FilterError("summarize_frame: the frame has no cells");
+  ConstArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
+  normalize(frame, x.maxCoeff(), std::max(1, std::min(threads, frame.bins)), /*shift=*/false);
+}
+
 PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
   temper_frame_in_place(frame, power, threads);
   return frame;
+}
+
+double route_reference_entropy(std::span<const double> entropies) {
+  const std::size_t n = std::min(entropies.size(), kEtuRouteFrames);
+  std::vector<double> last(entropies.end() - static_cast<std::ptrdiff_t>(n), entropies.end());
+  std::nth_element(last.begin(), last.begin() + static_cast<std::ptrdiff_t>(n / 2), last.end());
+  return last[n / 2];
 }
 
 Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {
@@ -373,13 +395,13 @@ struct SeqLocFilter::Impl {
   struct Worker {
     std::vector<float> sample, blend, depth;
     DepthHistogram frame_cells, belief_in_crop;  // self-calibration's evidence, this worker's share
-    double belief_outside = 0;
+    double belief_outside = 0, outside_cells = 0;
   };
   std::vector<Worker> workers;
 
   explicit Impl(const FilterConfig& c)
       : scratch(c.width, c.height, c.headings),
-        estimator(c.self_calibration_prior_octaves),
+        estimator(c.self_calibration_prior_octaves, c.self_calibration_outlier_share),
         workers(static_cast<std::size_t>(c.threads)) {
     for (auto& w : workers) {
       w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
@@ -396,21 +418,25 @@ namespace {
 // replaced by `outside`). A cell whose s underflowed to 0 is counted at the deepest depth float
 // can show, so that smaller powers are not credited with less mass than they would see.
 void collect_evidence(const float* belief, float* sample, std::size_t n, double exponent, float outside,
-                      std::vector<float>& depth, DepthHistogram& in_crop, double& belief_outside) {
+                      std::vector<float>& depth, DepthHistogram& in_crop, double& belief_outside,
+                      double& outside_cells) {
   const auto count = static_cast<Eigen::Index>(n);
   Eigen::Map<Eigen::ArrayXf> s(sample, count);
   const auto inverse = static_cast<float>(1.0 / exponent);
   const auto underflow = static_cast<float>(std::log(std::numeric_limits<float>::denorm_min()) / exponent);
   Eigen::Map<Eigen::ArrayXf>(depth.data(), count) = (s > 0.0f).select(s.log() * inverse, underflow);
   double outside_mass = 0;
+  std::size_t outside_count = 0;
   for (std::size_t i = 0; i < n; ++i) {
     if (sample[i] < 0) {
       outside_mass += belief[i];
+      ++outside_count;
     } else {
       in_crop.add(depth[i], belief[i]);
     }
   }
   belief_outside += outside_mass;
+  outside_cells += static_cast<double>(outside_count);
   s = (s < 0.0f).select(outside, s);
 }
 
@@ -429,6 +455,7 @@ void SeqLocFilter::reset_uniform() {
   first_ = true;
   last_estimate_.reset();
   impl_->estimator.reset();
+  entropies_.clear();
 }
 
 void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
@@ -437,6 +464,7 @@ void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
   first_ = true;
   last_estimate_.reset();
   impl_->estimator.reset();
+  entropies_.clear();
 }
 
 const PowerEstimator& SeqLocFilter::calibration() const { return impl_->estimator; }
@@ -536,7 +564,13 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
   }
   const PreparedFrame& frame = *used;
   result.frame_entropy = frame.entropy;
-  result.etu_weight = config_.etu ? etu_weight(frame.entropy, config_.etu_reference_entropy) : 1.0;
+  if (config_.etu && config_.etu_route_reference) {
+    entropies_.push_back(given.entropy);
+    if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
+    result.etu_weight = etu_weight(given.entropy, route_reference_entropy(entropies_));
+  } else {
+    result.etu_weight = config_.etu ? etu_weight(frame.entropy, config_.etu_reference_entropy) : 1.0;
+  }
   const auto w = static_cast<float>(result.etu_weight);
 
   // The tempered likelihood p^w on the crop, scaled by its maximum (the scale cancels in the
@@ -547,7 +581,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
     for (auto& worker : impl_->workers) {
       worker.frame_cells.clear();
       worker.belief_in_crop.clear();
-      worker.belief_outside = 0;
+      worker.belief_outside = worker.outside_cells = 0;
     }
   }
   const std::size_t frame_slice = static_cast<std::size_t>(frame.width) * frame.height;
@@ -593,7 +627,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
                              worker.sample.data());
         if (collect) {
           collect_evidence(belief_.slice(k), worker.sample.data(), n, exponent, outside, worker.depth,
-                           worker.belief_in_crop, worker.belief_outside);
+                           worker.belief_in_crop, worker.belief_outside, worker.outside_cells);
         }
         ArrayMap b(belief_.slice(k), N);
         ConstArrayMap sample(worker.sample.data(), N);
@@ -611,10 +645,12 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
   if (calibrating) {
     CalibrationEvidence evidence;
     evidence.log_outside = -given.log_cells - config_.outside_crop_nats;
+    evidence.window_cells = static_cast<double>(belief_.size());
     for (const auto& worker : impl_->workers) {
       evidence.frame_cells.merge(worker.frame_cells);
       evidence.belief_in_crop.merge(worker.belief_in_crop);
       evidence.belief_outside += worker.belief_outside;
+      evidence.outside_cells += worker.outside_cells;
     }
     impl_->estimator.add(evidence);
   }

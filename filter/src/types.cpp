@@ -64,6 +64,8 @@ std::span<const FilterConfigField> filter_config_fields() {
       {"pas", &C::pas, "Peak-Anchored Smoothing"},
       {"etu_reference_entropy", &C::etu_reference_entropy,
        "ETU relative to this normalized entropy: w = min(1, (1 - H) / (1 - H_ref)); 0: the paper's 1 - H"},
+      {"etu_route_reference", &C::etu_route_reference,
+       "ETU relative to the median entropy of the route's frames so far (as given) instead of --etu-reference"},
       {"mgr_epsilon", &C::mgr_epsilon, "MGR's eps: the share of road-prior mass mixed into the belief"},
       {"mgr_sigma_m", &C::mgr_sigma_m, "MGR's road-prior sigma in metres"},
       {"pas_radius", &C::pas_radius, "PAS radius in cells"},
@@ -73,6 +75,8 @@ std::span<const FilterConfigField> filter_config_fields() {
        "self-calibration: raise each volume to the power its predecessors' predictive likelihood favours"},
       {"self_calibration_prior_octaves", &C::self_calibration_prior_octaves,
        "Self-calibration: sigma of the prior on log2 of the power (octaves)"},
+      {"self_calibration_outlier_share", &C::self_calibration_outlier_share,
+       "Self-calibration: share of a uniform belief each frame is also judged against"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},
@@ -90,6 +94,7 @@ FilterConfig paper_config() {
   c.etu_reference_entropy = 0;
   c.outside_crop_nats = 0;
   c.self_calibrate = false;
+  c.etu_route_reference = false;
   return c;
 }
 
@@ -119,6 +124,9 @@ void FilterConfig::validate() const {
   if (!(motion_noise_deg_per_m >= 0)) fail("motion_noise_deg_per_m", motion_noise_deg_per_m, "must be >= 0");
   if (!(self_calibration_prior_octaves > 0 && self_calibration_prior_octaves <= 16)) {
     fail("self_calibration_prior_octaves", self_calibration_prior_octaves, "must be in (0, 16]");
+  }
+  if (!(self_calibration_outlier_share >= 0 && self_calibration_outlier_share < 1)) {
+    fail("self_calibration_outlier_share", self_calibration_outlier_share, "must be in [0, 1)");
   }
   if (threads < 1 || threads > 256) fail("threads", threads, "must be in [1, 256]");
 }

@@ -8,8 +8,8 @@
 
 #include <gtest/gtest.h>
 
-#include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/self_calibration.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
 
 namespace seqloc::filter {
 namespace {
@@ -115,7 +115,11 @@ TEST(SelfCalibration, PredictiveLikelihoodEqualsTheBruteForceSum) {
   const FrameVolume view{volume.data(), VolumeType::float32, VolumeValues::log_prob, h, w, n, 0.5};
   (void)filter.step(prepare_frame(view, c.headings), crop, {}, nullptr);
 
-  const PowerEstimator prior(c.self_calibration_prior_octaves);
+  const PowerEstimator prior(c.self_calibration_prior_octaves, c.self_calibration_outlier_share);
+  const double rho = c.self_calibration_outlier_share;
+  ASSERT_GT(rho, 0.0) << "the default mixes in a uniform belief, and so does this sum";
+  const double window_cells = static_cast<double>(b.size());
+  const double outside_cells = window_cells - static_cast<double>(volume.size());  // the crop lies inside the window
   const auto kappas = filter.calibration().grid();
   const double log_m = std::log(static_cast<double>(volume.size()));
   const double max = *std::max_element(volume.begin(), volume.end());
@@ -136,8 +140,10 @@ TEST(SelfCalibration, PredictiveLikelihoodEqualsTheBruteForceSum) {
             p += bel * std::exp(kappa * (volume[(static_cast<std::size_t>(vv) * w + vu) * n + j] - max)) / z;
           }
         }
+    // Against a uniform belief the crop's cells give 1 (q sums to 1 over them), the others e^-delta / M.
+    const double uniform = (1 + outside_cells * std::exp(-log_m - c.outside_crop_nats)) / window_cells;
     const double got = filter.calibration().score()[k] - prior.score()[k];
-    EXPECT_NEAR(got, std::log(p), 5e-3) << "kappa " << kappa;
+    EXPECT_NEAR(got, std::log((1 - rho) * p + rho * uniform), 5e-3) << "kappa " << kappa;
   }
 }
 
@@ -223,7 +229,7 @@ TEST(SelfCalibration, OffLeavesEveryFrameAsGiven) {
 }
 
 TEST(SelfCalibration, ResetStartsFromThePrior) {
-  PowerEstimator e(2.0);
+  PowerEstimator e(2.0, 0.0);
   CalibrationEvidence evidence;
   evidence.frame_cells.add(0, 1);
   evidence.frame_cells.add(-3, 10);
@@ -234,7 +240,8 @@ TEST(SelfCalibration, ResetStartsFromThePrior) {
   e.reset();
   EXPECT_EQ(e.power(), 1.0);
   EXPECT_EQ(e.frames(), 0);
-  EXPECT_THROW(PowerEstimator(0.0), FilterError);
+  EXPECT_THROW(PowerEstimator(0.0, 0.1), FilterError);
+  EXPECT_THROW(PowerEstimator(2.0, 1.0), FilterError);
 }
 
 }  // namespace

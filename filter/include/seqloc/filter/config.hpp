@@ -22,6 +22,12 @@ struct FilterConfig {
   /// weights temper every frame (w ~ 0.1) and the belief hardly moves. 0.9: the median entropy of
   /// the calibrated matcher's volumes on development routes (docs/filter.md, "ETU").
   double etu_reference_entropy = 0.9;
+  /// ETU relative to the route's own typical frame (ours): H_ref is the median entropy of the
+  /// route's frames so far (the last 256), as given, before self-calibration's power, instead of
+  /// etu_reference_entropy; the weight reads the frame's entropy as given too. A backbone whose
+  /// calibrated volumes are sharper or flatter than the matcher's then keeps ETU's meaning, and
+  /// self-calibration flattening a frame does not also make ETU flatten it.
+  bool etu_route_reference = true;
   double mgr_epsilon = 0.01;  ///< eps of MGR
   /// sigma of the road prior g(x) = exp(-d^2 / (2 sigma^2)). 3 m: a vehicle's centre lies within
   /// a lane or two of the mapped centerline, and the OSM centerline itself is off by a few metres
@@ -43,6 +49,10 @@ struct FilterConfig {
   /// The prior on kappa: Gaussian in log2 kappa around 0 with this sigma (octaves). It holds the
   /// estimate near 1 until the frames' evidence outweighs it.
   double self_calibration_prior_octaves = 2.0;
+  /// Each frame is judged against the predicted belief mixed with this share of a uniform one:
+  /// a belief locked onto the wrong place makes every good frame look overconfident, and without
+  /// it would drive the power down so that the frames could no longer correct it.
+  double self_calibration_outlier_share = 0.1;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the
   /// odometry is flagged "relocalized".

@@ -32,6 +32,7 @@ class ReferenceFilter {
   }
   FilterConfig c_;
   std::vector<double> b_;
+  std::vector<double> entropies_;  // the route's given entropies (ETU's route reference)
   bool first_ = true;
 };
 

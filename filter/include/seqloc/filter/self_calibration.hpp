@@ -10,7 +10,8 @@
 //
 //   P_t(kappa) = sum_x b_hat_t(x) L_kappa,t(x),   S_t(kappa) = sum_{s <= t} log P_s(kappa),
 //
-// L being the likelihood the update multiplies in (q_kappa inside the crop, e^-delta / M outside).
+// L being the likelihood the update multiplies in (q_kappa inside the crop, e^-delta / M outside),
+// and b_hat mixed with a small uniform share (a belief may be wrong; see PowerEstimator).
 // Frame t is filtered with kappa_t = argmax over kappa of S_{t-1}(kappa) + log prior(kappa): it
 // depends on frames before t only. For Gaussian evidence the maximizer is the calibrated power:
 // P_t is the density of the frame's peak under N(belief mean, sigma_b^2 + sigma_p^2 / kappa), whose
@@ -60,15 +61,20 @@ struct CalibrationEvidence {
   DepthHistogram belief_in_crop;
   double belief_outside = 0;
   double log_outside = 0;
+  double window_cells = 0;   ///< cells of the window (all headings)
+  double outside_cells = 0;  ///< of those, the cells outside the crop
 };
 
 /// The running estimate of kappa from frames' evidence, on a grid log2 kappa = -6 .. 4 in steps
-/// of 1/8 with a Gaussian prior on log2 kappa around 0, refined by a parabola through the best
-/// grid point and its neighbours.
+/// of 1/8 with a Gaussian prior on log2 kappa around 0: the posterior's mode, refined by a
+/// parabola through the best grid point and its neighbours.
 class PowerEstimator {
  public:
-  /// prior_sigma_log2: the prior's sigma in octaves of kappa (> 0).
-  explicit PowerEstimator(double prior_sigma_log2);
+  /// prior_sigma_log2: the prior's sigma in octaves of kappa (> 0). outlier_share rho in [0, 1):
+  /// each frame is judged against (1 - rho) b_hat + rho u, u uniform over the window, so that a
+  /// belief that has locked onto the wrong place (against which every good frame looks
+  /// overconfident) cannot drive the power down without bound.
+  PowerEstimator(double prior_sigma_log2, double outlier_share);
 
   /// kappa for the next frame: from the frames added so far and the prior (1 before any).
   [[nodiscard]] double power() const { return power_; }
@@ -77,15 +83,15 @@ class PowerEstimator {
   void add(const CalibrationEvidence& evidence);
   /// log P(kappa) of one frame at each kappa (for tests and diagnostics), up to a constant that
   /// does not depend on kappa (the belief's total mass).
-  [[nodiscard]] static std::vector<double> log_predictive(const CalibrationEvidence& evidence,
-                                                          std::span<const double> kappas);
+  [[nodiscard]] std::vector<double> log_predictive(const CalibrationEvidence& evidence,
+                                                   std::span<const double> kappas) const;
   [[nodiscard]] std::span<const double> grid() const { return kappas_; }
   /// S(kappa) + log prior at each grid point.
   [[nodiscard]] std::span<const double> score() const { return score_; }
   void reset();
 
  private:
-  double prior_sigma_log2_;
+  double prior_sigma_log2_, outlier_share_;
   std::vector<double> kappas_, log_prior_, score_;
   double power_ = 1;
   int frames_ = 0;

@@ -50,6 +50,11 @@ struct PreparedFrame {
 /// index in (H, W, N) order); a -inf log-probability is a valid zero.
 [[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1);
 
+/// Recomputes a frame's entropy, max_log_prob and argmax from its values as they stand (after
+/// they were rounded, say), leaving the values untouched: what the filter reads of a frame then
+/// describes the values it multiplies in.
+void summarize_frame(PreparedFrame& frame, int threads = 1);
+
 /// temper_frame in place (the frame's storage is reused).
 void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
 
@@ -59,13 +64,19 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
 /// and > 0.
 [[nodiscard]] PreparedFrame temper_frame(PreparedFrame frame, double power, int threads = 1);
 
+/// The median of the last `kEtuRouteFrames` entropies in `entropies` (which must not be empty):
+/// ETU's route reference (FilterConfig::etu_route_reference).
+inline constexpr std::size_t kEtuRouteFrames = 256;
+[[nodiscard]] double route_reference_entropy(std::span<const double> entropies);
+
 /// ETU weight of a frame (conventions.md section 6, step 2): w = max(1 - H, 1e-3). With a
 /// reference entropy H_ref > 0 (ours, FilterConfig::etu_reference_entropy) the weight is relative
 /// to a typical frame: w = clamp((1 - H) / (1 - H_ref), 1e-3, 1), so frames as sharp as H_ref or
 /// sharper count fully and only flatter ones are tempered.
+/// (A reference of 1, a route of uniform frames, is taken as 1 - 1e-9.)
 [[nodiscard]] inline double etu_weight(double normalized_entropy, double reference_entropy = 0.0) {
-  const double w = reference_entropy > 0 ? (1.0 - normalized_entropy) / (1.0 - reference_entropy)
-                                         : 1.0 - normalized_entropy;
+  const double ref = std::min(reference_entropy, 1.0 - 1e-9);
+  const double w = ref > 0 ? (1.0 - normalized_entropy) / (1.0 - ref) : 1.0 - normalized_entropy;
   return std::clamp(w, 1e-3, 1.0);
 }
 
@@ -142,6 +153,7 @@ class SeqLocFilter {
   bool first_ = true;
   std::optional<Pose> last_estimate_;
   std::optional<float> cached_min_;  ///< the belief's minimum, known at the end of a step
+  std::vector<double> entropies_;    ///< the route's last frames' entropies, for ETU's route reference
 };
 
 /// PAS (conventions.md section 6, step 5): the mass-weighted mean position over the
