@@ -100,6 +100,7 @@ void FrameStore::release(Slot& slot) {
 
 void round_like_frame_store(filter::PreparedFrame& frame) {
   for (float& v : frame.log_prob) v = filter::half_to_float(filter::float_to_half(v));
+  filter::summarize_frame(frame);
 }
 
 void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
@@ -109,7 +110,11 @@ void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
   std::shared_ptr<const filter::PreparedFrame> frame;
   std::vector<std::uint16_t> halves;
   try {
-    frame = source_(i);
+    // The header describes the rounded values (their entropy, peak and argmax), so that a frame
+    // written out as float16 and read back is the same frame.
+    auto rounded = std::make_shared<filter::PreparedFrame>(*source_(i));
+    round_like_frame_store(*rounded);
+    frame = std::move(rounded);
     halves.resize(values_of(*frame));
     std::transform(frame->log_prob.begin(), frame->log_prob.end(), halves.begin(), filter::float_to_half);
   } catch (...) {

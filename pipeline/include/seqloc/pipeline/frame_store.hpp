@@ -79,8 +79,9 @@ class FrameStore {
   Stats stats_;
 };
 
-/// What a frame's log-probabilities become in a FrameStore (float16, NumPy's rounding): a loop
-/// that feeds frames itself applies this to get localize's poses exactly.
+/// What a frame becomes in a FrameStore: its log-probabilities rounded to float16 (NumPy's
+/// rounding) and its entropy, peak and argmax those of the rounded values. A loop that feeds
+/// frames itself applies this to get localize's poses exactly.
 void round_like_frame_store(filter::PreparedFrame& frame);
 
 }  // namespace seqloc::pipeline
