@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "command.hpp"
+#include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/errors.hpp"
@@ -54,22 +55,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
                    "Divide every volume's log-probabilities by T and renormalize (T > 1 flattens an overconfident "
                    "backbone, T < 1 sharpens)")
         ->capture_default_str();
-    auto& m = options_.matcher;
-    app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
-        ->capture_default_str();
-    app.add_option("--matcher-temperature", m.temperature, "Built-in matcher: the log-likelihood is divided by this")
-        ->capture_default_str();
-    app.add_option("--matcher-tolerance", m.tolerance_m, "Built-in matcher: positional tolerance (sigma, m)")
-        ->capture_default_str();
-    app.add_option("--matcher-blur-cells", m.calibration.blur_cells,
-                   "Built-in matcher calibration: positional blur of the volume (sigma, cells)")
-        ->capture_default_str();
-    app.add_option("--matcher-blur-bins", m.calibration.blur_bins,
-                   "Built-in matcher calibration: heading blur of the volume (sigma, bins)")
-        ->capture_default_str();
-    app.add_option("--matcher-floor", m.calibration.floor,
-                   "Built-in matcher calibration: share of each volume spread uniformly")
-        ->capture_default_str();
+    app.add_option("--calibration", calibration_,
+                   "A calibration file from seqloc calibrate: its temperature, blur and floor applied to every volume "
+                   "(instead of --volume-temperature)");
+    add_matcher_options(app, options_.matcher);
     app.add_option("--shard", shard_,
                    "Localize only shard I of N (I/N, 0-based: every N-th route in sorted order from the I-th), e.g. "
                    "--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; merge the outputs with `seqloc evaluate`");
@@ -134,6 +123,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     // Everything is read and checked before any work, the other shards' routes too (a shard's
     // route names and errors do not depend on which shard runs); localize_routes checks the
     // crops of this shard's routes before its first job.
+    if (!calibration_.empty()) pipeline::apply_calibration_file(calibration_, options_);
     raster::CacheReader cache(cache_path_, 256);
     std::vector<fs::path> dirs = route_dirs_;
     std::sort(dirs.begin(), dirs.end());
@@ -200,14 +190,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
   }
 
  private:
-  static int default_threads() {
-    const unsigned n = std::thread::hardware_concurrency();
-    return n == 0 ? 1 : static_cast<int>(std::min(n, 64u));
-  }
-
   fs::path cache_path_;
   std::vector<fs::path> route_dirs_;
   fs::path out_;
+  fs::path calibration_;
   std::string mode_ = "seqloc";
   pipeline::LocalizeOptions options_;
   int window_ = filter::FilterConfig{}.width;

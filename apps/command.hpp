@@ -3,6 +3,7 @@
 // validates what was parsed (before any work: a usage error never leaves output behind), run()
 // does the work. main() turns exceptions into one line on stderr and an exit code.
 
+#include <algorithm>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -13,6 +14,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -20,7 +22,17 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/osm/features.hpp"
 
+namespace seqloc::pipeline {
+struct MatcherConfig;
+}  // namespace seqloc::pipeline
+
 namespace seqloc::app {
+
+/// Worker threads when the user names none: the machine's cores (1 when unknown, at most 64).
+[[nodiscard]] inline int default_threads() {
+  const unsigned n = std::thread::hardware_concurrency();
+  return n == 0 ? 1 : static_cast<int>(std::min(n, 64u));
+}
 
 /// Exit codes: 0 success, 1 failure (bad data, I/O), 2 usage.
 inline constexpr int kExitOk = 0;
@@ -74,8 +86,12 @@ class Command {
 
 /// An option for every field of `config` but those named in `skip`, from the filter's field table
 /// (filter::filter_config_fields): --NAME in kebab case (and the shorter name of earlier releases),
-/// with the field's help and its default; a switch that is on by default is --no-NAME.
+/// with the field's help and its default; a switch that is on by default is --no-NAME. --paper sets
+/// the fields in which filter::paper_config() differs from the defaults.
 void add_filter_options(CLI::App& app, filter::FilterConfig& config, std::initializer_list<std::string_view> skip);
+
+/// The built-in matcher's options (--matcher-*), for the commands that score observations.
+void add_matcher_options(CLI::App& app, pipeline::MatcherConfig& matcher);
 
 /// --overwrite for the commands that write an output (osmium-tool's option mixins).
 class WithOverwrite {
@@ -146,6 +162,8 @@ std::unique_ptr<Command> make_cache_merge_command();
 std::unique_ptr<Command> make_localize_command();
 std::unique_ptr<Command> make_evaluate_command();
 std::unique_ptr<Command> make_simulate_command();
+std::unique_ptr<Command> make_match_command();
+std::unique_ptr<Command> make_calibrate_command();
 std::unique_ptr<Command> make_render_command();
 std::unique_ptr<Command> make_serve_command();
 std::unique_ptr<Command> make_export_command();

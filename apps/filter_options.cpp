@@ -6,6 +6,7 @@
 #include <variant>
 
 #include "command.hpp"
+#include "seqloc/pipeline/matcher.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -43,6 +44,40 @@ void add_filter_options(CLI::App& app, filter::FilterConfig& config, std::initia
         },
         field.member);
   }
+  // Defined after the fields' options, so its callback runs after theirs and wins.
+  app.add_flag_callback(
+      "--paper",
+      [&config, defaults] {
+        // The fields in which the paper's configuration differs from the defaults.
+        const filter::FilterConfig paper = filter::paper_config();
+        for (const auto& field : filter::filter_config_fields()) {
+          std::visit(
+              [&](auto member) {
+                if (paper.*member != defaults.*member) config.*member = paper.*member;
+              },
+              field.member);
+        }
+      },
+      "The seed paper's configuration (conventions.md section 6): --etu-reference 0 --outside-crop-nats 0 "
+      "--no-self-calibrate, whatever those options say");
+}
+
+void add_matcher_options(CLI::App& app, pipeline::MatcherConfig& m) {
+  app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
+      ->capture_default_str();
+  app.add_option("--matcher-temperature", m.temperature, "Built-in matcher: the log-likelihood is divided by this")
+      ->capture_default_str();
+  app.add_option("--matcher-tolerance", m.tolerance_m, "Built-in matcher: positional tolerance (sigma, m)")
+      ->capture_default_str();
+  app.add_option("--matcher-blur-cells", m.calibration.blur_cells,
+                 "Built-in matcher calibration: positional blur of the volume (sigma, cells)")
+      ->capture_default_str();
+  app.add_option("--matcher-blur-bins", m.calibration.blur_bins,
+                 "Built-in matcher calibration: heading blur of the volume (sigma, bins)")
+      ->capture_default_str();
+  app.add_option("--matcher-floor", m.calibration.floor,
+                 "Built-in matcher calibration: share of each volume spread uniformly")
+      ->capture_default_str();
 }
 
 }  // namespace seqloc::app

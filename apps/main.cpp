@@ -71,6 +71,10 @@ int main(int argc, char** argv) {
   add(&cli, "localize", "Localize routes against a region cache", app::make_localize_command());
   add(&cli, "evaluate", "Recompute the recall table from localize outputs", app::make_evaluate_command());
   add(&cli, "simulate", "Simulate routes with BEV observations along a cache's roads", app::make_simulate_command());
+  add(&cli, "match", "Write the built-in matcher's volumes of observation routes as volume routes",
+      app::make_match_command());
+  add(&cli, "calibrate", "Fit a backbone's temperature, blur and floor on routes with ground truth",
+      app::make_calibrate_command());
   add(&cli, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time", app::make_render_command());
   add(&cli, "serve", "Serve region caches over HTTP: tiles, crops, points, WMTS, the viewer page",
       app::make_serve_command());

@@ -166,10 +166,17 @@ class PyCache {
 
 // The filter's settings by name, from filter::filter_config_fields (the one list of them).
 filter::FilterConfig config_from(const py::dict& d) {
+  // "preset": "paper" starts from the seed paper's configuration; the other keys override it.
   filter::FilterConfig c;
+  if (d.contains("preset")) {
+    const auto preset = d["preset"].cast<std::string>();
+    if (preset != "paper") throw py::value_error("preset '" + preset + "': the one preset is 'paper'");
+    c = filter::paper_config();
+  }
   const auto fields = filter::filter_config_fields();
   for (const auto& item : d) {
     const auto key = item.first.cast<std::string>();
+    if (key == "preset") continue;
     const py::handle value = item.second;
     const auto field = std::find_if(fields.begin(), fields.end(), [&](const auto& f) { return key == f.name; });
     if (field == fields.end()) throw py::key_error("unknown filter setting '" + key + "' (Filter.settings() lists them)");
@@ -286,6 +293,7 @@ class PyFilter {
     d["argmax"] = pose_dict(r.argmax);
     d["frame_entropy"] = r.frame_entropy;
     d["etu_weight"] = r.etu_weight;
+    d["volume_power"] = r.volume_power;
     d["relocalized"] = r.relocalized;
     d["peak_log_belief"] = r.peak_log_belief;
     return d;
@@ -361,6 +369,7 @@ class PyLocalizer {
     d["grid_heading_deg"] = pose.grid_heading_deg;
     d["entropy"] = pose.entropy;
     d["etu_weight"] = pose.etu_weight;
+    d["volume_power"] = pose.volume_power;
     d["relocalized"] = pose.relocalized;
     return d;
   }
@@ -407,7 +416,7 @@ PYBIND11_MODULE(seqloc, m) {
 
   py::class_<PyFilter>(m, "Filter", "The SeqLoc filter over a window of cells (docs/filter.md)")
       .def(py::init<const py::dict&>(), py::arg("config") = py::dict(),
-           "config: any of the settings of Filter.settings() by name; the others keep their defaults")
+           "config: any of the settings of Filter.settings() by name; the others keep their defaults ({\"preset\": \"paper\"} starts from the seed paper's configuration)")
       .def_static("settings", &filter_settings, "Every filter setting: {name: (default, what it is)}")
       .def_property_readonly("config", [](const PyFilter& f) { return config_dict(f.config()); },
                              "The settings in use, by name")
@@ -440,7 +449,7 @@ PYBIND11_MODULE(seqloc, m) {
            "odometry since the last frame (forward_m, left_m, yaw_deg), the crop's centre (crop_lat/crop_lon, "
            "north-up at true north, or crop_x/crop_y in region metres, grid north), optionally gps=(lat, lon, "
            "sigma_m). Returns the pose: lat, lon, heading_deg (compass), x, y (region metres), grid_heading_deg, "
-           "entropy, etu_weight, relocalized.")
+           "entropy, etu_weight, volume_power, relocalized.")
       .def("belief_marginal", &PyLocalizer::belief_marginal,
            "The belief summed over headings, (height, width) float32 (None before the first frame)")
       .def_property_readonly("window_origin", &PyLocalizer::window_origin,

@@ -25,6 +25,7 @@ double median(std::vector<double> v) {
 struct Row {
   int size;
   int threads;
+  bool calibrate;
   double step_ms, memcpy_ms, intake_ms;
 };
 
@@ -37,55 +38,63 @@ int main() {
   const int vh = 128, vw = 128, vn = 256;
   std::vector<float> volume(static_cast<std::size_t>(vh) * vw * vn);
   for (auto& x : volume) x = noise(rng);
-  const seqloc::filter::FrameVolume view{volume.data(), seqloc::filter::VolumeType::float32,
-                                         seqloc::filter::VolumeValues::log_prob, vh, vw, vn, 0.5};
+  const seqloc::filter::FrameVolume view{
+      volume.data(), seqloc::filter::VolumeType::float32, seqloc::filter::VolumeValues::log_prob, vh, vw, vn, 0.5};
   std::vector<Row> rows;
   for (const int size : {128, 256}) {
     for (const int threads : {1, 2}) {
-      FilterConfig c;
-      c.width = c.height = size;
-      c.headings = 256;
-      c.threads = threads;
-      seqloc::filter::SeqLocFilter filter(c);
-      std::vector<float> road(static_cast<std::size_t>(size) * size);
-      for (int v = 0; v < size; ++v)
-        for (int u = 0; u < size; ++u) road[static_cast<std::size_t>(v) * static_cast<std::size_t>(size) + static_cast<std::size_t>(u)] = static_cast<float>(std::abs(u - size / 2) * 0.5);
-      std::vector<double> step_ms, intake_ms;
-      for (int i = 0; i < 12; ++i) {
-        const auto t0 = Clock::now();
-        const auto frame = seqloc::filter::prepare_frame(view, c.headings, threads);
-        intake_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-        const auto r = filter.step(frame, {size / 2.0 + (i % 3), size / 2.0 - (i % 2), 0}, {3.7, 0.2, 4.3}, road.data());
-        step_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-        if (r.pose.u < -1e9) std::puts("");  // keep the result alive
+      for (const bool calibrate : {false, true}) {
+        FilterConfig c;
+        c.width = c.height = size;
+        c.headings = 256;
+        c.threads = threads;
+        c.self_calibrate = calibrate;
+        seqloc::filter::SeqLocFilter filter(c);
+        std::vector<float> road(static_cast<std::size_t>(size) * size);
+        for (int v = 0; v < size; ++v)
+          for (int u = 0; u < size; ++u)
+            road[static_cast<std::size_t>(v) * static_cast<std::size_t>(size) + static_cast<std::size_t>(u)] =
+                static_cast<float>(std::abs(u - size / 2) * 0.5);
+        std::vector<double> step_ms, intake_ms;
+        for (int i = 0; i < 12; ++i) {
+          const auto t0 = Clock::now();
+          const auto frame = seqloc::filter::prepare_frame(view, c.headings, threads);
+          intake_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+          const auto r =
+              filter.step(frame, {size / 2.0 + (i % 3), size / 2.0 - (i % 2), 0}, {3.7, 0.2, 4.3}, road.data());
+          step_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+          if (r.pose.u < -1e9) std::puts("");  // keep the result alive
+        }
+        step_ms.erase(step_ms.begin(), step_ms.begin() + 2);  // warm-up
+        // Peer: memcpy of the belief volume (W x H x R floats).
+        const auto& b = filter.belief();
+        std::vector<float> copy(b.size());
+        std::vector<double> copy_ms;
+        for (int i = 0; i < 10; ++i) {
+          const auto t0 = Clock::now();
+          std::memcpy(copy.data(), b.data(), b.size() * sizeof(float));
+          copy_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+        }
+        rows.push_back({size, threads, calibrate, median(step_ms), median(copy_ms), median(intake_ms)});
+        const Row& r = rows.back();
+        std::printf(
+            "%dx%dx256, %d thread%s, self-calibration %s: %.1f ms/step (volume intake %.1f ms), %.1f frames/s; memcpy "
+            "of the belief "
+            "(%.0f MB) %.2f ms; step / memcpy = %.1f\n",
+            size, size, threads, threads > 1 ? "s" : "", calibrate ? "on " : "off", r.step_ms, r.intake_ms,
+            1000.0 / r.step_ms, static_cast<double>(b.size()) * 4 / 1e6, r.memcpy_ms, r.step_ms / r.memcpy_ms);
       }
-      step_ms.erase(step_ms.begin(), step_ms.begin() + 2);  // warm-up
-      // Peer: memcpy of the belief volume (W x H x R floats).
-      const auto& b = filter.belief();
-      std::vector<float> copy(b.size());
-      std::vector<double> copy_ms;
-      for (int i = 0; i < 10; ++i) {
-        const auto t0 = Clock::now();
-        std::memcpy(copy.data(), b.data(), b.size() * sizeof(float));
-        copy_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-      }
-      rows.push_back({size, threads, median(step_ms), median(copy_ms), median(intake_ms)});
-      const Row& r = rows.back();
-      std::printf("%dx%dx256, %d thread%s: %.1f ms/step (volume intake %.1f ms), %.1f frames/s; memcpy of the belief "
-                  "(%.0f MB) %.2f ms; step / memcpy = %.1f\n",
-                  size, size, threads, threads > 1 ? "s" : "", r.step_ms, r.intake_ms, 1000.0 / r.step_ms,
-                  static_cast<double>(b.size()) * 4 / 1e6, r.memcpy_ms, r.step_ms / r.memcpy_ms);
     }
   }
   std::string json = R"({"benchmark": "filter", "volume": "128x128x256 float32", "rows": [)";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     char buffer[256];
     std::snprintf(buffer, sizeof buffer,
-                  "%s{\"window\": %d, \"threads\": %d, \"ms_per_step\": %.2f, \"intake_ms\": %.2f, \"frames_per_s\": %.2f, "
+                  "%s{\"window\": %d, \"threads\": %d, \"self_calibrate\": %s, \"ms_per_step\": %.2f, \"intake_ms\": "
+                  "%.2f, \"frames_per_s\": %.2f, "
                   "\"memcpy_ms\": %.3f, \"step_over_memcpy\": %.2f}",
-                  i ? ", " : "", rows[i].size, rows[i].threads, rows[i].step_ms, rows[i].intake_ms,
-                  1000.0 / rows[i].step_ms,
-                  rows[i].memcpy_ms, rows[i].step_ms / rows[i].memcpy_ms);
+                  i ? ", " : "", rows[i].size, rows[i].threads, rows[i].calibrate ? "true" : "false", rows[i].step_ms,
+                  rows[i].intake_ms, 1000.0 / rows[i].step_ms, rows[i].memcpy_ms, rows[i].step_ms / rows[i].memcpy_ms);
     json += buffer;
   }
   std::printf("%s]}\n", json.c_str());

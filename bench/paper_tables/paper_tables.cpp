@@ -3,10 +3,14 @@
 // every configuration; configurations run side by side. Writes report.md,
 // entropy_scatter_<region>.png and results.json under the output folder and ends with one line of
 // JSON.
-//   bench_paper_tables --work DIR --out DIR [--window 160] [--threads 2]
+//   bench_paper_tables --work DIR --out DIR [--window 160] [--threads 2] [--tables overall,tempered,...]
+// --tables runs only those tables' configurations (overall, ablation, eps, pas, noise, tempered,
+// extras; the overall table's are always run, as the others compare with them).
 // DIR/<region>.gpkg and DIR/<region>-routes/route_* must exist (bench/paper_tables/run makes them).
 
+#include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -36,17 +40,31 @@ struct Config {
   pipeline::Mode mode = pipeline::Mode::seqloc;
   std::function<void(filter::FilterConfig&)> tweak;
   double noise_t = 0, noise_r = 0;  // odometry noise (% of step, deg per m)
-  double sharpen = 1;               // the volumes raised to this power (an overconfident backbone)
+  double sharpen = 1;               // the volumes raised to this power k (k log p: k > 1 overconfident)
   int offline_half_window = 10;     // offline: frames within +-K (all when < 0)
 };
 
-// The paper's exact configuration: ETU w = 1 - H, unobserved cells at log(1/M).
+// The paper's exact configuration (filter::paper_config: ETU w = 1 - H, unobserved cells at
+// log(1/M), no self-calibration) in the bench's window and threads.
 void paper(filter::FilterConfig& f) {
-  f.etu_reference_entropy = 0;
-  f.outside_crop_nats = 0;
+  filter::FilterConfig p = filter::paper_config();
+  p.width = f.width;
+  p.height = f.height;
+  p.threads = f.threads;
+  f = p;
 }
 
-constexpr double kSharpen = 4;
+void no_self_calibration(filter::FilterConfig& f) { f.self_calibrate = false; }
+
+// Backbones out of calibration: the matcher's volumes tempered by k (k log p, renormalized).
+constexpr double kTempering[] = {0.25, 0.5, 2, 4, 8};
+constexpr double kSharpen = 4;  // the overconfident backbone of the paper's configuration's row
+
+std::string tempered_name(const char* what, double k) {
+  char n[96];
+  std::snprintf(n, sizeof n, "%s, k = %g", what, k);
+  return n;
+}
 
 std::vector<Config> configs() {
   using M = pipeline::Mode;
@@ -72,10 +90,15 @@ std::vector<Config> configs() {
       {"good (1%, 0.005 deg/m)", 1, 0.005}, {"medium (2%, 0.010 deg/m)", 2, 0.010},
       {"poor (5%, 0.020 deg/m)", 5, 0.020}, {"very poor (10%, 0.050 deg/m)", 10, 0.050}};
   for (const auto& n : noise) c.push_back({"noise", n.name, M::seqloc, none, n.t, n.r});
-  // Calibrated volumes sharpened 4x (temperature / 4), as a trained network is out of its domain.
-  c.push_back({"overconfident", "online (naive recursion), sharpened", M::online, none, 0, 0, kSharpen});
-  c.push_back({"overconfident", "SeqLoc, sharpened", M::seqloc, none, 0, 0, kSharpen});
-  c.push_back({"overconfident", "SeqLoc, paper's configuration, sharpened", M::seqloc, paper, 0, 0, kSharpen});
+  // Volumes out of calibration, as a network trained elsewhere gives them: each k with
+  // self-calibration on (SeqLoc) and off; k = 1 is the overall table's SeqLoc.
+  c.push_back({"tempered", tempered_name("SeqLoc without self-calibration", 1), M::seqloc, no_self_calibration});
+  for (const double k : kTempering) {
+    c.push_back({"tempered", tempered_name("SeqLoc", k), M::seqloc, none, 0, 0, k});
+    c.push_back({"tempered", tempered_name("SeqLoc without self-calibration", k), M::seqloc, no_self_calibration, 0, 0, k});
+  }
+  c.push_back({"tempered", tempered_name("online (naive recursion)", kSharpen), M::online, none, 0, 0, kSharpen});
+  c.push_back({"tempered", tempered_name("SeqLoc, paper's configuration", kSharpen), M::seqloc, paper, 0, 0, kSharpen});
   c.push_back({"extras", "+sub-bin heading", M::seqloc, [](auto& f) { f.subbin_heading = true; }});
   c.push_back({"extras", "+motion noise", M::seqloc, [](auto& f) { f.motion_noise = true; }});
   c.push_back({"extras", "+GPS term (first frame's fix)", M::seqloc, [](auto& f) { f.gps_prior = true; }});
@@ -130,6 +153,7 @@ double spearman(const std::vector<std::pair<double, double>>& points) {
 int main(int argc, char** argv) {
   fs::path work, out;
   int window = 160, threads = 2;
+  std::string only;  // ",table,table," or empty for all
   double temperature = pipeline::MatcherConfig{}.temperature;
   double miss_rate = pipeline::MatcherConfig{}.miss_rate;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -140,6 +164,7 @@ int main(int argc, char** argv) {
     else if (a == "--threads") threads = std::stoi(argv[i + 1]);
     else if (a == "--temperature") temperature = std::stod(argv[i + 1]);
     else if (a == "--miss-rate") miss_rate = std::stod(argv[i + 1]);
+    else if (a == "--tables") only = "," + std::string(argv[i + 1]) + ",";
   }
   if (work.empty() || out.empty()) {
     std::fprintf(stderr, "usage: bench_paper_tables --work DIR --out DIR [--window 160] [--threads 2]\n");
@@ -148,10 +173,14 @@ int main(int argc, char** argv) {
   fs::create_directories(out);
   const std::vector<std::pair<std::string, std::string>> regions = {
       {"andorra", "feature-sparse"}, {"north-bayreuth", "feature-sparse"}, {"monaco", "urban"}};
-  const auto all = configs();
+  std::vector<Config> all;
+  for (auto& c : configs()) {
+    if (only.empty() || c.table == "overall" || only.find("," + c.table + ",") != std::string::npos) all.push_back(c);
+  }
   // poses[config][group] and per region for the entropy analysis.
   std::map<std::string, std::map<std::string, std::vector<pipeline::FramePose>>> poses;
   std::map<std::string, std::vector<pipeline::FramePose>> single_by_region;
+  std::map<std::string, std::map<std::string, std::vector<double>>> last_power;  // [config][group or region]
   std::map<std::string, std::vector<pipeline::VolumeShape>> shapes;
   const auto start = Clock::now();
   double matcher_seconds = 0;
@@ -181,8 +210,10 @@ int main(int argc, char** argv) {
       matcher_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
       frames_matched += frames.size();
       const pipeline::FrameSource shared = [&frames](std::size_t i) { return frames[i]; };
-      const pipeline::FrameSource sharpened = [&frames](std::size_t i) {
-        return std::make_shared<const filter::PreparedFrame>(filter::temper_frame(*frames[i], kSharpen));
+      const auto tempered = [&frames](double k) -> pipeline::FrameSource {
+        return [&frames, k](std::size_t i) {
+          return std::make_shared<const filter::PreparedFrame>(filter::temper_frame(*frames[i], k));
+        };
       };
       // The likelihood's shape around the vehicle's heading (crops are region-grid north-up).
       const auto projection = cache.metadata().projection();
@@ -201,10 +232,20 @@ int main(int argc, char** argv) {
         o.offline_half_window = all[c].offline_half_window;
         all[c].tweak(o.filter);
         pipeline::Route r = route;
-        if (all[c].noise_t > 0) pipeline::perturb_odometry(r, all[c].noise_t, all[c].noise_r, 1000 + c);
-        results[c] = pipeline::localize_route(r, cache, o, all[c].mode, {}, all[c].sharpen != 1 ? sharpened : shared);
+        // The noise's seed follows the configuration's name (FNV-1a), so that adding or leaving out
+        // configurations does not redraw it.
+        std::uint64_t seed = 1469598103934665603ull;
+        for (const char ch : all[c].name) seed = (seed ^ static_cast<unsigned char>(ch)) * 1099511628211ull;
+        if (all[c].noise_t > 0) pipeline::perturb_odometry(r, all[c].noise_t, all[c].noise_r, seed);
+        results[c] = pipeline::localize_route(r, cache, o, all[c].mode, {},
+                                              all[c].sharpen != 1 ? tempered(all[c].sharpen) : shared);
       });
       for (std::size_t c = 0; c < all.size(); ++c) {
+        // Self-calibration's estimate after the route: the power its last frame was given.
+        if (!results[c].poses.empty()) {
+          last_power[all[c].name][group].push_back(results[c].poses.back().volume_power);
+          last_power[all[c].name][region].push_back(results[c].poses.back().volume_power);
+        }
         auto& g = poses[all[c].name][group];
         g.insert(g.end(), results[c].poses.begin(), results[c].poses.end());
         auto& reg = poses[all[c].name][region];
@@ -231,16 +272,17 @@ int main(int argc, char** argv) {
       {"overall", "1. Overall"}, {"ablation", "2. Ablation (naive recursion = online; +MGR+ETU+PAS = SeqLoc)"},
       {"eps", "3a. MGR eps (SeqLoc uses 0.01)"}, {"pas", "3b. PAS radius (SeqLoc uses 3)"},
       {"noise", "4. Odometry noise (none = SeqLoc)"},
-      {"overconfident", "5. Overconfident backbone: the same volumes sharpened 4x (p^4, renormalized; single frames "
-                        "keep their argmax)"},
+      {"tempered", "5. Backbones out of calibration: the same volumes tempered by k (k log p, renormalized; k > 1 "
+                   "overconfident, k < 1 timid; single frames keep their argmax); k = 1 is SeqLoc above"},
       {"extras", "6. Beyond the paper"}};
   for (const std::string group : {"feature-sparse", "urban"}) {
     md << "\n## " << group << "\n";
     for (const auto& [table, title] : tables) {
+      if (std::none_of(all.begin(), all.end(), [&](const Config& c) { return c.table == table; })) continue;
       md << "\n### " << title << "\n\n" << kHeader;
       if (table == "ablation") md << row("naive recursion", metrics("online (naive recursion)", group));
       if (table == "eps" || table == "pas" || table == "noise" || table == "extras") md << row("SeqLoc", metrics("SeqLoc", group));
-      if (table == "overconfident") md << row("single frame", metrics("single frame", group));
+      if (table == "tempered") md << row("single frame", metrics("single frame", group));
       for (const auto& c : all) {
         if (c.table == table) md << row(c.name, metrics(c.name, group));
         if (c.table == table || (table == "ablation" && c.name == "SeqLoc")) {
@@ -255,11 +297,41 @@ int main(int argc, char** argv) {
       if (table == "ablation") md << row("+MGR+ETU+PAS (SeqLoc)", metrics("SeqLoc", group));
     }
   }
-  md << "\n## Per region (overall)\n\n" << kHeader;
+  md << "\n## Per region (overall and tempered)\n\n" << kHeader;
   for (const auto& [region, group] : regions) {
     for (const auto& c : all) {
-      if (c.table == "overall") md << row(region + ": " + c.name, metrics(c.name, region));
+      if (c.table == "overall" || c.table == "tempered") md << row(region + ": " + c.name, metrics(c.name, region));
     }
+  }
+
+  // 5b. What self-calibration estimated: the power of each route's last frame against 1 / k.
+  auto median = [](std::vector<double> x) {
+    if (x.empty()) return 0.0;
+    std::nth_element(x.begin(), x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2), x.end());
+    return x[x.size() / 2];
+  };
+  md << "\n## 5b. Self-calibration's estimate (median over routes of the power given to the last frame)\n\n"
+     << "| k | 1 / k |";
+  std::vector<std::string> columns = {"feature-sparse", "urban"};
+  for (const auto& [region, group] : regions) columns.push_back(region);
+  for (const auto& col : columns) md << " " << col << " |";
+  md << "\n|---:|---:|";
+  for (std::size_t i = 0; i < columns.size(); ++i) md << "---:|";
+  md << "\n";
+  std::vector<double> ks = {1};
+  ks.insert(ks.end(), std::begin(kTempering), std::end(kTempering));
+  std::sort(ks.begin(), ks.end());
+  for (const double k : ks) {
+    const std::string name = k == 1 ? "SeqLoc" : tempered_name("SeqLoc", k);
+    char b[64];
+    std::snprintf(b, sizeof b, "| %g | %.3f |", k, 1 / k);
+    md << b;
+    for (const auto& col : columns) {
+      std::snprintf(b, sizeof b, " %.3f |", median(last_power[name][col]));
+      md << b;
+      results["self_calibration"][col][std::to_string(k)] = median(last_power[name][col]);
+    }
+    md << "\n";
   }
 
   // 7. Does entropy predict error? Single frames per region: recall per entropy tercile and the
@@ -318,10 +390,6 @@ int main(int argc, char** argv) {
       if (sh.elongation >= 2 && sh.axis_to_heading_deg <= 30) ridge++;
       if (sh.elongation >= 2 && sh.axis_to_heading_deg >= 60) across++;
     }
-    auto median = [](std::vector<double> x) {
-      std::nth_element(x.begin(), x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2), x.end());
-      return x[x.size() / 2];
-    };
     const auto n = static_cast<double>(v.size());
     char b[320];
     std::snprintf(b, sizeof b, "| %s (%s) | %zu | %.2f | %.1f%% | %.1f%% | %.1f / %.1f |\n", region.c_str(), group.c_str(),
@@ -343,9 +411,14 @@ int main(int argc, char** argv) {
   };
   std::printf("{\"benchmark\": \"paper_tables\", \"frames\": %zu, \"sparse_single_r5m\": %.1f, \"sparse_online_r5m\": %.1f, "
               "\"sparse_seqloc_r5m\": %.1f, \"sparse_offline_r5m\": %.1f, \"sparse_offline_all_r5m\": %.1f, "
-              "\"urban_single_r5m\": %.1f, \"urban_seqloc_r5m\": %.1f, \"seconds\": %.0f}\n",
+              "\"urban_single_r5m\": %.1f, \"urban_seqloc_r5m\": %.1f, \"sparse_seqloc_k4_r5m\": %.1f, "
+              "\"sparse_seqloc_k4_uncalibrated_r5m\": %.1f, \"sparse_seqloc_k0.25_r5m\": %.1f, \"sparse_seqloc_k8_r5m\": %.1f, "
+              "\"seconds\": %.0f}\n",
               frames_matched, r5("single frame", "feature-sparse"), r5("online (naive recursion)", "feature-sparse"),
               r5("SeqLoc", "feature-sparse"), r5("offline (+-10 frames)", "feature-sparse"),
-              r5("offline (all frames)", "feature-sparse"), r5("single frame", "urban"), r5("SeqLoc", "urban"), seconds);
+              r5("offline (all frames)", "feature-sparse"), r5("single frame", "urban"), r5("SeqLoc", "urban"),
+              r5(tempered_name("SeqLoc", 4), "feature-sparse"),
+              r5(tempered_name("SeqLoc without self-calibration", 4), "feature-sparse"),
+              r5(tempered_name("SeqLoc", 0.25), "feature-sparse"), r5(tempered_name("SeqLoc", 8), "feature-sparse"), seconds);
   return 0;
 }

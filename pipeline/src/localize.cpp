@@ -94,8 +94,22 @@ std::vector<float> match_frame(const RouteFrame& f, raster::CacheReader& cache, 
 filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options) {
   const int threads = options.filter.threads;
   // temper_frame passes power 1 through.
-  return filter::temper_frame(filter::prepare_frame(volume, options.filter.headings, threads),
-                              1.0 / options.volume_temperature, threads);
+  filter::PreparedFrame frame = filter::temper_frame(filter::prepare_frame(volume, options.filter.headings, threads),
+                                                     1.0 / options.volume_temperature, threads);
+  if (options.volume_calibration.identity()) return frame;
+  // Blur and floor work on (H, W, N) log-probabilities: the prepared frame's [bin][v][u] turned
+  // back, calibrated, and prepared again.
+  const int H = frame.height, W = frame.width, N = frame.bins;
+  const std::size_t slice = static_cast<std::size_t>(H) * static_cast<std::size_t>(W);
+  std::vector<float> hwn(frame.log_prob.size());
+  for (int j = 0; j < N; ++j)
+    for (std::size_t c = 0; c < slice; ++c) {
+      hwn[c * static_cast<std::size_t>(N) + static_cast<std::size_t>(j)] = frame.log_prob[static_cast<std::size_t>(j) * slice + c];
+    }
+  calibrate_volume(hwn, H, W, N, options.volume_calibration, threads);
+  return filter::prepare_frame({hwn.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob, H, W, N,
+                                frame.cell_m},
+                               options.filter.headings, threads);
 }
 
 FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
@@ -157,6 +171,7 @@ void LocalizeOptions::validate() const {
     s << "localize options: volume_temperature = " << volume_temperature << ": must be finite and > 0";
     throw filter::FilterError(s.str());
   }
+  volume_calibration.validate();
   if (!(max_crop_outside_m >= 0)) {
     std::ostringstream s;
     s << "localize options: max_crop_outside_m = " << max_crop_outside_m << ": must be >= 0";
@@ -236,6 +251,7 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
   FramePose pose;
   pose.entropy = e.entropy;
   pose.etu_weight = e.etu_weight;
+  pose.volume_power = e.volume_power;
   pose.relocalized = e.relocalized;
   double gamma = 0;
   const osm::GeoPoint geo = projection.reverse({e.x_m, e.y_m}, gamma);

@@ -3,6 +3,7 @@
 #include <fcntl.h>  // AT_FDCWD
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <csignal>  // ::kill (POSIX)
@@ -105,12 +106,13 @@ std::filesystem::path staging_directory(const std::filesystem::path& target) {
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r) {
   // poses.csv
   std::ostringstream csv;
-  csv << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,relocalized,position_error_m,"
+  csv << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,volume_power,relocalized,position_error_m,"
          "heading_error_deg,lateral_error_m,longitudinal_error_m\n";
   char line[512];
   for (const auto& p : r.poses) {
-    std::snprintf(line, sizeof line, "%.6f,%.9f,%.9f,%.4f,%.3f,%.3f,%.6f,%.6f,%d,", p.timestamp_s, p.lat_deg,
-                  p.lon_deg, p.compass_heading_deg, p.x_m, p.y_m, p.entropy, p.etu_weight, p.relocalized ? 1 : 0);
+    std::snprintf(line, sizeof line, "%.6f,%.9f,%.9f,%.4f,%.3f,%.3f,%.6f,%.6f,%.6f,%d,", p.timestamp_s, p.lat_deg,
+                  p.lon_deg, p.compass_heading_deg, p.x_m, p.y_m, p.entropy, p.etu_weight, p.volume_power,
+                  p.relocalized ? 1 : 0);
     csv << p.frame << "," << line << optional_number(p.position_error_m, 4) << ","
         << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
         << optional_number(p.longitudinal_error_m, 4) << "\n";
@@ -156,7 +158,8 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
   for (const auto& p : r.poses) {
     nlohmann::ordered_json props = {{"frame", p.frame},         {"timestamp", p.timestamp_s},
                                     {"heading_deg", p.compass_heading_deg}, {"entropy", p.entropy},
-                                    {"etu_weight", p.etu_weight}, {"relocalized", p.relocalized}};
+                                    {"etu_weight", p.etu_weight}, {"volume_power", p.volume_power},
+                                    {"relocalized", p.relocalized}};
     if (p.position_error_m) props["position_error_m"] = *p.position_error_m;
     if (p.heading_error_deg) props["heading_error_deg"] = *p.heading_error_deg;
     if (p.lateral_error_m) props["lateral_error_m"] = *p.lateral_error_m;
@@ -171,6 +174,14 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
 
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   metrics.update(metrics_json(compute_metrics(r.poses)));
+  if (!r.poses.empty()) {
+    // Self-calibration's estimate along the route: the power of the last frame (which saw all
+    // but that frame) and the median over the frames.
+    std::vector<double> powers;
+    for (const auto& p : r.poses) powers.push_back(p.volume_power);
+    std::nth_element(powers.begin(), powers.begin() + static_cast<std::ptrdiff_t>(powers.size() / 2), powers.end());
+    metrics["volume_power"] = {{"last", r.poses.back().volume_power}, {"median", powers[powers.size() / 2]}};
+  }
   write_file(dir / "metrics.json", metrics.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
 
   if (!r.beliefs.empty()) {
@@ -233,9 +244,11 @@ std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
     std::string cell;
     while (std::getline(ss, cell, ',')) f.push_back(cell);
     if (!text.empty() && text.back() == ',') f.emplace_back();
-    if (f.size() != 14) {
+    // 15 fields; 14 in files written before volume_power was added (read as power 1).
+    if (f.size() == 14) f.insert(f.begin() + 9, "1");
+    if (f.size() != 15) {
       throw DataError(path.string() + ":" + std::to_string(line) + ": " + std::to_string(f.size()) +
-                      " fields, expected 14 (a poses.csv written by seqloc localize)");
+                      " fields, expected 15 (a poses.csv written by seqloc localize)");
     }
     FramePose p;
     p.frame = f[0];
@@ -247,11 +260,12 @@ std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
     p.y_m = number(f[6]).value_or(0);
     p.entropy = number(f[7]).value_or(0);
     p.etu_weight = number(f[8]).value_or(0);
-    p.relocalized = f[9] == "1";
-    p.position_error_m = number(f[10]);
-    p.heading_error_deg = number(f[11]);
-    p.lateral_error_m = number(f[12]);
-    p.longitudinal_error_m = number(f[13]);
+    p.volume_power = number(f[9]).value_or(1);
+    p.relocalized = f[10] == "1";
+    p.position_error_m = number(f[11]);
+    p.heading_error_deg = number(f[12]);
+    p.lateral_error_m = number(f[13]);
+    p.longitudinal_error_m = number(f[14]);
     poses.push_back(std::move(p));
   }
   return poses;

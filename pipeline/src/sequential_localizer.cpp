@@ -5,7 +5,7 @@ namespace {
 
 filter::FilterConfig mode_config(const filter::FilterConfig& config, bool online) {
   filter::FilterConfig c = config;
-  if (online) c.etu = c.mgr = c.pas = false;
+  if (online) c.etu = c.mgr = c.pas = c.self_calibrate = false;
   return c;
 }
 
@@ -43,6 +43,7 @@ FrameEstimate SequentialLocalizer::step(const filter::PreparedFrame& frame, cons
   e.grid_heading_deg = r.pose.heading_deg;
   e.entropy = r.frame_entropy;
   e.etu_weight = r.etu_weight;
+  e.volume_power = r.volume_power;
   e.relocalized = r.relocalized;
   // Keep the window on the vehicle.
   keep_in_window(r.pose.u, r.pose.v);

@@ -32,7 +32,7 @@ TEST(Cli, HelpOnEverySubcommand) {
   for (const std::vector<std::string>& args :
        {std::vector<std::string>{"--help"}, {"preprocess", "--help"}, {"cache", "--help"}, {"cache", "info", "--help"},
         {"cache", "merge", "--help"}, {"localize", "--help"}, {"evaluate", "--help"}, {"simulate", "--help"},
-        {"render", "--help"}, {"serve", "--help"}, {"export", "--help"}}) {
+        {"render", "--help"}, {"serve", "--help"}, {"export", "--help"}, {"match", "--help"}}) {
     const auto r = run_seqloc(args);
     EXPECT_EQ(r.exit_code, 0) << args[0];
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
@@ -51,8 +51,13 @@ TEST(Cli, HelpOnEverySubcommand) {
   }
   const auto localize = run_seqloc({"localize", "--help"}).out;
   for (const char* option : {"--matcher-temperature", "--volume-temperature", "--etu-reference", "--outside-crop-nats",
-                             "--matcher-floor", "--shard", "--frame-memory", "--beliefs"}) {
+                             "--matcher-floor", "--shard", "--frame-memory", "--beliefs", "--no-self-calibrate",
+                             "--paper"}) {
     EXPECT_NE(localize.find(option), std::string::npos) << option;
+  }
+  const auto match = run_seqloc({"match", "--help"}).out;
+  for (const char* option : {"-o", "--matcher-temperature", "--matcher-floor", "--threads", "--overwrite", "--progress"}) {
+    EXPECT_NE(match.find(option), std::string::npos) << option;
   }
   const auto serve = run_seqloc({"serve", "--help"}).out;
   for (const char* option : {"--bind", "--port", "--threads", "--header-timeout", "--keep-alive", "--max-connections",
@@ -95,6 +100,15 @@ TEST(Cli, LocalizeHasAnOptionForEachFilterSetting) {
             std::string::npos);
   EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--sigma=-1"}).err.find("mgr_sigma_m = -1"),
             std::string::npos);
+  // --paper sets the paper's values whatever the options say: an ETU reference of 2 is refused
+  // alone, and overridden (so the run goes on to fail on the missing cache) with --paper.
+  const auto alone = run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--etu-reference", "2"});
+  EXPECT_EQ(alone.exit_code, 2);
+  EXPECT_NE(alone.err.find("etu_reference_entropy = 2"), std::string::npos) << alone.err;
+  const auto paper =
+      run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--etu-reference", "2", "--paper"});
+  EXPECT_EQ(paper.err.find("etu_reference_entropy"), std::string::npos) << paper.err;
+  EXPECT_NE(paper.err.find("nonexistent"), std::string::npos) << paper.err;
 }
 
 TEST(Cli, ServeRefusesWhatItCannotServe) {

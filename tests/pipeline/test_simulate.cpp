@@ -11,6 +11,8 @@
 
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/match_routes.hpp"
+#include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/pipeline/render.hpp"
 #include "seqloc/pipeline/simulate.hpp"
@@ -223,6 +225,46 @@ TEST(Simulate, CleanObservationsAreLocalizedAtTheTruth) {
     const auto bytes = test::read_file(f);
     EXPECT_GT(bytes.size(), 1000u) << f;
     EXPECT_EQ(bytes.substr(1, 3), "PNG") << f;
+  }
+}
+
+TEST(Match, VolumeRoutesGiveTheObservationRoutesPosesInEveryMode) {
+  // The matcher's volumes written as a volume route (float16 (H, W, N) log-probabilities, crops in
+  // grid metres) and localized again: the same poses, to the bit, in every mode.
+  raster::CacheReader cache(region_cache("north-bayreuth"));
+  test::ScratchDir out;
+  SimulateOptions options;
+  options.routes = 1;
+  options.frames = 15;
+  options.seed = 12;
+  simulate_routes(cache, options, out / "routes");
+  const Route observed = read_route(out / "routes/route_000");
+  LocalizeOptions lo;
+  lo.filter.width = lo.filter.height = 128;
+  lo.filter.threads = lo.matcher.threads = 2;
+  write_volume_route(observed, cache, lo, out / "volumes/route_000");
+  const Route stored = read_route(out / "volumes/route_000");
+  ASSERT_EQ(stored.frames.size(), observed.frames.size());
+  EXPECT_EQ(stored.volume_kind, filter::VolumeValues::log_prob);
+  for (std::size_t i = 0; i < stored.frames.size(); ++i) {
+    ASSERT_TRUE(stored.frames[i].observation.empty());
+    const NpyVolume npy(stored.frames[i].volume);
+    EXPECT_EQ(npy.type(), filter::VolumeType::float16);
+    EXPECT_EQ(npy.height(), lo.matcher.size);
+    EXPECT_EQ(npy.bins(), lo.matcher.headings);
+    ASSERT_TRUE(stored.frames[i].truth.has_value());
+    EXPECT_EQ(stored.frames[i].truth->where.lat_deg, observed.frames[i].truth->where.lat_deg);
+  }
+  for (const Mode mode : {Mode::single, Mode::offline, Mode::online, Mode::seqloc}) {
+    const auto a = localize_route(observed, cache, lo, mode);
+    const auto b = localize_route(stored, cache, lo, mode);
+    ASSERT_EQ(a.poses.size(), b.poses.size());
+    for (std::size_t i = 0; i < a.poses.size(); ++i) {
+      EXPECT_EQ(a.poses[i].x_m, b.poses[i].x_m) << mode_name(mode) << " frame " << i;
+      EXPECT_EQ(a.poses[i].y_m, b.poses[i].y_m) << mode_name(mode) << " frame " << i;
+      EXPECT_EQ(a.poses[i].compass_heading_deg, b.poses[i].compass_heading_deg) << mode_name(mode) << " frame " << i;
+      EXPECT_EQ(a.poses[i].volume_power, b.poses[i].volume_power) << mode_name(mode) << " frame " << i;
+    }
   }
 }
 

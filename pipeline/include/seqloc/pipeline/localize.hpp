@@ -15,6 +15,7 @@
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/frame_prefetcher.hpp"
 #include "seqloc/pipeline/matcher.hpp"
 #include "seqloc/pipeline/region_window.hpp"
@@ -39,6 +40,9 @@ struct LocalizeOptions {
   /// log-probabilities divided by T and renormalized (filter::temper_frame with power 1 / T).
   /// T > 1 flattens an overconfident backbone; T < 1 sharpens. 1: as given.
   double volume_temperature = 1.0;
+  /// Then blurred and floored (calibration.hpp; identity by default), as `seqloc calibrate` fits a
+  /// backbone (`--calibration calibration.json` sets both).
+  VolumeCalibration volume_calibration;
   /// Largest distance between consecutive crop centres (m) before the route is refused as
   /// implausible; 0: the belief window's size (a larger jump leaves the window anyway).
   double max_crop_jump_m = 0;
@@ -68,6 +72,9 @@ struct FramePose {
   double grid_heading_deg = 0;     ///< clockwise from grid north (for files in the region CRS)
   double entropy = 0;              ///< the frame volume's normalized entropy
   double etu_weight = 1;
+  /// The power self-calibration raised the frame's volume to (seqloc mode; 1 in the others and
+  /// with --no-self-calibrate): for volumes sharpened as p^k it tends to 1 / k.
+  double volume_power = 1;
   bool relocalized = false;
   std::optional<double> position_error_m, heading_error_deg, lateral_error_m, longitudinal_error_m;
   /// The ground truth of the frame, when the route has it, in the same forms as the estimate.
@@ -97,7 +104,8 @@ struct RouteResult {
 };
 
 /// A frame's volume made ready for the filter as localize makes every frame: prepared for
-/// options.filter.headings, tempered by options.volume_temperature. Throws filter::FilterError
+/// options.filter.headings, tempered by options.volume_temperature, blurred and floored by
+/// options.volume_calibration. Throws filter::FilterError
 /// for bad values (NaN, infinities, negative probabilities) or shapes.
 [[nodiscard]] filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options);
 

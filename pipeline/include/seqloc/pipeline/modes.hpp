@@ -21,6 +21,7 @@ struct FrameEstimate {
   double grid_heading_deg = 0;
   double entropy = 0;  ///< the frame volume's normalized entropy
   double etu_weight = 1;
+  double volume_power = 1;  ///< self-calibration's power for the frame (1 where it does not apply)
   bool relocalized = false;
 };
 

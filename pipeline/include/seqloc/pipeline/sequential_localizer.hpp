@@ -19,7 +19,8 @@ struct GridFix {
 
 class SequentialLocalizer {
  public:
-  /// `online`: the filter with ETU, MGR and PAS off (naive fusion); else as `config` says.
+  /// `online`: the filter with ETU, MGR, PAS and self-calibration off (naive fusion); else as
+  /// `config` says.
   /// The window re-centres on the vehicle when it comes within `recentre_margin` (a fraction of
   /// its size) of an edge.
   SequentialLocalizer(raster::CacheReader& cache, const filter::FilterConfig& config, bool online,

@@ -1,0 +1,80 @@
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "command.hpp"
+#include "seqloc/pipeline/backbone_calibration.hpp"
+#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/pipeline/outputs.hpp"
+
+namespace seqloc::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+class CalibrateCommand : public Command, public WithOverwrite, public WithProgress {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
+    app.add_option("routes", route_dirs_, "Route folders with ground truth (gt_lat, gt_lon, gt_heading_deg)")
+        ->required();
+    app.add_option("-o,--output", out_, "The calibration file to write (JSON)")->required();
+    add_matcher_options(app, options_.matcher);
+    app.add_option("--threads", options_.matcher.threads, "Threads")->default_val(default_threads());
+    add_overwrite_option(app, "calibration file");
+    add_progress_option(app);
+    app.footer("Fits a temperature, a blur and a floor to the routes' volumes (.npy from any backbone, or the built-in\n"
+               "matcher's) by the mean negative log-likelihood of the true cell, prints the fit against the volumes as\n"
+               "given and a uniform volume, and writes them for `seqloc localize --calibration` and the Python module\n"
+               "(docs/localize.md). Use routes that you do not report results on.");
+  }
+
+  void check() override {
+    options_.filter.threads = options_.matcher.threads;
+    try {
+      options_.validate();
+    } catch (const std::exception& e) {
+      throw pipeline::UsageError(e.what());
+    }
+    check_overwrite(out_);
+  }
+
+  int run() override {
+    raster::CacheReader cache(cache_path_, 256);
+    std::vector<fs::path> dirs = route_dirs_;
+    std::sort(dirs.begin(), dirs.end());
+    std::vector<pipeline::Route> routes;
+    std::size_t frames = 0;
+    for (const auto& dir : dirs) {
+      routes.push_back(pipeline::read_route(dir));
+      frames += routes.back().frames.size();
+    }
+    for (const auto& route : routes) pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
+    ProgressBar bar(show_progress(), "frames");
+    std::size_t done = 0;
+    const auto fit = pipeline::fit_backbone_calibration(routes, cache, options_, [&] { bar.update(++done, frames); });
+    bar.done();
+    const auto& b = fit.best;
+    std::printf("frames %zu (true cell outside the volume: %zu)\n", b.frames, b.skipped);
+    std::printf("fit: temperature %g, blur %g cells / %g bins, floor %g\n", b.temperature, b.calibration.blur_cells,
+                b.calibration.blur_bins, b.calibration.floor);
+    std::printf("mean NLL of the true cell (nats): fit %.3f, as given %.3f, uniform %.3f\n", b.nll, fit.as_given_nll,
+                b.uniform_nll);
+    pipeline::write_file(out_, pipeline::calibration_json(fit));
+    std::printf("wrote %s\n", out_.c_str());
+    return kExitOk;
+  }
+
+ private:
+  fs::path cache_path_, out_;
+  std::vector<fs::path> route_dirs_;
+  pipeline::LocalizeOptions options_;
+};
+
+}  // namespace
+
+std::unique_ptr<Command> make_calibrate_command() { return std::make_unique<CalibrateCommand>(); }
+
+}  // namespace seqloc::app

@@ -1,0 +1,76 @@
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "command.hpp"
+#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/pipeline/match_routes.hpp"
+#include "seqloc/pipeline/outputs.hpp"
+
+namespace seqloc::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+class MatchCommand : public Command, public WithOverwrite, public WithProgress {
+ public:
+  void setup(CLI::App& app) override {
+    app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
+    app.add_option("routes", route_dirs_, "Observation route folders (seqloc simulate's, docs/observation-format.md)")
+        ->required();
+    app.add_option("-o,--output", out_, "Output folder of volume routes (written whole, or not at all)")->required();
+    add_matcher_options(app, options_.matcher);
+    app.add_option("--threads", options_.matcher.threads, "Matcher threads")->default_val(default_threads());
+    add_overwrite_option(app, "output folder");
+    add_progress_option(app);
+    app.footer("Writes OUT/<route>/{route.json,frames.csv,volumes/NNNNNN.npy}: each frame's volume from the built-in\n"
+               "matcher as seqloc localize scores it (calibrated, normalized log-probabilities, float16, (H, W, N)),\n"
+               "its crop in region-grid metres, the odometry, GPS and ground truth of the input route\n"
+               "(docs/route-format.md). seqloc localize on them gives the poses it gives on the input routes.");
+  }
+
+  void check() override {
+    try {
+      options_.validate();
+    } catch (const std::exception& e) {
+      throw pipeline::UsageError(e.what());
+    }
+    check_overwrite(out_);
+  }
+
+  int run() override {
+    raster::CacheReader cache(cache_path_, 256);
+    std::vector<fs::path> dirs = route_dirs_;
+    std::sort(dirs.begin(), dirs.end());
+    std::vector<pipeline::Route> routes;
+    std::size_t frames = 0;
+    for (const auto& dir : dirs) {
+      routes.push_back(pipeline::read_route(dir));
+      frames += routes.back().frames.size();
+    }
+    for (const auto& route : routes) pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
+    const fs::path staged = pipeline::staging_directory(out_);
+    ProgressBar bar(show_progress(), "frames");
+    std::size_t done = 0;
+    for (const auto& route : routes) {
+      pipeline::write_volume_route(route, cache, options_, staged / route.name, [&] { bar.update(++done, frames); });
+    }
+    bar.done();
+    pipeline::commit_directory(staged, out_);
+    std::printf("wrote %s (%zu routes, %zu frames)\n", out_.c_str(), routes.size(), frames);
+    return kExitOk;
+  }
+
+ private:
+  fs::path cache_path_, out_;
+  std::vector<fs::path> route_dirs_;
+  pipeline::LocalizeOptions options_;
+};
+
+}  // namespace
+
+std::unique_ptr<Command> make_match_command() { return std::make_unique<MatchCommand>(); }
+
+}  // namespace seqloc::app

@@ -1,0 +1,124 @@
+#include "seqloc/pipeline/backbone_calibration.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace seqloc::pipeline {
+
+std::optional<std::array<int, 3>> true_volume_cell(const RouteFrame& frame, const GridCrop& crop,
+                                                   const osm::RegionProjection& projection, int height, int width,
+                                                   int bins, double cell_m) {
+  if (!frame.truth || !frame.truth->heading_deg) return std::nullopt;
+  double gamma = 0;
+  const auto truth = projection.forward(frame.truth->where, gamma);
+  // The offset in grid metres, turned into the crop's axes (the inverse of filter::volume_cell_pose).
+  const double dx = truth.x_m - crop.x, dy = truth.y_m - crop.y;
+  const double a = crop.rotation_deg * M_PI / 180.0;
+  const double east = dx * std::cos(a) - dy * std::sin(a);
+  const double north = dx * std::sin(a) + dy * std::cos(a);
+  const auto u = static_cast<int>(std::lround(east / cell_m + (width - 1) / 2.0));
+  const auto v = static_cast<int>(std::lround(-north / cell_m + (height - 1) / 2.0));
+  // The crop's heading of grid heading h is h - rotation.
+  const double heading = *frame.truth->heading_deg - gamma - crop.rotation_deg;
+  const auto bin = static_cast<int>(((std::lround(heading * bins / 360.0) % bins) + bins) % bins);
+  return std::array<int, 3>{v, u, bin};
+}
+
+CalibrationFit::Grid backbone_calibration_grid() {
+  CalibrationFit::Grid grid;
+  grid.temperatures.clear();
+  for (int half_octave = -6; half_octave <= 6; ++half_octave) grid.temperatures.push_back(std::exp2(half_octave / 2.0));
+  grid.blur_cells = {0, 1, 2, 3, 4};
+  grid.blur_bins = {0, 1, 2, 3};
+  return grid;
+}
+
+BackboneFit fit_backbone_calibration(const std::vector<Route>& routes, raster::CacheReader& cache,
+                                     const LocalizeOptions& options, const std::function<void()>& on_frame) {
+  LocalizeOptions as_given = options;
+  as_given.volume_temperature = 1;
+  as_given.volume_calibration = {};
+  CalibrationFit fit(backbone_calibration_grid());
+  const auto& projection = cache.metadata().projection();
+  std::vector<float> scores;
+  for (const auto& route : routes) {
+    const FrameSource source = route_frames(route, cache, as_given);
+    for (std::size_t i = 0; i < route.frames.size(); ++i) {
+      const RouteFrame& f = route.frames[i];
+      if (f.truth && f.truth->heading_deg) {
+        const auto frame = source(i);
+        const int H = frame->height, W = frame->width, N = frame->bins;
+        const GridCrop crop = frame_crop(f, cache.grid(), projection);
+        const auto cell = true_volume_cell(f, crop, projection, H, W, N, frame->cell_m);
+        // The prepared frame, [bin][v][u], as the (H, W, N) log-probabilities the fit reads.
+        scores.resize(frame->log_prob.size());
+        const std::size_t slice = static_cast<std::size_t>(H) * static_cast<std::size_t>(W);
+        for (int j = 0; j < N; ++j)
+          for (std::size_t c = 0; c < slice; ++c) {
+            scores[c * static_cast<std::size_t>(N) + static_cast<std::size_t>(j)] =
+                frame->log_prob[static_cast<std::size_t>(j) * slice + c];
+          }
+        fit.add(scores, H, W, N, (*cell)[0], (*cell)[1], (*cell)[2]);
+      }
+      if (on_frame) on_frame();
+    }
+  }
+  BackboneFit result{fit.best(), 0};
+  if (result.best.frames == 0) {
+    throw DataError("no frame has a true pose (gt_lat, gt_lon, gt_heading_deg) inside its volume: nothing to fit");
+  }
+  result.as_given_nll = fit.mean_nll(1.0, VolumeCalibration{});  // 1 and 0s are on the grid
+  return result;
+}
+
+std::string calibration_json(const BackboneFit& fit) {
+  const auto& b = fit.best;
+  const nlohmann::ordered_json j = {{"format", "seqloc-calibration"},
+                                    {"version", 1},
+                                    {"temperature", b.temperature},
+                                    {"blur_cells", b.calibration.blur_cells},
+                                    {"blur_bins", b.calibration.blur_bins},
+                                    {"floor", b.calibration.floor},
+                                    {"nll", b.nll},
+                                    {"uniform_nll", b.uniform_nll},
+                                    {"as_given_nll", fit.as_given_nll},
+                                    {"frames", b.frames},
+                                    {"skipped", b.skipped}};
+  return j.dump(2) + "\n";
+}
+
+void apply_calibration_file(const std::filesystem::path& path, LocalizeOptions& options) {
+  std::ifstream in(path);
+  if (!in) throw DataError(path.string() + ": cannot read");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw DataError(path.string() + ": not JSON: " + e.what());
+  }
+  if (!j.is_object() || j.value("format", "") != "seqloc-calibration") {
+    throw DataError(path.string() + ": not a calibration file (\"format\": \"seqloc-calibration\" expected)");
+  }
+  if (j.value("version", 0) != 1) {
+    throw DataError(path.string() + ": calibration version " + j.value("version", nlohmann::json()).dump() +
+                    ", this seqloc reads version 1");
+  }
+  auto number = [&](const char* key) {
+    if (!j.contains(key) || !j[key].is_number()) throw DataError(path.string() + ": '" + key + "' must be a number");
+    return j[key].get<double>();
+  };
+  LocalizeOptions applied = options;
+  applied.volume_temperature = number("temperature");
+  applied.volume_calibration = {number("blur_cells"), number("blur_bins"), number("floor")};
+  try {
+    applied.validate();
+  } catch (const std::exception& e) {
+    throw DataError(path.string() + ": " + e.what());
+  }
+  options = applied;
+}
+
+}  // namespace seqloc::pipeline
