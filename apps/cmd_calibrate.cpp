@@ -1,4 +1,3 @@
-#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -43,15 +42,8 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
 
   int run() override {
     raster::CacheReader cache(cache_path_, 256);
-    std::vector<fs::path> dirs = route_dirs_;
-    std::sort(dirs.begin(), dirs.end());
-    std::vector<pipeline::Route> routes;
-    std::size_t frames = 0;
-    for (const auto& dir : dirs) {
-      routes.push_back(pipeline::read_route(dir));
-      frames += routes.back().frames.size();
-    }
-    for (const auto& route : routes) pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
+    const auto routes = read_checked_routes(route_dirs_, cache, options_);
+    const std::size_t frames = frame_count(routes);
     ProgressBar bar(show_progress(), "frames");
     std::size_t done = 0;
     const auto fit = pipeline::fit_backbone_calibration(routes, cache, options_, [&] { bar.update(++done, frames); });

@@ -22,8 +22,13 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/osm/features.hpp"
 
+namespace seqloc::raster {
+class CacheReader;
+}  // namespace seqloc::raster
 namespace seqloc::pipeline {
 struct MatcherConfig;
+struct LocalizeOptions;
+struct Route;
 }  // namespace seqloc::pipeline
 
 namespace seqloc::app {
@@ -92,6 +97,14 @@ void add_filter_options(CLI::App& app, filter::FilterConfig& config, std::initia
 
 /// The built-in matcher's options (--matcher-*), for the commands that score observations.
 void add_matcher_options(CLI::App& app, pipeline::MatcherConfig& matcher);
+
+/// The routes of `dirs`, read and checked (their crops against the region) before any work, in
+/// sorted order; a name that two folders share gets "-K" (K its 1-based place) on the second.
+/// Throws DataError naming the file and line.
+[[nodiscard]] std::vector<pipeline::Route> read_checked_routes(std::vector<std::filesystem::path> dirs,
+                                                               raster::CacheReader& cache,
+                                                               const pipeline::LocalizeOptions& options);
+[[nodiscard]] std::size_t frame_count(const std::vector<pipeline::Route>& routes);
 
 /// --overwrite for the commands that write an output (osmium-tool's option mixins).
 class WithOverwrite {

@@ -7,6 +7,7 @@
 #include <array>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -19,6 +20,7 @@
 
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
@@ -314,12 +316,19 @@ class PyFilter {
 class PyLocalizer {
  public:
   PyLocalizer(const std::string& cache, const py::dict& config, const std::string& mode, double volume_temperature,
-              double recentre_margin)
+              double recentre_margin, const std::optional<std::string>& calibration)
       : cache_(std::make_unique<raster::CacheReader>(cache)) {
     if (mode != "seqloc" && mode != "online") throw py::value_error("mode: 'seqloc' or 'online', got '" + mode + "'");
     options_.filter = config_from(config);
     options_.volume_temperature = volume_temperature;
     options_.recentre_margin = recentre_margin;
+    if (calibration) {
+      try {
+        pipeline::apply_calibration_file(*calibration, options_);
+      } catch (const pipeline::DataError& e) {
+        throw py::value_error(e.what());
+      }
+    }
     options_.validate();
     localizer_ = std::make_unique<pipeline::SequentialLocalizer>(*cache_, options_.filter, mode == "online",
                                                                  recentre_margin);
@@ -436,11 +445,14 @@ PYBIND11_MODULE(seqloc, m) {
   py::class_<PyLocalizer>(m, "Localizer",
                           "seqloc localize's seqloc (or online) mode one frame at a time over a region cache: it "
                           "owns the window, its road distances and re-centring (docs/serve.md)")
-      .def(py::init<const std::string&, const py::dict&, const std::string&, double, double>(), py::arg("cache"),
-           py::arg("config") = py::dict(), py::arg("mode") = "seqloc",
+      .def(py::init<const std::string&, const py::dict&, const std::string&, double, double,
+                    const std::optional<std::string>&>(),
+           py::arg("cache"), py::arg("config") = py::dict(), py::arg("mode") = "seqloc",
            py::arg("volume_temperature") = pipeline::LocalizeOptions{}.volume_temperature,
            py::arg("recentre_margin") = pipeline::LocalizeOptions{}.recentre_margin,
-           "cache: a region cache; config: filter settings by name (Filter.settings()); mode: 'seqloc' or 'online'")
+           py::arg("calibration") = py::none(),
+           "cache: a region cache; config: filter settings by name (Filter.settings()); mode: 'seqloc' or 'online'; "
+           "calibration: a calibration.json from seqloc calibrate (its temperature replaces volume_temperature)")
       .def("step", &PyLocalizer::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
            py::kw_only(), py::arg("crop_lat") = py::none(), py::arg("crop_lon") = py::none(),
            py::arg("crop_x") = py::none(), py::arg("crop_y") = py::none(), py::arg("gps") = py::none(),

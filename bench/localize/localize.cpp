@@ -154,11 +154,22 @@ int main() {
               result.prepare_seconds, result.filter_seconds, result.wait_seconds, write_s, result.recentres);
   std::printf("peak memory %.0f MB\n", static_cast<double>(peak_kb()) / 1024.0);
   const double peak_mb = static_cast<double>(peak_kb()) / 1024.0;
+  // The same route without self-calibration: what it costs per frame.
+  auto plain = options;
+  plain.filter.self_calibrate = false;
+  const auto t2 = Clock::now();
+  const auto without = seqloc::pipeline::localize_route(route, cache, plain, seqloc::pipeline::Mode::seqloc);
+  const double plain_s = std::chrono::duration<double>(Clock::now() - t2).count();
+  std::printf("without self-calibration: %.1f s = %.1f frames/s, filter %.1f s (self-calibration adds %.1f ms a frame "
+              "to the filter)\n",
+              plain_s, frames / plain_s, without.filter_seconds,
+              1000.0 * (result.filter_seconds - without.filter_seconds) / frames);
   const std::string observations = observation_routes(work);
   std::printf("{\"benchmark\": \"localize\", \"frames\": %d, \"frames_per_s\": %.2f, \"total_s\": %.2f, "
-              "\"prepare_s\": %.2f, \"filter_s\": %.2f, \"wait_s\": %.2f, \"write_s\": %.3f, \"peak_mb\": %.0f%s}\n",
+              "\"prepare_s\": %.2f, \"filter_s\": %.2f, \"wait_s\": %.2f, \"write_s\": %.3f, \"peak_mb\": %.0f, "
+              "\"no_self_calibration_frames_per_s\": %.2f, \"no_self_calibration_filter_s\": %.2f%s}\n",
               frames, frames / total, total, result.prepare_seconds, result.filter_seconds, result.wait_seconds,
-              write_s, peak_mb, observations.c_str());
+              write_s, peak_mb, frames / plain_s, without.filter_seconds, observations.c_str());
   fs::remove_all(work);
   return 0;
 }

@@ -22,15 +22,15 @@ double log_add(double a, double b) {
 
 }  // namespace
 
-DepthHistogram::DepthHistogram() {
+DepthHistogram::DepthHistogram(Scale scale) : scale_(scale) {
   const auto bins = static_cast<std::size_t>(kMaxDepthNats / kBinNats) + 1;
-  weight_.assign(bins, 0.0);
-  depth_sum_.assign(bins, 0.0);
+  weight_.assign(bins, 0);
+  depth_sum_.assign(bins, 0);
 }
 
 void DepthHistogram::clear() {
-  std::fill(weight_.begin(), weight_.end(), 0.0);
-  std::fill(depth_sum_.begin(), depth_sum_.end(), 0.0);
+  std::fill(weight_.begin(), weight_.end(), 0);
+  std::fill(depth_sum_.begin(), depth_sum_.end(), 0);
 }
 
 void DepthHistogram::merge(const DepthHistogram& other) {
@@ -41,16 +41,19 @@ void DepthHistogram::merge(const DepthHistogram& other) {
 }
 
 double DepthHistogram::total() const {
-  double s = 0;
-  for (double w : weight_) s += w;
-  return s;
+  std::int64_t s = 0;
+  for (const std::int64_t w : weight_) s += w;
+  return static_cast<double>(s) / scale_.weight;
 }
 
 std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) const {
   // The non-empty bins as (log weight, mean depth), summed stably (shifted by the largest term).
   std::vector<std::pair<double, double>> bins;
   for (std::size_t i = 0; i < weight_.size(); ++i) {
-    if (weight_[i] > 0) bins.emplace_back(std::log(weight_[i]), depth_sum_[i] / weight_[i]);
+    if (weight_[i] > 0) {
+      const double w = static_cast<double>(weight_[i]) / scale_.weight;
+      bins.emplace_back(std::log(w), static_cast<double>(depth_sum_[i]) / scale_.depth / w);
+    }
   }
   std::vector<double> out(kappas.size(), kNegInf);
   if (bins.empty()) return out;

@@ -394,7 +394,7 @@ struct SeqLocFilter::Impl {
   PowerEstimator estimator;
   struct Worker {
     std::vector<float> sample, blend, depth;
-    DepthHistogram frame_cells, belief_in_crop;  // self-calibration's evidence, this worker's share
+    DepthHistogram frame_cells{DepthHistogram::kCount}, belief_in_crop;  // self-calibration's evidence, this worker's share
     double belief_outside = 0, outside_cells = 0;
   };
   std::vector<Worker> workers;

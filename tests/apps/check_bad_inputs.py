@@ -170,6 +170,13 @@ def main():
         localize_case(".npy header claiming 2^60 cells", ["v1.npy"],
                       lambda: npy(v1, vol, "(1048576, 1048576, 1048576)"), restore_v1)
         localize_case(".npy of float64", ["v1.npy", "<f8"], lambda: np.save(v1, vol.astype(np.float64)), restore_v1)
+        calibration = os.path.join(w, "calibration.json")
+        with open(calibration, "w") as f:
+            f.write('{"format": "seqloc-calibration", "version": 2}')
+        case("calibration.json of another version", "localize valley.gpkg route -o out --calibration calibration.json "
+             "--overwrite", run("localize", cache, route, "-o", out, "--overwrite", "--window", "64", "--headings", "16",
+                                "--no-progress", "--calibration", calibration),
+             1, ["calibration.json", "version 2"], out, before_out)
 
         # A cache from another version of the format.
         old = os.path.join(w, "old.gpkg")

@@ -191,6 +191,16 @@ TEST(SelfCalibration, IsCausal) {
   }
 }
 
+TEST(SelfCalibration, TheEstimateIsTheSameForAnyNumberOfThreads) {
+  // Its sums are fixed point: the order in which threads add them cannot change a bit.
+  Generator one(51, 4), three(51, 4);
+  FilterConfig c = one.config();
+  const auto a = run(one, c, 15);
+  c.threads = 3;
+  const auto b = run(three, c, 15);
+  for (std::size_t t = 0; t < a.size(); ++t) EXPECT_EQ(a[t].volume_power, b[t].volume_power) << "frame " << t;
+}
+
 TEST(SelfCalibration, OneFrameAndPureNoiseNeitherCrashNorRunAway) {
   Generator g(31, 4);
   const FilterConfig c = g.config();

@@ -52,8 +52,13 @@ struct CountingSource {
   }
 };
 
+// The frame as the store holds it: its values in float16, and its entropy, peak and argmax those
+// of the rounded values (what the filter multiplies in), not the source's.
 void expect_half_of(const filter::PreparedFrame& got, std::size_t i) {
-  const auto want = random_frame(i);
+  auto want = random_frame(i);
+  const float source_max = want.max_log_prob;
+  round_like_frame_store(want);
+  EXPECT_NE(want.max_log_prob, source_max) << "the source's own summary must not be what is kept";
   EXPECT_EQ(got.height, want.height);
   EXPECT_EQ(got.bins, want.bins);
   EXPECT_EQ(got.entropy, want.entropy);

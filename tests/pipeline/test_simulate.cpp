@@ -4,12 +4,15 @@
 // come back at the truth (simulator, matcher and localize agree on every convention).
 
 #include <cmath>
+#include <cstring>
+#include <vector>
 #include <fstream>
 #include <utility>
 
 #include <gtest/gtest.h>
 
 #include "seqloc/osm/synthetic.hpp"
+#include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/match_routes.hpp"
 #include "seqloc/pipeline/npy.hpp"
@@ -235,7 +238,7 @@ TEST(Match, VolumeRoutesGiveTheObservationRoutesPosesInEveryMode) {
   test::ScratchDir out;
   SimulateOptions options;
   options.routes = 1;
-  options.frames = 15;
+  options.frames = 8;
   options.seed = 12;
   simulate_routes(cache, options, out / "routes");
   const Route observed = read_route(out / "routes/route_000");
@@ -265,6 +268,61 @@ TEST(Match, VolumeRoutesGiveTheObservationRoutesPosesInEveryMode) {
       EXPECT_EQ(a.poses[i].compass_heading_deg, b.poses[i].compass_heading_deg) << mode_name(mode) << " frame " << i;
       EXPECT_EQ(a.poses[i].volume_power, b.poses[i].volume_power) << mode_name(mode) << " frame " << i;
     }
+  }
+}
+
+TEST(Calibrate, TheFittedTemperatureFollowsAKnownSharpeningExactly) {
+  // The matcher's volumes written as a volume route, then the same route with every
+  // log-probability doubled (float16 times 2 is exact): temperature 2T with the same blur and
+  // floor turns the doubled volumes into the same calibrated ones, so the fit must be 2T.
+  raster::CacheReader cache(region_cache("north-bayreuth"));
+  test::ScratchDir out;
+  SimulateOptions options;
+  options.routes = 1;
+  options.frames = 8;
+  options.seed = 14;
+  simulate_routes(cache, options, out / "routes");
+  LocalizeOptions lo;
+  lo.filter.threads = lo.matcher.threads = 2;
+  write_volume_route(read_route(out / "routes/route_000"), cache, lo, out / "once/route_000");
+  write_volume_route(read_route(out / "routes/route_000"), cache, lo, out / "twice/route_000");
+  const Route twice = read_route(out / "twice/route_000");
+  for (const auto& f : twice.frames) {
+    const NpyVolume npy(f.volume);
+    std::vector<std::uint16_t> halves(static_cast<std::size_t>(npy.height()) * npy.width() * npy.bins());
+    std::memcpy(halves.data(), npy.data(), halves.size() * sizeof(std::uint16_t));
+    for (auto& h : halves) h = filter::float_to_half(2 * filter::half_to_float(h));
+    const std::string bytes = encode_npy_float16(npy.height(), npy.width(), npy.bins(), halves.data());
+    std::ofstream(f.volume, std::ios::binary) << bytes;
+  }
+  const auto a = fit_backbone_calibration({read_route(out / "once/route_000")}, cache, lo);
+  const auto b = fit_backbone_calibration({read_route(out / "twice/route_000")}, cache, lo);
+  ASSERT_EQ(a.best.frames, 8u);
+  ASSERT_LT(a.best.temperature, 8.0) << "2T must be on the grid for the test to say anything";
+  EXPECT_DOUBLE_EQ(b.best.temperature, 2 * a.best.temperature);
+  EXPECT_EQ(b.best.calibration.blur_cells, a.best.calibration.blur_cells);
+  EXPECT_EQ(b.best.calibration.floor, a.best.calibration.floor);
+  EXPECT_NEAR(b.best.nll, a.best.nll, 0.02);
+  EXPECT_LT(a.best.nll, a.best.uniform_nll) << "the matcher's volumes beat a uniform volume";
+  EXPECT_LE(a.best.nll, a.as_given_nll) << "the volumes as given are one point of the grid";
+  EXPECT_LE(b.best.nll, b.as_given_nll);
+
+  // The file localize reads: the fit, and clear errors for what is not one.
+  const auto file = out / "calibration.json";
+  std::ofstream(file) << calibration_json(b);
+  LocalizeOptions applied;
+  apply_calibration_file(file, applied);
+  EXPECT_EQ(applied.volume_temperature, b.best.temperature);
+  EXPECT_EQ(applied.volume_calibration.floor, b.best.calibration.floor);
+  std::ofstream(file) << R"({"format": "seqloc-calibration", "version": 1, "temperature": -1, "blur_cells": 0,
+                            "blur_bins": 0, "floor": 0})";
+  EXPECT_THROW(apply_calibration_file(file, applied), DataError);
+  std::ofstream(file) << R"({"format": "something else"})";
+  try {
+    apply_calibration_file(file, applied);
+    ADD_FAILURE() << "a file of another format was read";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("calibration.json"), std::string::npos) << e.what();
   }
 }
 

@@ -278,6 +278,7 @@ class LocalizerAsLocalize(unittest.TestCase):
                     self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=where)
                     self.assertAlmostEqual(got["heading_deg"], float(want["heading_deg"]), delta=0.002, msg=where)
                     self.assertAlmostEqual(got["entropy"], float(want["entropy"]), delta=2e-6, msg=where)
+                    self.assertAlmostEqual(got["volume_power"], float(want["volume_power"]), delta=2e-6, msg=where)
                     self.assertEqual(int(got["relocalized"]), int(want["relocalized"]), where)
                 self.assertEqual(len(expected), len(rows))
                 marginal = loc.belief_marginal()
@@ -310,6 +311,37 @@ class LocalizerAsLocalize(unittest.TestCase):
                     self.assertAlmostEqual(pose["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
                     self.assertAlmostEqual(pose["heading_deg"], float(want["heading_deg"]), delta=0.002,
                                            msg=want["frame"])
+
+    @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
+    def test_a_calibration_file_applies_as_localize_applies_it(self):
+        with tempfile.TemporaryDirectory() as d:
+            route, rows = self.write_route(d, frames=6)
+            calibration = os.path.join(d, "calibration.json")
+            with open(calibration, "w") as f:
+                f.write('{"format": "seqloc-calibration", "version": 1, "temperature": 2.0, "blur_cells": 1.0, '
+                        '"blur_bins": 0.0, "floor": 0.1}')
+            out = os.path.join(d, "out")
+            r = subprocess.run([SEQLOC, "localize", CACHE, route, "-o", out, "--window", "96", "--headings", "64",
+                                "--calibration", calibration], capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            with open(os.path.join(out, "py", "seqloc", "poses.csv")) as f:
+                expected = list(csv.DictReader(f))
+            loc = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": 64}, calibration=calibration)
+            plain = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": 64})
+            differs = False
+            for row, want in zip(rows, expected):
+                vol = np.load(os.path.join(route, row[2]))
+                got = loc.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
+                other = plain.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
+                self.assertAlmostEqual(got["x"], float(want["x_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got["entropy"], float(want["entropy"]), delta=2e-6, msg=want["frame"])
+                differs = differs or abs(got["entropy"] - other["entropy"]) > 1e-3
+            self.assertTrue(differs, "the calibration must change the frames")
+            with open(calibration, "w") as f:
+                f.write('{"format": "seqloc-calibration", "version": 2}')
+            with self.assertRaisesRegex(ValueError, "calibration.json"):
+                seqloc.Localizer(CACHE, calibration=calibration)
 
     def test_bad_arguments_are_short_errors(self):
         with self.assertRaises(ValueError):

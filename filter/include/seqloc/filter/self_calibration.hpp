@@ -23,26 +23,36 @@
 // frame in (one log per window cell), and the frame's own cells by depth for Z; each kappa is
 // then a sum over a few hundred bins.
 
+#include <algorithm>
+#include <cstdint>
 #include <span>
 #include <vector>
 
 namespace seqloc::filter {
 
 /// Weights binned by depth r <= 0 (nats below a frame's peak), each bin keeping its weighted mean
-/// depth, so that sum_i w_i exp(kappa r_i) is exact to second order in the bin's width.
+/// depth, so that sum_i w_i exp(kappa r_i) is exact to second order in the bin's width. The sums
+/// are kept in fixed point (integers), so that they do not depend on the order in which the
+/// filter's threads add and merge them: the estimate is the same for any number of threads.
 class DepthHistogram {
  public:
   static constexpr double kBinNats = 0.05;
   static constexpr double kMaxDepthNats = 200;  ///< deeper cells are counted at this depth
+  /// Fixed-point scales: probability masses (summing to at most a few) in units of 2^-52; cell
+  /// counts (up to 2^31) as they are, with their depths in units of 2^-20 nats.
+  struct Scale {
+    double weight, depth;
+  };
+  static constexpr Scale kMass{0x1p52, 0x1p52}, kCount{1, 0x1p20};
 
-  DepthHistogram();
+  explicit DepthHistogram(Scale scale = kMass);
   void clear();
-  /// Adds weight w at depth r (r > 0 is taken as 0, r < -kMaxDepthNats as -kMaxDepthNats).
+  /// Adds weight w >= 0 at depth r (r > 0 is taken as 0, r < -kMaxDepthNats as -kMaxDepthNats).
   void add(double r, double w) {
-    const double d = r < 0 ? -r : 0.0;
-    const auto i = d < kMaxDepthNats ? static_cast<std::size_t>(d * (1 / kBinNats)) : weight_.size() - 1;
-    weight_[i] += w;
-    depth_sum_[i] += w * d;
+    const double d = r < 0 ? std::min(-r, kMaxDepthNats) : 0.0;
+    const auto i = std::min(static_cast<std::size_t>(d * (1 / kBinNats)), weight_.size() - 1);
+    weight_[i] += static_cast<std::int64_t>(w * scale_.weight + 0.5);
+    depth_sum_[i] += static_cast<std::int64_t>(w * d * scale_.depth + 0.5);
   }
   void merge(const DepthHistogram& other);
   [[nodiscard]] double total() const;
@@ -50,14 +60,15 @@ class DepthHistogram {
   [[nodiscard]] std::vector<double> log_sum_exp(std::span<const double> kappas) const;
 
  private:
-  std::vector<double> weight_, depth_sum_;
+  Scale scale_;
+  std::vector<std::int64_t> weight_, depth_sum_;
 };
 
 /// One frame's evidence about the power: its own cells by depth (for Z), the predicted belief's
 /// mass inside the crop by the depth of the frame there, and the belief's mass outside the crop
 /// with the log-likelihood the update gives it there (log(1/M) - outside_crop_nats).
 struct CalibrationEvidence {
-  DepthHistogram frame_cells;
+  DepthHistogram frame_cells{DepthHistogram::kCount};
   DepthHistogram belief_in_crop;
   double belief_outside = 0;
   double log_outside = 0;
