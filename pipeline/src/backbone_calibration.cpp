@@ -43,7 +43,6 @@ BackboneFit fit_backbone_calibration(const std::vector<Route>& routes, raster::C
   as_given.volume_calibration = {};
   CalibrationFit fit(backbone_calibration_grid());
   const auto& projection = cache.metadata().projection();
-  std::vector<float> scores;
   for (const auto& route : routes) {
     const FrameSource source = route_frames(route, cache, as_given);
     for (std::size_t i = 0; i < route.frames.size(); ++i) {
@@ -53,15 +52,7 @@ BackboneFit fit_backbone_calibration(const std::vector<Route>& routes, raster::C
         const int H = frame->height, W = frame->width, N = frame->bins;
         const GridCrop crop = frame_crop(f, cache.grid(), projection);
         const auto cell = true_volume_cell(f, crop, projection, H, W, N, frame->cell_m);
-        // The prepared frame, [bin][v][u], as the (H, W, N) log-probabilities the fit reads.
-        scores.resize(frame->log_prob.size());
-        const std::size_t slice = static_cast<std::size_t>(H) * static_cast<std::size_t>(W);
-        for (int j = 0; j < N; ++j)
-          for (std::size_t c = 0; c < slice; ++c) {
-            scores[c * static_cast<std::size_t>(N) + static_cast<std::size_t>(j)] =
-                frame->log_prob[static_cast<std::size_t>(j) * slice + c];
-          }
-        fit.add(scores, H, W, N, (*cell)[0], (*cell)[1], (*cell)[2]);
+        fit.add(hwn_values(*frame), H, W, N, (*cell)[0], (*cell)[1], (*cell)[2]);
       }
       if (on_frame) on_frame();
     }

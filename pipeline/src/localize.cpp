@@ -91,6 +91,15 @@ std::vector<float> match_frame(const RouteFrame& f, raster::CacheReader& cache, 
   return matcher.match(obs, map);
 }
 
+std::vector<float> hwn_values(const filter::PreparedFrame& frame) {
+  const std::size_t slice = static_cast<std::size_t>(frame.height) * static_cast<std::size_t>(frame.width);
+  const auto N = static_cast<std::size_t>(frame.bins);
+  std::vector<float> hwn(frame.log_prob.size());
+  for (std::size_t j = 0; j < N; ++j)
+    for (std::size_t c = 0; c < slice; ++c) hwn[c * N + j] = frame.log_prob[j * slice + c];
+  return hwn;
+}
+
 filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options) {
   const int threads = options.filter.threads;
   // temper_frame passes power 1 through.
@@ -100,12 +109,7 @@ filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const Lo
   // Blur and floor work on (H, W, N) log-probabilities: the prepared frame's [bin][v][u] turned
   // back, calibrated, and prepared again.
   const int H = frame.height, W = frame.width, N = frame.bins;
-  const std::size_t slice = static_cast<std::size_t>(H) * static_cast<std::size_t>(W);
-  std::vector<float> hwn(frame.log_prob.size());
-  for (int j = 0; j < N; ++j)
-    for (std::size_t c = 0; c < slice; ++c) {
-      hwn[c * static_cast<std::size_t>(N) + static_cast<std::size_t>(j)] = frame.log_prob[static_cast<std::size_t>(j) * slice + c];
-    }
+  std::vector<float> hwn = hwn_values(frame);
   calibrate_volume(hwn, H, W, N, options.volume_calibration, threads);
   return filter::prepare_frame({hwn.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob, H, W, N,
                                 frame.cell_m},

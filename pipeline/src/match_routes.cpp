@@ -1,5 +1,6 @@
 #include "seqloc/pipeline/match_routes.hpp"
 
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <vector>
@@ -23,15 +24,10 @@ void write_volume_route(const Route& route, raster::CacheReader& cache, const Lo
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
     const auto frame = source(i);
     const int H = frame->height, W = frame->width, N = frame->bins;
-    // [bin][v][u] to (H, W, N); the values are float16 already (the frame store's rounding), so
-    // the conversion back to half bits is exact.
-    halves.resize(frame->log_prob.size());
-    const std::size_t slice = static_cast<std::size_t>(H) * static_cast<std::size_t>(W);
-    for (int j = 0; j < N; ++j)
-      for (std::size_t c = 0; c < slice; ++c) {
-        halves[c * static_cast<std::size_t>(N) + static_cast<std::size_t>(j)] =
-            filter::float_to_half(frame->log_prob[static_cast<std::size_t>(j) * slice + c]);
-      }
+    // The values are float16 already (the frame store's rounding): back to half bits exactly.
+    const std::vector<float> values = hwn_values(*frame);
+    halves.resize(values.size());
+    std::transform(values.begin(), values.end(), halves.begin(), filter::float_to_half);
     char name[32];
     std::snprintf(name, sizeof name, "%06zu.npy", i);
     const std::filesystem::path path = dir / "volumes" / name;

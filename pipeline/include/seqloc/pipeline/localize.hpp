@@ -109,6 +109,9 @@ struct RouteResult {
 /// for bad values (NaN, infinities, negative probabilities) or shapes.
 [[nodiscard]] filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options);
 
+/// A prepared frame's log-probabilities ([bin][v][u]) in a volume's (H, W, N) order.
+[[nodiscard]] std::vector<float> hwn_values(const filter::PreparedFrame& frame);
+
 /// The route's own frames: its .npy volumes, or the built-in matcher run on its observations
 /// against the cache's class raster. Throws DataError naming the file.
 [[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
