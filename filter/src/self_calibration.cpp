@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Core>
+
 #include "seqloc/filter/types.hpp"
 
 namespace seqloc::filter {
@@ -24,13 +26,40 @@ double log_add(double a, double b) {
 
 DepthHistogram::DepthHistogram(Scale scale) : scale_(scale) {
   const auto bins = static_cast<std::size_t>(kMaxDepthNats / kBinNats) + 1;
-  weight_.assign(bins, 0);
-  depth_sum_.assign(bins, 0);
+  weight_.assign(bins * kLanes, 0);
+  depth_sum_.assign(bins * kLanes, 0);
 }
 
 void DepthHistogram::clear() {
   std::fill(weight_.begin(), weight_.end(), 0);
   std::fill(depth_sum_.begin(), depth_sum_.end(), 0);
+}
+
+void DepthHistogram::add_each(std::span<const float> r, std::span<const float> w) {
+  constexpr Eigen::Index kBlock = 1024;
+  Eigen::Array<float, kBlock, 1> depth;
+  Eigen::Array<std::int32_t, kBlock, 1> bin;
+  const auto max_depth = static_cast<float>(kMaxDepthNats), per_nat = static_cast<float>(1 / kBinNats);
+  const auto last = static_cast<std::int32_t>(weight_.size() / kLanes - 1);
+  const auto size = static_cast<Eigen::Index>(r.size());
+  for (Eigen::Index start = 0; start < size; start += kBlock) {
+    const Eigen::Index len = std::min(kBlock, size - start);
+    // The depths and their bins in SIMD (a NaN depth lands in some bin; its weight must be 0).
+    auto d = depth.head(len);
+    d = (-Eigen::Map<const Eigen::ArrayXf>(r.data() + start, len)).max(0.0f).min(max_depth);
+    bin.head(len) = (d * per_nat).cast<std::int32_t>().max(0).min(last);
+    const float* ws = w.data() + start;
+    // Neighbouring cells often share a bin: each of kLanes copies takes every kLanes-th cell, so
+    // that one add need not wait for the one before it.
+    for (Eigen::Index i = 0; i < len; ++i) {
+      if (ws[i] > 0) {
+        const double wi = ws[i];
+        const auto b = static_cast<std::size_t>(bin[i]) * kLanes + static_cast<std::size_t>(i % kLanes);
+        weight_[b] += static_cast<std::int64_t>(wi * scale_.weight + 0.5);
+        depth_sum_[b] += static_cast<std::int64_t>(wi * depth[i] * scale_.depth + 0.5);
+      }
+    }
+  }
 }
 
 void DepthHistogram::merge(const DepthHistogram& other) {
@@ -49,10 +78,15 @@ double DepthHistogram::total() const {
 std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) const {
   // The non-empty bins as (log weight, mean depth), summed stably (shifted by the largest term).
   std::vector<std::pair<double, double>> bins;
-  for (std::size_t i = 0; i < weight_.size(); ++i) {
-    if (weight_[i] > 0) {
-      const double w = static_cast<double>(weight_[i]) / scale_.weight;
-      bins.emplace_back(std::log(w), static_cast<double>(depth_sum_[i]) / scale_.depth / w);
+  for (std::size_t i = 0; i < weight_.size(); i += kLanes) {
+    std::int64_t weight = 0, depth_sum = 0;
+    for (std::size_t lane = 0; lane < kLanes; ++lane) {
+      weight += weight_[i + lane];
+      depth_sum += depth_sum_[i + lane];
+    }
+    if (weight > 0) {
+      const double w = static_cast<double>(weight) / scale_.weight;
+      bins.emplace_back(std::log(w), static_cast<double>(depth_sum) / scale_.depth / w);
     }
   }
   std::vector<double> out(kappas.size(), kNegInf);

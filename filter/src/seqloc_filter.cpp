@@ -45,9 +45,9 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
       const Eigen::Index len = std::min<Eigen::Index>(kBlock, static_cast<Eigen::Index>(cells) - start);
       ConstArrayMap x(f.log_prob.data() + start, len);
       auto eb = e.head(len);
-      eb = (x > kLogZero).select((x - max).exp(), 0.0f);
+      detail::exp_or_zero(x.data(), static_cast<std::size_t>(len), 1.0f, max, eb.data());
       s_sum += eb.sum();
-      s_ex += (eb * (x > kLogZero).select(x, 0.0f)).sum();
+      s_ex += (eb * x.max(kLogZero)).sum();  // 0 * kLogZero at a zero cell, which may hold -inf (rounded)
     }
     chunk_sum[static_cast<std::size_t>(t)] = s_sum;
     chunk_ex[static_cast<std::size_t>(t)] = s_ex;
@@ -387,13 +387,23 @@ Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, 
 // ---------------------------------------------------------------------------------------------
 // The filter
 
+namespace {
+
+/// What the filter reads of a frame raised to a power: its peak log-probability and entropy.
+struct FrameShape {
+  float max_log_prob;
+  double entropy;
+};
+
+}  // namespace
+
 struct SeqLocFilter::Impl {
   BeliefVolume scratch;          // the other buffer of predict
-  AlignedVector<float> tempered;  // the frame's p^w / max, heading-major
-  PreparedFrame calibrated;       // the frame raised to self-calibration's power
+  AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
   PowerEstimator estimator;
   struct Worker {
-    std::vector<float> sample, blend, depth;
+    std::vector<float> sample, blend;
+    AlignedVector<float> depth, mass;  // aligned: Eigen's SIMD log covers the same cells wherever they lie
     DepthHistogram frame_cells{DepthHistogram::kCount}, belief_in_crop;  // self-calibration's evidence, this worker's share
     double belief_outside = 0, outside_cells = 0;
   };
@@ -405,8 +415,56 @@ struct SeqLocFilter::Impl {
         workers(static_cast<std::size_t>(c.threads)) {
     for (auto& w : workers) {
       w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
-      if (c.self_calibrate) w.depth.resize(w.sample.size());
+      if (c.self_calibrate) {
+        w.depth.resize(w.sample.size());
+        w.mass.resize(w.sample.size());
+      }
     }
+  }
+
+  // One pass over the given frame for self-calibration: its cells binned by depth below the peak
+  // (each worker's share in its frame_cells) and, for power k != 1, the peak and entropy of
+  // q = p^k / Z: with r = log p - log p_max, log q_max = -log Z, Z = sum e^{k r} and
+  // H = log Z - k sum(e^{k r} r) / Z. The sums are kept per heading bin and added in bin order,
+  // so that they do not depend on the number of threads.
+  FrameShape scan_frame(const PreparedFrame& f, double power, int threads) {
+    const std::size_t slice = static_cast<std::size_t>(f.width) * f.height;
+    std::vector<double> bin_z(static_cast<std::size_t>(f.bins)), bin_zr(static_cast<std::size_t>(f.bins));
+    const bool raised = power != 1.0;
+    const auto k = static_cast<float>(power);
+    detail::parallel_chunks(f.bins, threads, [&](int j0, int j1, int t) {
+      constexpr std::size_t kBlock = 4096;
+      Eigen::ArrayXf r(kBlock), one(kBlock), e(kBlock);  // aligned: sums that do not depend on the heap
+      auto& cells = workers[static_cast<std::size_t>(t)].frame_cells;
+      for (int j = j0; j < j1; ++j) {
+        double z = 0, zr = 0;
+        for (std::size_t start = 0; start < slice; start += kBlock) {
+          const std::size_t len = std::min(kBlock, slice - start);
+          const float* x = f.log_prob.data() + static_cast<std::size_t>(j) * slice + start;
+          for (std::size_t i = 0; i < len; ++i) {  // vectorizes
+            r[i] = std::max(x[i], kLogZero) - f.max_log_prob;
+            one[i] = x[i] > kLogZero ? 1.0f : 0.0f;
+          }
+          cells.add_each({r.data(), len}, {one.data(), len});
+          if (raised) {
+            detail::exp_or_zero(x, len, k, f.max_log_prob, e.data());
+            ConstArrayMap eb(e.data(), static_cast<Eigen::Index>(len));
+            z += eb.sum();
+            zr += (eb * ConstArrayMap(r.data(), static_cast<Eigen::Index>(len))).sum();  // 0 * kLogZero at a zero cell
+          }
+        }
+        bin_z[static_cast<std::size_t>(j)] = z;
+        bin_zr[static_cast<std::size_t>(j)] = zr;
+      }
+    });
+    if (!raised) return {f.max_log_prob, f.entropy};
+    double z = 0, zr = 0;
+    for (int j = 0; j < f.bins; ++j) {
+      z += bin_z[static_cast<std::size_t>(j)];
+      zr += bin_zr[static_cast<std::size_t>(j)];
+    }
+    const double log_z = std::log(z);  // z >= 1: the peak's own cell counts e^0
+    return {static_cast<float>(-log_z), std::clamp((log_z - power * zr / z) / f.log_cells, 0.0, 1.0)};
   }
 };
 
@@ -418,26 +476,32 @@ namespace {
 // replaced by `outside`). A cell whose s underflowed to 0 is counted at the deepest depth float
 // can show, so that smaller powers are not credited with less mass than they would see.
 void collect_evidence(const float* belief, float* sample, std::size_t n, double exponent, float outside,
-                      std::vector<float>& depth, DepthHistogram& in_crop, double& belief_outside,
-                      double& outside_cells) {
+                      AlignedVector<float>& depth, AlignedVector<float>& mass, DepthHistogram& in_crop,
+                      double& belief_outside, double& outside_cells) {
   const auto count = static_cast<Eigen::Index>(n);
-  Eigen::Map<Eigen::ArrayXf> s(sample, count);
   const auto inverse = static_cast<float>(1.0 / exponent);
   const auto underflow = static_cast<float>(std::log(std::numeric_limits<float>::denorm_min()) / exponent);
-  Eigen::Map<Eigen::ArrayXf>(depth.data(), count) = (s > 0.0f).select(s.log() * inverse, underflow);
-  double outside_mass = 0;
+  // The log in SIMD over the whole slice (NaN outside the crop), then in a loop that vectorizes
+  // (restrict: the arrays do not overlap) the underflowed cells' depth, each cell's mass in the
+  // crop (0 outside) and the outside fill.
+  Eigen::Map<Eigen::ArrayXf>(depth.data(), count) = Eigen::Map<const Eigen::ArrayXf>(sample, count).log() * inverse;
+  float* __restrict d = depth.data();
+  float* __restrict m = mass.data();
+  float* __restrict s = sample;
+  const float* __restrict b = belief;
   std::size_t outside_count = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    if (sample[i] < 0) {
-      outside_mass += belief[i];
-      ++outside_count;
-    } else {
-      in_crop.add(depth[i], belief[i]);
-    }
+    const bool in = s[i] >= 0;
+    outside_count += in ? 0 : 1;
+    d[i] = s[i] > 0 ? d[i] : underflow;
+    m[i] = in ? b[i] : 0.0f;
+    s[i] = in ? s[i] : outside;
   }
+  // b - m is b outside the crop and exactly 0 inside.
+  const double outside_mass = (Eigen::Map<const Eigen::ArrayXf>(belief, count) - Eigen::Map<const Eigen::ArrayXf>(m, count)).sum();
+  in_crop.add_each({depth.data(), n}, {mass.data(), n});
   belief_outside += outside_mass;
   outside_cells += static_cast<double>(outside_count);
-  s = (s < 0.0f).select(outside, s);
 }
 
 }  // namespace
@@ -552,31 +616,12 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
   const auto N = static_cast<Eigen::Index>(n);
   if (!first_) predict(odometry);
 
-  // Self-calibration: the frame raised to the power the frames before it favour.
+  // Self-calibration: the frame raised to the power kappa the frames before it favour,
+  // q = p^kappa / Z(kappa). q is never written out: its peak and entropy come from one pass over
+  // the given frame, which also bins the frame's cells by depth for the estimator.
   FrameResult result;
   const bool calibrating = config_.self_calibrate;
   result.volume_power = calibrating ? impl_->estimator.power() : 1.0;
-  const PreparedFrame* used = &given;
-  if (result.volume_power != 1.0) {
-    impl_->calibrated = given;
-    temper_frame_in_place(impl_->calibrated, result.volume_power, config_.threads);
-    used = &impl_->calibrated;
-  }
-  const PreparedFrame& frame = *used;
-  result.frame_entropy = frame.entropy;
-  if (config_.etu && config_.etu_route_reference) {
-    entropies_.push_back(given.entropy);
-    if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
-    result.etu_weight = etu_weight(given.entropy, route_reference_entropy(entropies_));
-  } else {
-    result.etu_weight = config_.etu ? etu_weight(frame.entropy, config_.etu_reference_entropy) : 1.0;
-  }
-  const auto w = static_cast<float>(result.etu_weight);
-
-  // The tempered likelihood p^w on the crop, scaled by its maximum (the scale cancels in the
-  // normalization); log(1/M) - outside_crop_nats outside the crop.
-  const float log_p_max = frame.max_log_prob;
-  impl_->tempered.resize(frame.log_prob.size());
   if (calibrating) {
     for (auto& worker : impl_->workers) {
       worker.frame_cells.clear();
@@ -584,19 +629,30 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
       worker.belief_outside = worker.outside_cells = 0;
     }
   }
-  const std::size_t frame_slice = static_cast<std::size_t>(frame.width) * frame.height;
-  detail::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int t) {
-    const std::size_t begin = static_cast<std::size_t>(j0) * frame_slice;
-    const auto length = static_cast<Eigen::Index>(static_cast<std::size_t>(j1 - j0) * frame_slice);
-    ConstArrayMap log_p(frame.log_prob.data() + begin, length);
-    ArrayMap(impl_->tempered.data() + begin, length) = (log_p > kLogZero).select((w * (log_p - log_p_max)).exp(), 0.0f);
-    if (calibrating) {
-      // The given frame's own cells by depth, for Z(kappa).
-      auto& cells = impl_->workers[static_cast<std::size_t>(t)].frame_cells;
-      const float* raw = given.log_prob.data() + begin;
-      for (Eigen::Index i = 0; i < length; ++i) {
-        if (raw[i] > kLogZero) cells.add(static_cast<double>(raw[i] - given.max_log_prob), 1.0);
-      }
+  const FrameShape used = calibrating ? impl_->scan_frame(given, result.volume_power, config_.threads)
+                                      : FrameShape{given.max_log_prob, given.entropy};
+  result.frame_entropy = used.entropy;
+  if (config_.etu && config_.etu_route_reference) {
+    entropies_.push_back(given.entropy);
+    if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
+    result.etu_weight = etu_weight(given.entropy, route_reference_entropy(entropies_));
+  } else {
+    result.etu_weight = config_.etu ? etu_weight(used.entropy, config_.etu_reference_entropy) : 1.0;
+  }
+  const auto w = static_cast<float>(result.etu_weight);
+
+  // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
+  // normalization): exp(w kappa (log p - log p_max)); log(1/M) - outside_crop_nats outside the crop.
+  const PreparedFrame& frame = given;
+  const float log_p_max = used.max_log_prob;
+  impl_->tempered.resize(frame.log_prob.size());
+  const auto exponent_f = static_cast<float>(w * result.volume_power);
+  detail::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
+    const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
+    for (int j = j0; j < j1; ++j) {  // bin by bin: the same cuts for any number of threads
+      const std::size_t begin = static_cast<std::size_t>(j) * slice;
+      detail::exp_or_zero(frame.log_prob.data() + begin, slice, exponent_f, frame.max_log_prob,
+                          impl_->tempered.data() + begin);
     }
   });
   const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
@@ -626,7 +682,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
                              belief_.bin_heading_deg(k), W, H, collect ? -1.0f : outside, worker.blend,
                              worker.sample.data());
         if (collect) {
-          collect_evidence(belief_.slice(k), worker.sample.data(), n, exponent, outside, worker.depth,
+          collect_evidence(belief_.slice(k), worker.sample.data(), n, exponent, outside, worker.depth, worker.mass,
                            worker.belief_in_crop, worker.belief_outside, worker.outside_cells);
         }
         ArrayMap b(belief_.slice(k), N);

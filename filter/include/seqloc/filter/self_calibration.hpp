@@ -50,18 +50,22 @@ class DepthHistogram {
   /// Adds weight w >= 0 at depth r (r > 0 is taken as 0, r < -kMaxDepthNats as -kMaxDepthNats).
   void add(double r, double w) {
     const double d = r < 0 ? std::min(-r, kMaxDepthNats) : 0.0;
-    const auto i = std::min(static_cast<std::size_t>(d * (1 / kBinNats)), weight_.size() - 1);
+    const auto i = std::min(static_cast<std::size_t>(d * (1 / kBinNats)), weight_.size() / kLanes - 1) * kLanes;
     weight_[i] += static_cast<std::int64_t>(w * scale_.weight + 0.5);
     depth_sum_[i] += static_cast<std::int64_t>(w * d * scale_.depth + 0.5);
   }
+  /// add(r[i], w[i]) for every i, r and w of the same length (w[i] <= 0 adds nothing, whatever
+  /// r[i] is, NaN included). The bins are found in SIMD, a block at a time: the filter's hot path.
+  void add_each(std::span<const float> r, std::span<const float> w);
   void merge(const DepthHistogram& other);
   [[nodiscard]] double total() const;
   /// log sum_i w_i exp(kappa r_i) for each kappa (-inf where the histogram is empty).
   [[nodiscard]] std::vector<double> log_sum_exp(std::span<const double> kappas) const;
 
  private:
+  static constexpr std::size_t kLanes = 4;  ///< copies of each bin (see add_each), side by side
   Scale scale_;
-  std::vector<std::int64_t> weight_, depth_sum_;
+  std::vector<std::int64_t> weight_, depth_sum_;  ///< [bin][lane]
 };
 
 /// One frame's evidence about the power: its own cells by depth (for Z), the predicted belief's
