@@ -5,9 +5,29 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/types.hpp"
 
+#if defined(__F16C__)
+#include <immintrin.h>
+#endif
+
 namespace seqloc::filter {
 
 float half_to_float(std::uint16_t h) {
+#if defined(__F16C__)
+  return _cvtsh_ss(h);  // one instruction, exact (F16C: x86-64-v3)
+#else
+  return detail::half_to_float_portable(h);
+#endif
+}
+
+std::uint16_t float_to_half(float f) {
+#if defined(__F16C__)
+  return _cvtss_sh(f, _MM_FROUND_TO_NEAREST_INT);  // ties to even, overflow to infinity
+#else
+  return detail::float_to_half_portable(f);
+#endif
+}
+
+float detail::half_to_float_portable(std::uint16_t h) {
   const std::uint32_t sign = static_cast<std::uint32_t>(h & 0x8000u) << 16;
   const std::uint32_t exponent = (h >> 10) & 0x1Fu;
   const std::uint32_t mantissa = h & 0x3FFu;
@@ -30,7 +50,7 @@ float half_to_float(std::uint16_t h) {
   return out;
 }
 
-std::uint16_t float_to_half(float f) {
+std::uint16_t detail::float_to_half_portable(float f) {
   std::uint32_t bits = 0;
   std::memcpy(&bits, &f, 4);
   const auto sign = static_cast<std::uint16_t>((bits >> 16) & 0x8000u);

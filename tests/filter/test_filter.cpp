@@ -488,6 +488,32 @@ TEST(Half, FloatToHalfIsTheNearestHalfTiesToEven) {
   EXPECT_TRUE(std::isnan(half_to_float(float_to_half(std::numeric_limits<float>::quiet_NaN()))));
 }
 
+// The plain-code conversions (builds without F16C) give the same bits as the ones this build
+// runs, for every half and for floats of every exponent the halves can reach and beyond.
+TEST(Half, PortableConversionsMatch) {
+  for (std::uint32_t h = 0; h < 0x10000; ++h) {
+    const auto half = static_cast<std::uint16_t>(h);
+    const float a = half_to_float(half), b = detail::half_to_float_portable(half);
+    if (std::isnan(a)) {
+      EXPECT_TRUE(std::isnan(b)) << h;
+      continue;
+    }
+    ASSERT_EQ(std::memcmp(&a, &b, 4), 0) << h;
+  }
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<std::uint32_t> any_bits;
+  for (int i = 0; i < 200000; ++i) {
+    std::uint32_t bits = any_bits(rng);
+    if ((bits & 0x7F800000u) == 0x7F800000u) continue;  // inf and NaN: payloads may differ
+    if (i % 2 == 0) bits = (bits & 0x80FFFFFFu) | ((95u + bits % 50u) << 23);
+    float f = 0;
+    std::memcpy(&f, &bits, 4);
+    ASSERT_EQ(float_to_half(f), detail::float_to_half_portable(f)) << f;
+  }
+  EXPECT_EQ(detail::float_to_half_portable(std::numeric_limits<float>::infinity()), 0x7C00);
+  EXPECT_TRUE(std::isnan(detail::half_to_float_portable(detail::float_to_half_portable(std::nanf("")))));
+}
+
 TEST(Config, ValidateNamesTheField) {
   FilterConfig c;
   c.mgr_epsilon = 1.5;

@@ -64,4 +64,11 @@ float half_to_float(std::uint16_t h);
 /// from 65520 up become infinity, below 2^-25 zero (keeping the sign); NaN stays NaN.
 std::uint16_t float_to_half(float f);
 
+namespace detail {
+/// The same two conversions in plain integer code: what half_to_float and float_to_half run where
+/// the CPU has no F16C instructions (a build without -march=x86-64-v3); tested against them.
+float half_to_float_portable(std::uint16_t h);
+std::uint16_t float_to_half_portable(float f);
+}  // namespace detail
+
 }  // namespace seqloc::filter
