@@ -608,20 +608,39 @@ void SeqLocFilter::predict(const Odometry& odometry) {
   }
 }
 
-FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop, const Odometry& odometry,
+FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
                                const float* road_distance_m, const GpsFix* gps) {
+  if (!first_) predict(odometry);
+  FrameResult result = update(frame, crop, road_distance_m, gps);
+  if (last_estimate_ && !first_) {
+    double du = 0, dv = 0;
+    displacement_cells(odometry, last_estimate_->heading_deg, du, dv);
+    const double pu = last_estimate_->u + du, pv = last_estimate_->v + dv;
+    result.relocalized = std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
+  }
+  last_estimate_ = result.pose;
+  first_ = false;
+  return result;
+}
+
+FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop, const float* road_distance_m,
+                                 const GpsFix* gps, const FrameWeighting* weighting) {
   if (config_.mgr && road_distance_m == nullptr) throw FilterError("MGR is on but no road-distance window was given");
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);
-  if (!first_) predict(odometry);
 
   // Self-calibration: the frame raised to the power kappa the frames before it favour,
   // q = p^kappa / Z(kappa). q is never written out: its peak and entropy come from one pass over
   // the given frame, which also bins the frame's cells by depth for the estimator.
   FrameResult result;
-  const bool calibrating = config_.self_calibrate;
-  result.volume_power = calibrating ? impl_->estimator.power() : 1.0;
+  const bool calibrating = config_.self_calibrate && weighting == nullptr;
+  if (weighting != nullptr) {
+    result.volume_power = weighting->volume_power;
+    result.etu_weight = weighting->etu_weight;
+  } else {
+    result.volume_power = calibrating ? impl_->estimator.power() : 1.0;
+  }
   if (calibrating) {
     for (auto& worker : impl_->workers) {
       worker.frame_cells.clear();
@@ -630,15 +649,19 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
     }
   }
   const FrameShape used = calibrating ? impl_->scan_frame(given, result.volume_power, config_.threads)
-                                      : FrameShape{given.max_log_prob, given.entropy};
+                          : weighting != nullptr ? FrameShape{weighting->peak_log_prob, given.entropy}
+                                                 : FrameShape{given.max_log_prob, given.entropy};
   result.frame_entropy = used.entropy;
-  if (config_.etu && config_.etu_route_reference) {
+  if (weighting != nullptr) {
+    // As weighed before.
+  } else if (config_.etu && config_.etu_route_reference) {
     entropies_.push_back(given.entropy);
     if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
     result.etu_weight = etu_weight(given.entropy, route_reference_entropy(entropies_));
   } else {
     result.etu_weight = config_.etu ? etu_weight(used.entropy, config_.etu_reference_entropy) : 1.0;
   }
+  result.weighting = {result.volume_power, result.etu_weight, used.max_log_prob};
   const auto w = static_cast<float>(result.etu_weight);
 
   // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
@@ -773,14 +796,6 @@ FrameResult SeqLocFilter::step(const PreparedFrame& given, const CropPose& crop,
     }
     result.pose.heading_deg = wrap_degrees(std::atan2(sx, sy) / kDegToRad);
   }
-  if (last_estimate_ && !first_) {
-    double du = 0, dv = 0;
-    displacement_cells(odometry, last_estimate_->heading_deg, du, dv);
-    const double pu = last_estimate_->u + du, pv = last_estimate_->v + dv;
-    result.relocalized = std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
-  }
-  last_estimate_ = result.pose;
-  first_ = false;
   return result;
 }
 

@@ -102,6 +102,16 @@ struct GpsFix {
   double sigma_m = 10;
 };
 
+/// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
+/// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
+/// the route (the smoother's, smoother.hpp) gives it to SeqLocFilter::update to multiply in the
+/// very likelihood the first pass did, without estimating anything again.
+struct FrameWeighting {
+  double volume_power = 1;
+  double etu_weight = 1;
+  float peak_log_prob = 0;
+};
+
 struct FrameResult {
   Pose pose;     ///< the estimate: PAS's x_hat with th* (or the argmax when PAS is off)
   Pose argmax;   ///< (x*, th*)
@@ -112,6 +122,7 @@ struct FrameResult {
   /// the frames before this one. For volumes sharpened as p^k it tends to 1 / k.
   double volume_power = 1;
   bool relocalized = false;  ///< the argmax jumped farther than the configured threshold
+  FrameWeighting weighting;  ///< what the step multiplied in (volume_power and etu_weight again, and the scale)
 };
 
 class SeqLocFilter {
@@ -141,6 +152,12 @@ class SeqLocFilter {
   /// The stages, exposed for tests and for callers that move the window between frames.
   void predict(const Odometry& odometry);
   void recentre(int du, int dv);
+  /// step() without the prediction and the relocalization flag: the frame's likelihood multiplied
+  /// in, MGR, the argmax and PAS. With `weighting` the frame is weighed as given (a pass repeating
+  /// an earlier one: nothing is estimated, self-calibration and ETU's route history are left as
+  /// they are); without it, as the configuration says.
+  FrameResult update(const PreparedFrame& frame, const CropPose& crop, const float* road_distance_m,
+                     const GpsFix* gps = nullptr, const FrameWeighting* weighting = nullptr);
 
   /// Self-calibration's estimator (its power is what the next step uses).
   [[nodiscard]] const PowerEstimator& calibration() const;

@@ -1,0 +1,127 @@
+#include "seqloc/filter/smoother.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "parallel.hpp"
+#include "seqloc/filter/offline.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+
+// The backward filter's own configuration: the forward one's, without self-calibration's buffers
+// (it is given every frame's weighting).
+FilterConfig backward_config(FilterConfig config) {
+  config.self_calibrate = false;
+  return config;
+}
+
+}  // namespace
+
+BackwardFilter::BackwardFilter(const FilterConfig& config) : filter_(backward_config(config)) { reset(); }
+
+void BackwardFilter::reset() { filter_.reset_uniform(); }
+
+void BackwardFilter::absorb(const PreparedFrame& frame, const CropPose& crop, const FrameWeighting& weighting,
+                            const float* road_distance_m, const GpsFix* gps) {
+  (void)filter_.update(frame, crop, road_distance_m, gps, &weighting);
+}
+
+void BackwardFilter::step_back(const Odometry& odometry) { filter_.predict(invert(odometry)); }
+
+FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& backward, const FilterConfig& config,
+                            BeliefVolume* posterior) {
+  if (forward.width() != backward.width() || forward.height() != backward.height() ||
+      forward.headings() != backward.headings()) {
+    throw FilterError("smoothed_result: the forward and backward beliefs cover different windows");
+  }
+  const int W = forward.width(), R = forward.headings();
+  const std::size_t n = forward.slice_cells();
+  const auto N = static_cast<Eigen::Index>(n);
+  if (posterior != nullptr && (posterior->width() != W || posterior->height() != forward.height() ||
+                               posterior->headings() != R)) {
+    throw FilterError("smoothed_result: the posterior's shape differs from the beliefs'");
+  }
+  // Per heading slice: the product's largest value and its sum, kept per slice and added in slice
+  // order (the same for any number of threads).
+  std::vector<float> best(static_cast<std::size_t>(R));
+  std::vector<double> sum(static_cast<std::size_t>(R));
+  detail::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
+    Eigen::ArrayXf product(N);
+    for (int k = k0; k < k1; ++k) {
+      product = ConstArrayMap(forward.slice(k), N) * ConstArrayMap(backward.slice(k), N);
+      best[static_cast<std::size_t>(k)] = product.maxCoeff();
+      sum[static_cast<std::size_t>(k)] = static_cast<double>(product.sum());
+      if (posterior != nullptr) std::copy(product.data(), product.data() + n, posterior->slice(k));
+    }
+  });
+  double total = 0;
+  for (double s : sum) total += s;
+  if (!(total > 0) || !std::isfinite(total)) {
+    throw FilterError("smoothed_result: the forward and backward beliefs share no mass in the window");
+  }
+  if (posterior != nullptr) {
+    const auto scale = static_cast<float>(1.0 / total);
+    for (int k = 0; k < R; ++k) {
+      Eigen::Map<Eigen::ArrayXf>(posterior->slice(k), N) *= scale;
+    }
+  }
+  int k_star = 0;
+  for (int k = 1; k < R; ++k) {
+    if (best[static_cast<std::size_t>(k)] > best[static_cast<std::size_t>(k_star)]) k_star = k;
+  }
+  // The first cell of slice k* holding its largest product (as the forward filter's argmax).
+  const float* a = forward.slice(k_star);
+  const float* b = backward.slice(k_star);
+  std::size_t cell = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (a[i] * b[i] == best[static_cast<std::size_t>(k_star)]) {
+      cell = i;
+      break;
+    }
+  }
+  const int u_star = static_cast<int>(cell % static_cast<std::size_t>(W));
+  const int v_star = static_cast<int>(cell / static_cast<std::size_t>(W));
+  FrameResult result;
+  result.argmax = {static_cast<double>(u_star), static_cast<double>(v_star), forward.bin_heading_deg(k_star)};
+  result.pose = result.argmax;
+  result.peak_log_belief = static_cast<float>(std::log(best[static_cast<std::size_t>(k_star)] / total));
+  auto gamma = [&](int u, int v, int k) { return static_cast<double>(forward.prob(u, v, k)) * backward.prob(u, v, k); };
+  if (config.pas) {
+    // PAS on gamma: the mass-weighted mean position over the cells around x* (peak_anchored_position).
+    double sm = 0, su = 0, sv = 0;
+    const int r = config.pas_radius;
+    for (int v = std::max(0, v_star - r); v <= std::min(forward.height() - 1, v_star + r); ++v) {
+      for (int u = std::max(0, u_star - r); u <= std::min(W - 1, u_star + r); ++u) {
+        double m = 0;
+        for (int k = 0; k < R; ++k) m += gamma(u, v, k);
+        sm += m;
+        su += m * u;
+        sv += m * v;
+      }
+    }
+    if (sm > 0) {
+      result.pose.u = su / sm;
+      result.pose.v = sv / sm;
+    }
+  }
+  if (config.subbin_heading) {
+    double sx = 0, sy = 0;
+    for (int i = -config.subbin_half_width; i <= config.subbin_half_width; ++i) {
+      const int k = (k_star + i + R) % R;
+      const double h = forward.bin_heading_deg(k) * M_PI / 180.0;
+      sx += gamma(u_star, v_star, k) * std::sin(h);
+      sy += gamma(u_star, v_star, k) * std::cos(h);
+    }
+    const double deg = std::atan2(sx, sy) * 180.0 / M_PI;
+    result.pose.heading_deg = deg < 0 ? deg + 360.0 : deg;
+  }
+  return result;
+}
+
+}  // namespace seqloc::filter
