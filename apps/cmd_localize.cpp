@@ -29,9 +29,16 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     app.add_option("routes", route_dirs_, "Route folders (route.json + frames.csv, see docs/route-format.md)")
         ->required();
     app.add_option("-o,--output", out_, "Output folder (written whole, or not at all)")->required();
-    app.add_option("--mode", mode_, "seqloc, online (naive recursion), single, offline (uses future frames), or all")
+    app.add_option("--mode", mode_,
+                   "seqloc, online (naive recursion), single, offline (uses future frames), smooth (each frame given "
+                   "the whole route: the best poses for batch work), or all")
         ->default_val("seqloc")
-        ->check(CLI::IsMember({"seqloc", "online", "single", "offline", "all"}));
+        ->check(CLI::IsMember({"seqloc", "online", "single", "offline", "smooth", "all"}));
+    app.add_option("--lag", options_.lag,
+                   "seqloc and online: report each frame's pose given the L frames after it too (fixed-lag smoothing: "
+                   "real time with a delay of L frames; keeps L + 1 windows in memory)")
+        ->capture_default_str()
+        ->check(CLI::NonNegativeNumber);
     app.add_option("--offline-window", options_.offline_half_window,
                    "Offline mode: frames within K of each frame are aligned and summed (-1: all)")
         ->capture_default_str();
@@ -98,7 +105,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       }
     }
     if (mode_ == "all") {
-      modes_ = {pipeline::Mode::single, pipeline::Mode::offline, pipeline::Mode::online, pipeline::Mode::seqloc};
+      modes_ = {pipeline::Mode::single, pipeline::Mode::offline, pipeline::Mode::online, pipeline::Mode::seqloc,
+                pipeline::Mode::smooth};
+    } else if (mode_ == "smooth") {
+      modes_ = {pipeline::Mode::smooth};
     } else if (mode_ == "single") {
       modes_ = {pipeline::Mode::single};
     } else if (mode_ == "offline") {

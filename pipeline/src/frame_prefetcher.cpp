@@ -21,7 +21,7 @@ FramePrefetcher::Frame FramePrefetcher::load(std::size_t i, double* seconds) con
   return frame;
 }
 
-const filter::PreparedFrame& FramePrefetcher::get(std::size_t i) {
+std::shared_ptr<const filter::PreparedFrame> FramePrefetcher::get_shared(std::size_t i) {
   auto it = kept_.find(i);
   if (it == kept_.end()) {
     Frame frame;
@@ -38,12 +38,15 @@ const filter::PreparedFrame& FramePrefetcher::get(std::size_t i) {
     it = kept_.emplace(i, std::move(frame)).first;
   }
   // Start on the following frame while the caller works on this one.
-  if (lookahead_ && i + 1 < frames_ && !(next_.valid() && next_index_ == i + 1)) {
-    if (next_.valid()) next_.wait();  // a frame nobody took (not in order); never two at once
-    next_index_ = i + 1;
-    next_ = std::async(std::launch::async, [this, i] { return load(i + 1, &next_seconds_); });
-  }
-  return *it->second;
+  if (lookahead_ && i + 1 < frames_) prefetch(i + 1);
+  return it->second;
+}
+
+void FramePrefetcher::prefetch(std::size_t i) {
+  if (i >= frames_ || kept_.count(i) != 0 || (next_.valid() && next_index_ == i)) return;
+  if (next_.valid()) next_.wait();  // a frame nobody took (not in order); never two at once
+  next_index_ = i;
+  next_ = std::async(std::launch::async, [this, i] { return load(i, &next_seconds_); });
 }
 
 }  // namespace seqloc::pipeline

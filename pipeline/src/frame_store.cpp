@@ -12,6 +12,8 @@
 #include <string>
 #include <system_error>
 
+#include "unlinked_file.hpp"
+
 namespace seqloc::pipeline {
 namespace {
 
@@ -30,10 +32,8 @@ std::size_t values_of(const filter::PreparedFrame& f) {
 class FrameStore::SpillFile {
  public:
   explicit SpillFile(const std::filesystem::path& dir) : dir_(dir) {
-    std::string name = (dir / "seqloc-frames-XXXXXX").string();
-    fd_ = ::mkstemp(name.data());
+    fd_ = detail::open_unlinked_file(dir, "seqloc-frames");  // the space is freed when fd_ closes
     if (fd_ < 0) fail("cannot create a temporary file");
-    ::unlink(name.c_str());  // gone from the directory now; the space is freed when fd_ closes
   }
   ~SpillFile() { ::close(fd_); }
   SpillFile(const SpillFile&) = delete;

@@ -147,11 +147,14 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
   };
 }
 
-FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
-  auto store = std::make_shared<FrameStore>(route_frames(route, cache, options), route.frames.size(), 1,
+FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+                                int readers) {
+  auto store = std::make_shared<FrameStore>(route_frames(route, cache, options), route.frames.size(), readers,
                                             options.frame_memory_mb << 20, options.spill_dir);
   return [store](std::size_t i) { return store->take(i); };
 }
+
+int frame_reads(Mode mode) { return mode == Mode::smooth ? 2 : 1; }
 
 const char* mode_name(Mode mode) {
   switch (mode) {
@@ -161,6 +164,8 @@ const char* mode_name(Mode mode) {
       return "online";
     case Mode::offline:
       return "offline";
+    case Mode::smooth:
+      return "smooth";
     case Mode::single:
       break;
   }
@@ -184,6 +189,11 @@ void LocalizeOptions::validate() const {
   if (!(max_crop_jump_m >= 0)) {
     std::ostringstream s;
     s << "localize options: max_crop_jump_m = " << max_crop_jump_m << ": must be >= 0 (0: the window's size)";
+    throw filter::FilterError(s.str());
+  }
+  if (lag < 0) {
+    std::ostringstream s;
+    s << "localize options: lag = " << lag << ": must be >= 0 frames";
     throw filter::FilterError(s.str());
   }
   if (!(recentre_margin > 0 && recentre_margin < 0.5)) {
@@ -290,12 +300,13 @@ namespace {
 RouteResult run_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                       const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   const auto& projection = cache.metadata().projection();
-  if (!source) source = stored_route_frames(route, cache, options);
+  if (!source) source = stored_route_frames(route, cache, options, frame_reads(mode));
   const auto estimator = make_mode(mode, {route, cache, options, inspect});
   FramePrefetcher frames(std::move(source), route.frames.size(), estimator->lookahead());
   RouteResult result;
   result.route = route.name;
   result.mode = mode;
+  if (mode == Mode::online || mode == Mode::seqloc) result.lag = options.lag;
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
     const GridCrop crop = frame_crop(route.frames[i], cache.grid(), projection);
     result.poses.push_back(frame_pose(route.frames[i], estimator->estimate(i, crop, frames), projection));
@@ -343,6 +354,8 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
   };
   std::vector<Shared> shared(routes.size());
   for (auto& s : shared) s.jobs_left = modes.size();
+  int readers = 0;
+  for (const auto mode : modes) readers += frame_reads(mode);
   BatchResult batch;
   batch.results.resize(jobs.size());
   std::mutex mutex;  // guards shared and batch's counters
@@ -350,7 +363,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
     std::lock_guard lock(mutex);
     if (!shared[r].store) {
       shared[r].store = std::make_shared<FrameStore>(route_frames(routes[r], cache, job_options), routes[r].frames.size(),
-                                                     static_cast<int>(modes.size()), budget, options.spill_dir);
+                                                     readers, budget, options.spill_dir);
     }
     return shared[r].store;
   };

@@ -173,6 +173,7 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
   write_file(dir / "track.geojson", track.dump(-1, ' ', false, kReplaceInvalidUtf8) + "\n");
 
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
+  if (r.lag > 0) metrics["lag"] = r.lag;
   metrics.update(metrics_json(compute_metrics(r.poses)));
   if (!r.poses.empty()) {
     // Self-calibration's estimate along the route: the power of the last frame (which saw all

@@ -29,6 +29,13 @@ void RegionWindow::shift(int du, int dv) {
   road_stale_ = true;
 }
 
+void RegionWindow::move_to(std::int64_t origin_u, std::int64_t origin_v) {
+  if (origin_u == origin_u_ && origin_v == origin_v_) return;
+  origin_u_ = origin_u;
+  origin_v_ = origin_v;
+  road_stale_ = true;
+}
+
 const float* RegionWindow::road_distance_m() {
   if (road_stale_) {
     cache_->read_road_distance_m(origin_u_, origin_v_, width_, height_, road_m_, /*fill_outside=*/true);

@@ -1,5 +1,8 @@
 #include "seqloc/pipeline/sequential_localizer.hpp"
 
+#include <stdexcept>
+#include <string>
+
 namespace seqloc::pipeline {
 namespace {
 
@@ -12,12 +15,26 @@ filter::FilterConfig mode_config(const filter::FilterConfig& config, bool online
 }  // namespace
 
 SequentialLocalizer::SequentialLocalizer(raster::CacheReader& cache, const filter::FilterConfig& config, bool online,
-                                         double recentre_margin)
+                                         double recentre_margin, int lag)
     : config_(mode_config(config, online)),
       recentre_margin_(recentre_margin),
-      window_(cache, config_.width, config_.height) {}
+      lag_(lag),
+      window_(cache, config_.width, config_.height) {
+  if (lag < 0) throw filter::FilterError("lag = " + std::to_string(lag) + ": must be >= 0 frames");
+  if (lag > 0) backward_.emplace(cache, config_);
+}
 
 FrameEstimate SequentialLocalizer::step(const filter::PreparedFrame& frame, const GridCrop& crop,
+                                        const filter::Odometry& odometry, const std::optional<GridFix>& gps) {
+  if (lag_ == 0) {
+    // Nothing keeps the frame: no copy.
+    return step(std::shared_ptr<const filter::PreparedFrame>(&frame, [](const filter::PreparedFrame*) {}), crop,
+                odometry, gps);
+  }
+  return step(std::make_shared<const filter::PreparedFrame>(frame), crop, odometry, gps);
+}
+
+FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFrame> frame, const GridCrop& crop,
                                         const filter::Odometry& odometry, const std::optional<GridFix>& gps) {
   if (!filter_) {
     // The first frame: centred on its GPS fix when it has one (the fix's Gaussian is the prior),
@@ -36,7 +53,8 @@ FrameEstimate SequentialLocalizer::step(const filter::PreparedFrame& frame, cons
   std::optional<filter::GpsFix> fix;
   if (config_.gps_prior && gps) fix = filter::GpsFix{window_.u_of(gps->x_m), window_.v_of(gps->y_m), gps->sigma_m};
   const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
-  const filter::FrameResult r = filter_->step(frame, window_.crop_pose(crop), odometry, road, fix ? &*fix : nullptr);
+  const filter::CropPose crop_pose = window_.crop_pose(crop);
+  const filter::FrameResult r = filter_->step(*frame, crop_pose, odometry, road, fix ? &*fix : nullptr);
   FrameEstimate e;
   e.x_m = window_.x_of(r.pose.u);
   e.y_m = window_.y_of(r.pose.v);
@@ -45,9 +63,54 @@ FrameEstimate SequentialLocalizer::step(const filter::PreparedFrame& frame, cons
   e.etu_weight = r.etu_weight;
   e.volume_power = r.volume_power;
   e.relocalized = r.relocalized;
+  last_ = StepRecord{{window_.origin_u(), window_.origin_v()}, {}, crop_pose, odometry, fix, r.weighting, e};
   // Keep the window on the vehicle.
   keep_in_window(r.pose.u, r.pose.v);
+  last_.origin_after = {window_.origin_u(), window_.origin_v()};
+
+  const std::size_t index = stepped_++;
+  if (lag_ == 0) {
+    final_.emplace_back(index, e);
+    return e;
+  }
+  // Fixed lag: keep this frame's forward belief (reusing the storage of one that left), then the
+  // frame L back is final.
+  if (waiting_.size() > static_cast<std::size_t>(lag_)) {
+    Waiting reused = std::move(waiting_.front());
+    waiting_.pop_front();
+    reused.alpha = filter_->belief();
+    waiting_.push_back({index, last_, std::move(frame), std::move(reused.alpha)});
+  } else {
+    waiting_.push_back({index, last_, std::move(frame), filter_->belief()});
+  }
+  if (waiting_.size() == static_cast<std::size_t>(lag_) + 1) smooth_waiting(0, 1);
   return e;
+}
+
+// One backward pass from the last waiting frame down to waiting_[from]; the first `to_emit` frames
+// from `from` on get their smoothed estimates.
+void SequentialLocalizer::smooth_waiting(std::size_t from, std::size_t to_emit) {
+  backward_->start(waiting_.back().record);
+  std::vector<std::pair<std::size_t, FrameEstimate>> done;
+  for (std::size_t j = waiting_.size(); j-- > from;) {
+    if (j < from + to_emit) done.emplace_back(waiting_[j].index, backward_->estimate(waiting_[j].alpha, waiting_[j].record));
+    if (j > from) backward_->step_back(waiting_[j].record, *waiting_[j].frame, waiting_[j - 1].record);
+  }
+  final_.insert(final_.end(), done.rbegin(), done.rend());
+}
+
+void SequentialLocalizer::finish() {
+  if (waiting_.empty()) return;
+  // The frame L back was emitted at the last step (when there were L + 1); the rest now.
+  const std::size_t from = waiting_.size() == static_cast<std::size_t>(lag_) + 1 ? 1 : 0;
+  if (from < waiting_.size()) smooth_waiting(from, waiting_.size() - from);
+  waiting_.clear();
+}
+
+std::vector<std::pair<std::size_t, FrameEstimate>> SequentialLocalizer::take_final() {
+  std::vector<std::pair<std::size_t, FrameEstimate>> out;
+  out.swap(final_);
+  return out;
 }
 
 // Re-centres the window by whole cells on window position (u, v) when it lies within the margin

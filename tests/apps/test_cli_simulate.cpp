@@ -45,7 +45,7 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   r = run_seqloc({"localize", cache, routes + "/route_000", routes + "/route_001", "-o", out, "--mode", "all",
                   "--window", "192", "--threads", "2"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  for (const char* mode : {"single", "offline", "online", "seqloc"}) {
+  for (const char* mode : {"single", "offline", "online", "seqloc", "smooth"}) {
     EXPECT_NE(r.out.find(std::string("\n") + mode), std::string::npos) << r.out;
     EXPECT_TRUE(std::filesystem::exists(dir / "localized/route_000" / mode / "poses.csv")) << mode;
   }
@@ -59,9 +59,9 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   r = run_seqloc({"-v", "localize", cache, routes + "/route_000", routes + "/route_001", "-o", spilled, "--mode", "all",
                   "--window", "192", "--threads", "2", "--frame-memory", "0", "--beliefs"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.err.find("20 volumes scored or read once for 4 modes; 20 spilled"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("20 volumes scored or read once for 5 modes; 20 spilled"), std::string::npos) << r.err;
   for (const char* route : {"route_000", "route_001"}) {
-    for (const char* mode : {"single", "offline", "online", "seqloc"}) {
+    for (const char* mode : {"single", "offline", "online", "seqloc", "smooth"}) {
       EXPECT_EQ(test::read_file(dir / "spilled" / route / mode / "poses.csv"),
                 test::read_file(dir / "localized" / route / mode / "poses.csv"))
           << route << "/" << mode;

@@ -94,7 +94,7 @@ TEST(Localize, DeltaAtTheTruthGivesZeroErrorInEveryMode) {
   test::ScratchDir dir;
   const int frames = 16;
   const Route route = straight_route(dir, projection, -40.25, frames);
-  for (const Mode mode : {Mode::seqloc, Mode::online, Mode::single, Mode::offline}) {
+  for (const Mode mode : {Mode::seqloc, Mode::online, Mode::single, Mode::offline, Mode::smooth}) {
     const RouteResult result = localize_route(route, cache, small_options(), mode);
     ASSERT_EQ(result.poses.size(), static_cast<std::size_t>(frames));
     for (const auto& p : result.poses) {
@@ -102,7 +102,7 @@ TEST(Localize, DeltaAtTheTruthGivesZeroErrorInEveryMode) {
       EXPECT_LT(*p.position_error_m, 1e-3) << mode_name(mode) << " frame " << p.frame;
       EXPECT_LT(*p.heading_error_deg, 1e-6) << mode_name(mode) << " frame " << p.frame;
     }
-    if (mode == Mode::seqloc || mode == Mode::online) {
+    if (mode == Mode::seqloc || mode == Mode::online || mode == Mode::smooth) {
       EXPECT_GT(result.recentres, 0) << "75 m of driving in a 32 m window";
     }
   }
@@ -170,7 +170,7 @@ TEST(Localize, SubCellDeltaRouteIsFoundByEveryMode) {
   }
   csv.close();
   const Route route = read_route(dir.path());
-  for (const Mode mode : {Mode::single, Mode::offline, Mode::online, Mode::seqloc}) {
+  for (const Mode mode : {Mode::single, Mode::offline, Mode::online, Mode::seqloc, Mode::smooth}) {
     const RouteResult result = localize_route(route, cache, small_options(), mode);
     ASSERT_EQ(result.poses.size(), turns.size());
     for (const auto& p : result.poses) {
@@ -279,11 +279,10 @@ namespace {
 // Ridge-shaped volumes along a straight road (the paper's failure case of single frames): every
 // frame says "somewhere on this road, heading east", with noise along the ridge; one frame in
 // the middle is distinctive. Single frames stay ambiguous; SeqLoc locks on and keeps it.
-TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
-  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
-  raster::CacheReader cache(region->cache);
-  const auto projection = cache.metadata().projection();
-  test::ScratchDir dir;
+// A road along which every frame's volume is a ridge (the position along it unknown, noise on the
+// ridge), but for frame kDistinctive, whose volume also says where along it the vehicle is.
+constexpr int kRidgeFrames = 24, kDistinctive = 10;
+Route ridge_route(const test::ScratchDir& dir, const osm::RegionProjection& projection) {
   std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "ridge"})";
   std::ofstream csv(dir / "frames.csv");
   csv.precision(17);
@@ -291,7 +290,7 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
   std::mt19937 rng(21);
   std::normal_distribution<float> noise(0.0f, 0.6f);
   std::uniform_int_distribution<int> offset(-10, 10);  // crop centre off the truth, along the road
-  const int frames = 24, distinctive = 10, side = 41, centre = 20;
+  const int frames = kRidgeFrames, distinctive = kDistinctive, side = 41, centre = 20;
   for (int t = 0; t < frames; ++t) {
     const double x = -100.25 + 5.0 * t, y = 0.25;
     const int shift = offset(rng);  // cells: the truth sits at column centre - shift of the crop
@@ -312,14 +311,29 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
         << gt.lat_deg << "," << gt.lon_deg << "," << 90 + gamma << "\n";
   }
   csv.close();
-  const Route route = read_route(dir.path());
+  return read_route(dir.path());
+}
+
+LocalizeOptions ridge_options() {
   LocalizeOptions options = small_options();
   options.filter.width = options.filter.height = 96;
-  auto mean_error_after = [&](const RouteResult& r) {
-    double sum = 0;
-    for (int t = distinctive + 1; t < frames; ++t) sum += *r.poses[static_cast<std::size_t>(t)].position_error_m;
-    return sum / (frames - distinctive - 1);
-  };
+  return options;
+}
+
+double mean_error(const RouteResult& r, int from, int to) {
+  double sum = 0;
+  for (int t = from; t < to; ++t) sum += *r.poses[static_cast<std::size_t>(t)].position_error_m;
+  return sum / (to - from);
+}
+
+TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
+  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
+  raster::CacheReader cache(region->cache);
+  test::ScratchDir dir;
+  const Route route = ridge_route(dir, cache.metadata().projection());
+  const LocalizeOptions options = ridge_options();
+  const int frames = kRidgeFrames, distinctive = kDistinctive;
+  auto mean_error_after = [&](const RouteResult& r) { return mean_error(r, distinctive + 1, frames); };
   const double single = mean_error_after(localize_route(route, cache, options, Mode::single));
   const RouteResult seqloc = localize_route(route, cache, options, Mode::seqloc);
   const double sequence = mean_error_after(seqloc);
@@ -327,6 +341,71 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
   EXPECT_GT(single, 2.0) << "single frames are ambiguous along the ridge";
   EXPECT_LT(sequence, 1.0) << "SeqLoc keeps the position the distinctive frame gave";
   EXPECT_LT(*seqloc.poses[distinctive].position_error_m, 1.0);
+}
+
+// Smoothing carries the distinctive frame's evidence back to the frames before it, which the
+// filter alone cannot place; a lag of L carries it back L frames.
+TEST(Smooth, PlacesTheFramesBeforeTheDistinctiveOneAndLagsCarryItBackLFrames) {
+  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
+  raster::CacheReader cache(region->cache);
+  test::ScratchDir dir;
+  const Route route = ridge_route(dir, cache.metadata().projection());
+  LocalizeOptions options = ridge_options();
+  const RouteResult seqloc = localize_route(route, cache, options, Mode::seqloc);
+  const RouteResult smooth = localize_route(route, cache, options, Mode::smooth);
+  const double seqloc_before = mean_error(seqloc, 0, kDistinctive), smooth_before = mean_error(smooth, 0, kDistinctive);
+  std::printf("mean error before the distinctive frame: seqloc %.2f m, smooth %.2f m\n", seqloc_before, smooth_before);
+  EXPECT_GT(seqloc_before, 2.0) << "the filter has not seen the distinctive frame yet";
+  EXPECT_LT(smooth_before, 1.0);
+  EXPECT_LT(mean_error(smooth, kDistinctive, kRidgeFrames), 1.0);
+  EXPECT_GT(smooth.recentres, 0) << "the window moved: the backward pass retraced its moves";
+  options.lag = 5;
+  const RouteResult lag5 = localize_route(route, cache, options, Mode::seqloc);
+  EXPECT_EQ(lag5.lag, 5);
+  EXPECT_LT(mean_error(lag5, kDistinctive - 5, kRidgeFrames), 1.0) << "frames that see the distinctive one";
+  EXPECT_GT(mean_error(lag5, 0, kDistinctive - 5), 2.0) << "frames that do not";
+}
+
+// The three ways to the same posterior agree: a lag of at least the route's length is smooth
+// (its backward pass over beliefs kept in memory; smooth's over beliefs recomputed from
+// checkpoints, three stretches here), a lag of L at frame t is smooth over frames 0 .. t + L, and a
+// lag of 0 is the filter itself.
+TEST(Smooth, FixedLagAgreesWithSmoothAndLagZeroWithTheFilter) {
+  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
+  raster::CacheReader cache(region->cache);
+  test::ScratchDir dir;
+  const Route route = ridge_route(dir, cache.metadata().projection());
+  LocalizeOptions options = ridge_options();
+  auto expect_same = [](const FramePose& a, const FramePose& b, const std::string& what) {
+    EXPECT_EQ(a.x_m, b.x_m) << what << " frame " << a.frame;
+    EXPECT_EQ(a.y_m, b.y_m) << what << " frame " << a.frame;
+    EXPECT_EQ(a.grid_heading_deg, b.grid_heading_deg) << what << " frame " << a.frame;
+  };
+  const RouteResult smooth = localize_route(route, cache, options, Mode::smooth);
+  const RouteResult seqloc = localize_route(route, cache, options, Mode::seqloc);
+  options.lag = kRidgeFrames;
+  const RouteResult whole = localize_route(route, cache, options, Mode::seqloc);
+  ASSERT_EQ(whole.poses.size(), smooth.poses.size());
+  for (std::size_t t = 0; t < smooth.poses.size(); ++t) expect_same(whole.poses[t], smooth.poses[t], "lag >= N vs smooth");
+  options.lag = 3;
+  const RouteResult lag3 = localize_route(route, cache, options, Mode::seqloc);
+  for (const std::size_t t : {std::size_t{2}, std::size_t{9}, std::size_t{17}}) {
+    Route head = route;
+    head.frames.resize(t + 4);
+    options.lag = 0;
+    const RouteResult truncated = localize_route(head, cache, options, Mode::smooth);
+    expect_same(lag3.poses[t], truncated.poses[t], "lag 3 vs smooth over frames 0 .. t + 3");
+  }
+  options.lag = 0;
+  const RouteResult lag0 = localize_route(route, cache, options, Mode::seqloc);
+  for (std::size_t t = 0; t < seqloc.poses.size(); ++t) expect_same(lag0.poses[t], seqloc.poses[t], "lag 0 vs seqloc");
+  // The last frame has no later frames: smooth gives the filter's pose there (but for the rounding
+  // of PAS's weights times a uniform beta).
+  EXPECT_NEAR(smooth.poses.back().x_m, seqloc.poses.back().x_m, 1e-9);
+  EXPECT_NEAR(smooth.poses.back().y_m, seqloc.poses.back().y_m, 1e-9);
+  EXPECT_EQ(smooth.poses.back().grid_heading_deg, seqloc.poses.back().grid_heading_deg);
+  options.lag = -1;
+  EXPECT_THROW(options.validate(), filter::FilterError);
 }
 
 }  // namespace

@@ -12,6 +12,8 @@ namespace seqloc::pipeline::modes {
 [[nodiscard]] std::unique_ptr<LocalizationMode> make_offline(const RouteContext& context);
 /// online: the filter with ETU, MGR and PAS off; seqloc: as the options configure it.
 [[nodiscard]] std::unique_ptr<LocalizationMode> make_sequential(const RouteContext& context, bool online);
+/// smooth: the seqloc filter forward and the backward filter, every frame given every frame.
+[[nodiscard]] std::unique_ptr<LocalizationMode> make_smooth(const RouteContext& context);
 
 using detail::Clock;
 using detail::seconds_since;

@@ -16,6 +16,8 @@ std::unique_ptr<LocalizationMode> make_mode(Mode mode, const RouteContext& conte
       return modes::make_offline(context);
     case Mode::online:
       return modes::make_sequential(context, /*online=*/true);
+    case Mode::smooth:
+      return modes::make_smooth(context);
     case Mode::seqloc:
       break;
   }

@@ -1,6 +1,9 @@
 // online and seqloc: the sequential filter (conventions.md section 6) in a window that follows the
 // vehicle, driven along a route. online is the same filter with ETU, MGR and PAS off (naive
-// fusion). The filter and its window are SequentialLocalizer (sequential_localizer.cpp).
+// fusion). The filter and its window are SequentialLocalizer (sequential_localizer.cpp), which
+// also smooths with a lag (LocalizeOptions::lag): frame i's pose is then final once frame i + lag
+// has been stepped, or the route has ended.
+#include <map>
 #include <optional>
 
 #include "factories.hpp"
@@ -13,29 +16,19 @@ class SequentialMode final : public LocalizationMode {
  public:
   SequentialMode(const RouteContext& context, bool online)
       : LocalizationMode(context),
-        localizer_(context.cache, context.options.filter, online, context.options.recentre_margin) {}
+        localizer_(context.cache, context.options.filter, online, context.options.recentre_margin,
+                   context.options.lag) {}
 
-  FrameEstimate estimate(std::size_t i, const GridCrop& crop, FramePrefetcher& frames) override {
-    const RouteFrame& f = context_.route.frames[i];
-    const filter::PreparedFrame& frame = frames.get(i);
-    std::optional<GridFix> gps;
-    if (f.gps) {
-      const auto g = context_.cache.metadata().projection().forward(f.gps->where);
-      gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
+  FrameEstimate estimate(std::size_t i, const GridCrop&, FramePrefetcher& frames) override {
+    const std::size_t n = context_.route.frames.size();
+    while (final_.find(i) == final_.end()) {
+      if (next_ == n) throw std::logic_error("sequential mode: frame " + std::to_string(i) + " asked for twice");
+      step(next_++, frames);
+      if (next_ == n) localizer_.finish();
+      for (auto& [index, e] : localizer_.take_final()) final_.emplace(index, e);
     }
-    const auto t0 = Clock::now();
-    const FrameEstimate e = localizer_.step(frame, crop, f.odometry, gps);
-    filter_seconds_ += seconds_since(t0);
-    const RegionWindow& window = localizer_.window();
-    if (context_.inspect) {
-      context_.inspect({i, &frame, crop, &localizer_.filter()->belief(), window.origin_u(), window.origin_v()});
-    }
-    if (context_.options.keep_beliefs) {
-      const auto marginal = localizer_.filter()->belief().position_marginal();
-      beliefs_.insert(beliefs_.end(), marginal.begin(), marginal.end());
-      belief_origins_.push_back({window.origin_u(), window.origin_v()});
-    }
-    frames.release(i);
+    const FrameEstimate e = final_.at(i);
+    final_.erase(i);
     return e;
   }
 
@@ -51,7 +44,35 @@ class SequentialMode final : public LocalizationMode {
   }
 
  private:
+  // The filter's step on frame j (and, with a lag, the backward pass it completes).
+  void step(std::size_t j, FramePrefetcher& frames) {
+    const RouteFrame& f = context_.route.frames[j];
+    const auto& projection = context_.cache.metadata().projection();
+    const GridCrop crop = frame_crop(f, context_.cache.grid(), projection);
+    const auto frame = frames.get_shared(j);
+    std::optional<GridFix> gps;
+    if (f.gps) {
+      const auto g = projection.forward(f.gps->where);
+      gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
+    }
+    const auto t0 = Clock::now();
+    (void)localizer_.step(frame, crop, f.odometry, gps);
+    filter_seconds_ += seconds_since(t0);
+    const RegionWindow& window = localizer_.window();
+    if (context_.inspect) {
+      context_.inspect({j, frame.get(), crop, &localizer_.filter()->belief(), window.origin_u(), window.origin_v()});
+    }
+    if (context_.options.keep_beliefs) {
+      const auto marginal = localizer_.filter()->belief().position_marginal();
+      beliefs_.insert(beliefs_.end(), marginal.begin(), marginal.end());
+      belief_origins_.push_back({window.origin_u(), window.origin_v()});
+    }
+    frames.release(j);  // the localizer keeps what its lag needs
+  }
+
   SequentialLocalizer localizer_;
+  std::size_t next_ = 0;
+  std::map<std::size_t, FrameEstimate> final_;
   std::vector<float> beliefs_;
   std::vector<std::array<std::int64_t, 2>> belief_origins_;
 };

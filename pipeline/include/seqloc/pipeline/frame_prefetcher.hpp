@@ -26,7 +26,15 @@ class FramePrefetcher {
   ~FramePrefetcher();
 
   /// Frame i, kept until released. Rethrows the source's error for frame i.
-  [[nodiscard]] const filter::PreparedFrame& get(std::size_t i);
+  [[nodiscard]] const filter::PreparedFrame& get(std::size_t i) { return *get_shared(i); }
+  /// The same, shared with the caller (who may keep it after release).
+  [[nodiscard]] std::shared_ptr<const filter::PreparedFrame> get_shared(std::size_t i);
+  /// Starts preparing frame i in the background (unless it is kept or on its way): for a caller
+  /// that knows its next frame is not the following one. A frame prefetched and never taken costs
+  /// its source one more read.
+  void prefetch(std::size_t i);
+  /// Turns the automatic preparation of frame i + 1 on or off.
+  void set_lookahead(bool on) { lookahead_ = on; }
   void release(std::size_t i) { kept_.erase(i); }
   /// Releases every frame before i.
   void release_before(std::size_t i) { kept_.erase(kept_.begin(), kept_.lower_bound(i)); }

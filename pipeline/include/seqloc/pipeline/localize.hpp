@@ -24,7 +24,7 @@
 
 namespace seqloc::pipeline {
 
-enum class Mode { seqloc, online, single, offline };
+enum class Mode { seqloc, online, single, offline, smooth };
 [[nodiscard]] const char* mode_name(Mode mode);
 
 struct LocalizeOptions {
@@ -34,6 +34,9 @@ struct LocalizeOptions {
   double recentre_margin = 0.25;
   /// Offline mode: frames within this many of t are aligned to t and summed (< 0: all of them).
   int offline_half_window = 10;
+  /// Online and seqloc modes: each frame's pose given the frames up to `lag` after it (fixed-lag
+  /// smoothing, for real time with a delay of `lag` frames); 0: the filter's own pose.
+  int lag = 0;
   /// The built-in matcher, for frames with an observation instead of a volume.
   MatcherConfig matcher;
   /// Every frame's volume (a backbone's or the matcher's) is tempered before filtering: its
@@ -90,6 +93,7 @@ struct RouteResult {
   Mode mode = Mode::seqloc;
   std::vector<FramePose> poses;
   int recentres = 0;  ///< how often the window moved
+  int lag = 0;        ///< online and seqloc: the fixed lag the poses were smoothed with (LocalizeOptions::lag)
   /// Where the time went (seconds). Reading and preparing the next frame's volume overlaps the
   /// filter's step on the current one; `wait_seconds` is what the filter waited for it.
   double prepare_seconds = 0;
@@ -116,11 +120,16 @@ struct RouteResult {
 /// against the cache's class raster. Throws DataError naming the file.
 [[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
 
-/// route_frames through a FrameStore with one reader: each frame with the float16 values that
-/// localize_routes gives every mode, held only until it is taken. localize_route's default, and
-/// what render and the benchmark use to see the frames as localize saw them.
+/// route_frames through a FrameStore with `readers` readers: each frame with the float16 values
+/// that localize_routes gives every mode, held only until it has been taken that often.
+/// localize_route's default, and what render and the benchmark use to see the frames as localize
+/// saw them.
 [[nodiscard]] FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache,
-                                              const LocalizeOptions& options);
+                                              const LocalizeOptions& options, int readers = 1);
+
+/// How often a mode reads each frame: 2 for smooth (its forward pass, then its backward pass),
+/// else 1. A FrameStore shared by modes has the sum as its readers.
+[[nodiscard]] int frame_reads(Mode mode);
 
 /// The built-in matcher's raw volume for an observation frame: (size, size, headings) float32
 /// log-likelihood scores over the frame's crop (before any calibration). Throws DataError for an

@@ -6,6 +6,8 @@
 //   offline  each frame with its neighbours aligned to it  (modes/offline.cpp)
 //   online   the sequential filter without ETU, MGR, PAS   (modes/sequential.cpp)
 //   seqloc   the sequential filter as configured           (modes/sequential.cpp)
+//   smooth   the filter forward, then backward: every frame  (modes/smooth.cpp)
+// online and seqloc take LocalizeOptions::lag (fixed-lag smoothing).
 
 #include <cstddef>
 #include <memory>

@@ -55,6 +55,8 @@ class RegionWindow {
   [[nodiscard]] std::optional<std::array<int, 2>> recentre_shift(double u, double v, double margin) const;
   /// Moves the window by (du, dv) cells: the new cell (u, v) is the old (u + du, v + dv).
   void shift(int du, int dv);
+  /// Places the window's cell (0, 0) at region pixel (origin_u, origin_v) (where another window was).
+  void move_to(std::int64_t origin_u, std::int64_t origin_v);
 
   /// The road distance over the window in metres, width x height row-major (v, u); cells outside
   /// the region read as the cache's fill. Read from the cache on the first call after a move.

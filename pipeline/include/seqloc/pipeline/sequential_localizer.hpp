@@ -2,11 +2,18 @@
 // The sequential filter (conventions.md section 6) in a window that follows the vehicle over a
 // region, one frame at a time: what `seqloc localize` runs for its online and seqloc modes
 // (modes/sequential.cpp drives it along a route), and what the Python module's Localizer wraps
-// for a loop that brings its own volumes.
+// for a loop that brings its own volumes. With a lag L it also smooths: frame t - L's pose given
+// the frames up to t (fixed-lag smoothing, docs/localize.md).
 
+#include <cstddef>
+#include <deque>
+#include <memory>
 #include <optional>
+#include <utility>
+#include <vector>
 
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/pipeline/backward_pass.hpp"
 #include "seqloc/pipeline/modes.hpp"
 #include "seqloc/pipeline/region_window.hpp"
 
@@ -23,30 +30,63 @@ class SequentialLocalizer {
   /// `config` says.
   /// The window re-centres on the vehicle when it comes within `recentre_margin` (a fraction of
   /// its size) of an edge.
+  /// `lag` L > 0: fixed-lag smoothing; the localizer keeps the last L + 1 frames and forward
+  /// beliefs (L + 1 windows of memory) and after frame t runs the backward filter over frames
+  /// t .. t - L + 1 (L backward steps a frame).
   SequentialLocalizer(raster::CacheReader& cache, const filter::FilterConfig& config, bool online,
-                      double recentre_margin);
+                      double recentre_margin, int lag = 0);
 
   /// One frame: its prepared volume, its crop in region grid metres, the odometry since the
   /// previous frame, and a GPS fix if there is one. The first frame places the window on the fix
-  /// (whose Gaussian is then the prior) or on the crop (uniform prior).
-  [[nodiscard]] FrameEstimate step(const filter::PreparedFrame& frame, const GridCrop& crop,
-                                   const filter::Odometry& odometry, const std::optional<GridFix>& gps);
+  /// (whose Gaussian is then the prior) or on the crop (uniform prior). Returns the frame's
+  /// filtered estimate (given the frames up to it).
+  FrameEstimate step(std::shared_ptr<const filter::PreparedFrame> frame, const GridCrop& crop,
+                     const filter::Odometry& odometry, const std::optional<GridFix>& gps);
+  /// The same for a frame the caller keeps (copied when a lag needs it later).
+  FrameEstimate step(const filter::PreparedFrame& frame, const GridCrop& crop, const filter::Odometry& odometry,
+                     const std::optional<GridFix>& gps);
+
+  /// The estimates that became final and were not taken yet, in frame order, with their frame's
+  /// index (0: the first frame stepped). Without a lag, each frame's filtered estimate as soon as
+  /// it is stepped; with a lag L, after frame t, frame t - L's smoothed estimate given the frames
+  /// up to t.
+  [[nodiscard]] std::vector<std::pair<std::size_t, FrameEstimate>> take_final();
+  /// The route ends: the frames still waiting for their lag get their smoothed estimates given
+  /// every frame (take_final hands them out).
+  void finish();
 
   [[nodiscard]] const filter::FilterConfig& config() const { return config_; }
+  [[nodiscard]] int lag() const { return lag_; }
   [[nodiscard]] const RegionWindow& window() const { return window_; }
   /// The filter, once the first frame started it.
   [[nodiscard]] const filter::SeqLocFilter* filter() const { return filter_ ? &*filter_ : nullptr; }
+  /// What the last step did (for a second pass over the route).
+  [[nodiscard]] const StepRecord& last_step() const { return last_; }
   /// How often the window moved.
   [[nodiscard]] int recentres() const { return recentres_; }
 
  private:
+  struct Waiting {
+    std::size_t index;
+    StepRecord record;
+    std::shared_ptr<const filter::PreparedFrame> frame;
+    filter::BeliefVolume alpha;
+  };
   void keep_in_window(double u, double v);
+  /// Frames [from, waiting_.size()) of waiting_ smoothed by one backward pass from the last.
+  void smooth_waiting(std::size_t from, std::size_t to_emit);
 
   filter::FilterConfig config_;
   double recentre_margin_;
+  int lag_;
   RegionWindow window_;
   std::optional<filter::SeqLocFilter> filter_;
   int recentres_ = 0;
+  std::size_t stepped_ = 0;
+  StepRecord last_;
+  std::deque<Waiting> waiting_;
+  std::optional<BackwardPass> backward_;
+  std::vector<std::pair<std::size_t, FrameEstimate>> final_;
 };
 
 }  // namespace seqloc::pipeline

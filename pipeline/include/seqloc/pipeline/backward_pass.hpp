@@ -1,0 +1,70 @@
+#pragma once
+// The smoother's passes over a region (docs/localize.md, "smooth and --lag"): what the forward
+// filter did at each frame (StepRecord), the backward filter in a window that retraces the forward
+// window's moves (BackwardPass), and the forward filter run again from a kept belief, step for
+// step as it ran the first time (ForwardReplay: smooth's recomputation between checkpoints).
+
+#include <array>
+#include <cstdint>
+#include <optional>
+
+#include "seqloc/filter/smoother.hpp"
+#include "seqloc/pipeline/modes.hpp"
+#include "seqloc/pipeline/region_window.hpp"
+
+namespace seqloc::pipeline {
+
+/// What the forward pass did at one frame: all a second pass needs to repeat it or to reverse it.
+/// The forward belief after frame t (alpha_t) is taken as it stands after the whole step, in the
+/// window of `origin_after`; the frame's crop and fix are in the window of `origin`.
+struct StepRecord {
+  std::array<std::int64_t, 2> origin{};        ///< region pixel of window cell (0, 0) when the frame was taken in
+  std::array<std::int64_t, 2> origin_after{};  ///< the same after the step re-centred the window on its estimate
+  filter::CropPose crop;                       ///< the frame's crop in that window
+  filter::Odometry odometry;                   ///< from the previous frame
+  std::optional<filter::GpsFix> fix;           ///< the GPS term's fix in that window, when the filter used one
+  filter::FrameWeighting weighting;            ///< how the filter weighed the frame
+  FrameEstimate filtered;                      ///< the forward filter's estimate (frames <= t)
+};
+
+/// beta over a window of the region: from the last frame of a stretch (no later frames) back to
+/// earlier ones, each frame's likelihood weighed as the forward pass weighed it.
+class BackwardPass {
+ public:
+  BackwardPass(raster::CacheReader& cache, const filter::FilterConfig& config);
+
+  /// At frame `last`, with no frames after it: beta uniform, the window where the forward one was.
+  void start(const StepRecord& last);
+  /// The smoothed estimate of the frame beta stands at, from its forward belief `alpha` (after the
+  /// frame's step, in the window of record.origin_after): position and heading of alpha * beta, and the forward
+  /// filter's entropy, weights and flag.
+  [[nodiscard]] FrameEstimate estimate(const filter::BeliefVolume& alpha, const StepRecord& record);
+  /// Takes frame t in (`record`, `frame`), then moves back to frame t - 1, into the window of
+  /// `previous` (its record).
+  void step_back(const StepRecord& record, const filter::PreparedFrame& frame, const StepRecord& previous);
+
+ private:
+  filter::FilterConfig config_;
+  RegionWindow window_;
+  filter::BackwardFilter filter_;
+};
+
+/// The forward filter resumed from a belief it had, repeating its recorded steps exactly: the same
+/// window moves, the same weighting, so that the beliefs equal the first run's bit for bit.
+class ForwardReplay {
+ public:
+  ForwardReplay(raster::CacheReader& cache, const filter::FilterConfig& config);
+
+  /// Resumes after frame t with `alpha`, the forward filter's belief then (`record`: frame t's).
+  void resume(const filter::BeliefVolume& alpha, const StepRecord& record);
+  /// The next frame, `record` and `frame`; belief() is then its alpha.
+  void step(const StepRecord& record, const filter::PreparedFrame& frame);
+  [[nodiscard]] const filter::BeliefVolume& belief() const { return filter_.belief(); }
+
+ private:
+  filter::FilterConfig config_;
+  RegionWindow window_;
+  filter::SeqLocFilter filter_;
+};
+
+}  // namespace seqloc::pipeline

@@ -1,0 +1,69 @@
+#include "seqloc/pipeline/backward_pass.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+filter::FilterConfig replay_config(filter::FilterConfig config) {
+  config.self_calibrate = false;  // every frame comes with its weighting: no estimator, no buffers for it
+  return config;
+}
+
+// Moves a window and the belief over it to `origin` by whole cells.
+template <class Filter>
+void move_window(Filter& filter, RegionWindow& window, const std::array<std::int64_t, 2>& origin) {
+  const auto du = static_cast<int>(origin[0] - window.origin_u());
+  const auto dv = static_cast<int>(origin[1] - window.origin_v());
+  if (du == 0 && dv == 0) return;
+  filter.recentre(du, dv);
+  window.shift(du, dv);
+}
+
+}  // namespace
+
+BackwardPass::BackwardPass(raster::CacheReader& cache, const filter::FilterConfig& config)
+    : config_(config), window_(cache, config.width, config.height), filter_(config) {}
+
+void BackwardPass::start(const StepRecord& last) {
+  window_.move_to(last.origin_after[0], last.origin_after[1]);
+  filter_.reset();
+}
+
+FrameEstimate BackwardPass::estimate(const filter::BeliefVolume& alpha, const StepRecord& record) {
+  const filter::FrameResult r = filter::smoothed_result(alpha, filter_.belief(), config_);
+  FrameEstimate e = record.filtered;
+  e.x_m = window_.x_of(r.pose.u);
+  e.y_m = window_.y_of(r.pose.v);
+  e.grid_heading_deg = r.pose.heading_deg;
+  return e;
+}
+
+void BackwardPass::step_back(const StepRecord& record, const filter::PreparedFrame& frame, const StepRecord& previous) {
+  // beta stands in the window the forward belief ended the step in; the frame was taken in where
+  // the window was before that step's re-centring.
+  move_window(filter_, window_, record.origin);
+  const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
+  filter_.absorb(frame, record.crop, record.weighting, road, record.fix ? &*record.fix : nullptr);
+  filter_.step_back(record.odometry);
+  move_window(filter_, window_, previous.origin_after);
+}
+
+ForwardReplay::ForwardReplay(raster::CacheReader& cache, const filter::FilterConfig& config)
+    : config_(replay_config(config)), window_(cache, config.width, config.height), filter_(config_) {}
+
+void ForwardReplay::resume(const filter::BeliefVolume& alpha, const StepRecord& record) {
+  window_.move_to(record.origin_after[0], record.origin_after[1]);
+  filter_.belief() = alpha;
+}
+
+void ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& frame) {
+  // The window moves as it moved the first time: before the step (onto the frame's crop), then
+  // after it (onto the estimate), each a move of its own (a move drops the mass that leaves the
+  // window and fills what enters).
+  move_window(filter_, window_, record.origin);
+  filter_.predict(record.odometry);
+  const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
+  (void)filter_.update(frame, record.crop, road, record.fix ? &*record.fix : nullptr, &record.weighting);
+  move_window(filter_, window_, record.origin_after);
+}
+
+}  // namespace seqloc::pipeline
