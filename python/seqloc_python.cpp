@@ -316,8 +316,9 @@ class PyFilter {
 class PyLocalizer {
  public:
   PyLocalizer(const std::string& cache, const py::dict& config, const std::string& mode, double volume_temperature,
-              double recentre_margin, const std::optional<std::string>& calibration)
+              double recentre_margin, const std::optional<std::string>& calibration, int lag)
       : cache_(std::make_unique<raster::CacheReader>(cache)) {
+    if (lag < 0) throw py::value_error("lag: must be >= 0 frames, got " + std::to_string(lag));
     if (mode != "seqloc" && mode != "online") throw py::value_error("mode: 'seqloc' or 'online', got '" + mode + "'");
     options_.filter = config_from(config);
     options_.volume_temperature = volume_temperature;
@@ -331,7 +332,7 @@ class PyLocalizer {
     }
     options_.validate();
     localizer_ = std::make_unique<pipeline::SequentialLocalizer>(*cache_, options_.filter, mode == "online",
-                                                                 recentre_margin);
+                                                                 recentre_margin, lag);
   }
 
   py::dict step(const py::object& volume_in, const py::object& odometry_in, const py::object& crop_lat,
@@ -363,24 +364,23 @@ class PyLocalizer {
     pipeline::FrameEstimate e;
     {
       py::gil_scoped_release release;
-      filter::PreparedFrame frame = pipeline::prepare_volume(view, options_);
-      pipeline::round_like_frame_store(frame);
-      e = localizer_->step(frame, crop, {odometry[0], odometry[1], odometry[2]}, fix);
+      auto frame = std::make_shared<filter::PreparedFrame>(pipeline::prepare_volume(view, options_));
+      pipeline::round_like_frame_store(*frame);
+      e = localizer_->step(std::move(frame), crop, {odometry[0], odometry[1], odometry[2]}, fix);
     }
-    const pipeline::FramePose pose = pipeline::frame_pose(f, e, projection);
+    py::dict d = pose_dict(frames_, e);
     ++frames_;
-    py::dict d;
-    d["lat"] = pose.lat_deg;
-    d["lon"] = pose.lon_deg;
-    d["heading_deg"] = pose.compass_heading_deg;
-    d["x"] = pose.x_m;
-    d["y"] = pose.y_m;
-    d["grid_heading_deg"] = pose.grid_heading_deg;
-    d["entropy"] = pose.entropy;
-    d["etu_weight"] = pose.etu_weight;
-    d["volume_power"] = pose.volume_power;
-    d["relocalized"] = pose.relocalized;
+    d["final"] = final_poses();
     return d;
+  }
+
+  /// The route ends: the poses of the frames still waiting for their lag, given every frame.
+  py::list finish() {
+    {
+      py::gil_scoped_release release;
+      localizer_->finish();
+    }
+    return final_poses();
   }
 
   [[nodiscard]] py::object belief_marginal() const {
@@ -394,8 +394,35 @@ class PyLocalizer {
   }
 
   [[nodiscard]] py::dict config() const { return config_dict(localizer_->config()); }
+  [[nodiscard]] int lag() const { return localizer_->lag(); }
 
  private:
+  // The estimates that became final, as pose dicts with their frame's index.
+  py::list final_poses() {
+    py::list out;
+    for (const auto& [index, e] : localizer_->take_final()) out.append(pose_dict(static_cast<long>(index), e));
+    return out;
+  }
+
+  py::dict pose_dict(long index, const pipeline::FrameEstimate& e) const {
+    pipeline::RouteFrame f;
+    f.frame = std::to_string(index);
+    const pipeline::FramePose pose = pipeline::frame_pose(f, e, cache_->metadata().projection());
+    py::dict d;
+    d["frame"] = index;
+    d["lat"] = pose.lat_deg;
+    d["lon"] = pose.lon_deg;
+    d["heading_deg"] = pose.compass_heading_deg;
+    d["x"] = pose.x_m;
+    d["y"] = pose.y_m;
+    d["grid_heading_deg"] = pose.grid_heading_deg;
+    d["entropy"] = pose.entropy;
+    d["etu_weight"] = pose.etu_weight;
+    d["volume_power"] = pose.volume_power;
+    d["relocalized"] = pose.relocalized;
+    return d;
+  }
+
   std::unique_ptr<raster::CacheReader> cache_;
   pipeline::LocalizeOptions options_;
   std::unique_ptr<pipeline::SequentialLocalizer> localizer_;
@@ -446,13 +473,15 @@ PYBIND11_MODULE(seqloc, m) {
                           "seqloc localize's seqloc (or online) mode one frame at a time over a region cache: it "
                           "owns the window, its road distances and re-centring (docs/serve.md)")
       .def(py::init<const std::string&, const py::dict&, const std::string&, double, double,
-                    const std::optional<std::string>&>(),
+                    const std::optional<std::string>&, int>(),
            py::arg("cache"), py::arg("config") = py::dict(), py::arg("mode") = "seqloc",
            py::arg("volume_temperature") = pipeline::LocalizeOptions{}.volume_temperature,
            py::arg("recentre_margin") = pipeline::LocalizeOptions{}.recentre_margin,
-           py::arg("calibration") = py::none(),
+           py::arg("calibration") = py::none(), py::arg("lag") = 0,
            "cache: a region cache; config: filter settings by name (Filter.settings()); mode: 'seqloc' or 'online'; "
-           "calibration: a calibration.json from seqloc calibrate (its temperature replaces volume_temperature)")
+           "calibration: a calibration.json from seqloc calibrate (its temperature replaces volume_temperature); "
+           "lag: fixed-lag smoothing, each frame's final pose given the `lag` frames after it too (step()'s "
+           "'final', then finish())")
       .def("step", &PyLocalizer::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
            py::kw_only(), py::arg("crop_lat") = py::none(), py::arg("crop_lon") = py::none(),
            py::arg("crop_x") = py::none(), py::arg("crop_y") = py::none(), py::arg("gps") = py::none(),
@@ -460,8 +489,13 @@ PYBIND11_MODULE(seqloc, m) {
            "One frame: its (H, W, N) volume (NumPy, DLPack such as a CPU torch tensor, or __array__), the "
            "odometry since the last frame (forward_m, left_m, yaw_deg), the crop's centre (crop_lat/crop_lon, "
            "north-up at true north, or crop_x/crop_y in region metres, grid north), optionally gps=(lat, lon, "
-           "sigma_m). Returns the pose: lat, lon, heading_deg (compass), x, y (region metres), grid_heading_deg, "
-           "entropy, etu_weight, volume_power, relocalized.")
+           "sigma_m). Returns the frame's filtered pose: frame (its index from 0), lat, lon, heading_deg (compass), "
+           "x, y (region metres), grid_heading_deg, entropy, etu_weight, volume_power, relocalized; and 'final', "
+           "the poses that became final with this frame (each such a dict): this frame's with lag 0, frame "
+           "index - lag's smoothed one with a lag.")
+      .def("finish", &PyLocalizer::finish,
+           "The route ends: the smoothed poses of the frames still waiting for their lag (given every frame)")
+      .def_property_readonly("lag", &PyLocalizer::lag, "The fixed lag, frames")
       .def("belief_marginal", &PyLocalizer::belief_marginal,
            "The belief summed over headings, (height, width) float32 (None before the first frame)")
       .def_property_readonly("window_origin", &PyLocalizer::window_origin,

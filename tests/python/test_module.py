@@ -286,6 +286,35 @@ class LocalizerAsLocalize(unittest.TestCase):
                 self.assertAlmostEqual(float(marginal.sum()), 1.0, places=4)
 
     @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
+    def test_a_lagged_loop_gives_the_poses_of_seqloc_localize_with_that_lag(self):
+        with tempfile.TemporaryDirectory() as d:
+            route, rows = self.write_route(d, frames=10)
+            out = os.path.join(d, "out")
+            r = subprocess.run([SEQLOC, "localize", CACHE, route, "-o", out, "--window", "96", "--headings", "64",
+                                "--lag", "3"], capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            with open(os.path.join(out, "py", "seqloc", "poses.csv")) as f:
+                expected = list(csv.DictReader(f))
+            loc = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": 64}, lag=3)
+            self.assertEqual(loc.lag, 3)
+            final = []
+            for t, row in enumerate(rows):
+                pose = loc.step(np.load(os.path.join(route, row[2])), (row[5], row[6], row[7]),
+                                crop_lat=float(row[3]), crop_lon=float(row[4]))
+                self.assertEqual(pose["frame"], t)
+                # Frame t - 3 is final once frame t is in.
+                self.assertEqual([p["frame"] for p in pose["final"]], [t - 3] if t >= 3 else [])
+                final += pose["final"]
+            final += loc.finish()
+            self.assertEqual([p["frame"] for p in final], list(range(len(rows))))
+            for got, want in zip(final, expected):
+                self.assertAlmostEqual(got["x"], float(want["x_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got["heading_deg"], float(want["heading_deg"]), delta=0.002, msg=want["frame"])
+            with self.assertRaises(ValueError):
+                seqloc.Localizer(CACHE, lag=-1)
+
+    @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
     def test_a_pytorch_loop_gives_the_poses_of_seqloc_localize(self):
         try:
             import torch  # python3-torch, Debian's (scripts/deps test installs it)
