@@ -233,6 +233,13 @@ TEST(CliLocalize, UsageErrorsAndOverwrite) {
   EXPECT_FALSE(std::filesystem::exists(out / "east" / "single")) << "the old folder was replaced whole";
   EXPECT_EQ(run_seqloc(args(f, f.dir / "x", {"--mode", "offline-ish"})).exit_code, 2);
   EXPECT_EQ(run_seqloc(args(f, f.dir / "x", {"--odometry-noise", "2"})).exit_code, 2);
+  const auto bad_lag = run_seqloc(args(f, f.dir / "x", {"--lag", "-2"}));
+  EXPECT_EQ(bad_lag.exit_code, 2);
+  EXPECT_NE(bad_lag.err.find("--lag"), std::string::npos) << bad_lag.err;
+  // A lag is reported with the poses it gave.
+  const auto lagged = run_seqloc(args(f, f.dir / "lagged", {"--lag", "2"}));
+  ASSERT_EQ(lagged.exit_code, 0) << lagged.err;
+  EXPECT_NE(test::read_file(f.dir / "lagged" / "east" / "seqloc" / "metrics.json").find("\"lag\": 2"), std::string::npos);
   const auto bad_epsilon = run_seqloc(args(f, f.dir / "x", {"--epsilon", "2"}));
   EXPECT_EQ(bad_epsilon.exit_code, 2);
   EXPECT_NE(bad_epsilon.err.find("mgr_epsilon = 2"), std::string::npos) << bad_epsilon.err;
