@@ -139,7 +139,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     std::sort(dirs.begin(), dirs.end());
     std::vector<pipeline::Route> routes;
     std::set<std::string> names;
-    long long total_frames = 0;
+    long long total_frames = 0, route_frames = 0;  // frames times modes, and frames
     for (std::size_t k = 0; k < dirs.size(); ++k) {
       auto route = pipeline::read_route(dirs[k], limits_);
       if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
@@ -150,6 +150,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       }
       if (noise_t_ > 0 || noise_r_ > 0) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);
       total_frames += static_cast<long long>(route.frames.size() * modes_.size());
+      route_frames += static_cast<long long>(route.frames.size());
       routes.push_back(std::move(route));
     }
     if (shard_count_ > 1) {
@@ -169,8 +170,9 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
         bar.update(d, total_frames);
       });
       bar.done();
-      log("%zu volumes scored or read once for %zu modes; %zu spilled to a temporary file; at most %.0f MB per route",
-          batch.frames_made, modes_.size(), batch.frames_spilled,
+      log("%zu volumes scored or read for %lld frames and %zu modes; %zu spilled to a temporary file; at most %.0f MB "
+          "per route",
+          batch.frames_made, route_frames, modes_.size(), batch.frames_spilled,
           static_cast<double>(batch.peak_frame_memory_bytes) / (1 << 20));
       std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
       std::vector<std::string> route_names;

@@ -154,7 +154,11 @@ FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, 
   return [store](std::size_t i) { return store->take(i); };
 }
 
-int frame_reads(Mode mode) { return mode == Mode::smooth ? 2 : 1; }
+int frame_reads(Mode mode, const Route& route) {
+  if (mode != Mode::smooth) return 1;
+  const bool scored = std::any_of(route.frames.begin(), route.frames.end(), [](const RouteFrame& f) { return f.volume.empty(); });
+  return scored ? 2 : 1;
+}
 
 const char* mode_name(Mode mode) {
   switch (mode) {
@@ -300,7 +304,7 @@ namespace {
 RouteResult run_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                       const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
   const auto& projection = cache.metadata().projection();
-  if (!source) source = stored_route_frames(route, cache, options, frame_reads(mode));
+  if (!source) source = stored_route_frames(route, cache, options, frame_reads(mode, route));
   const auto estimator = make_mode(mode, {route, cache, options, inspect});
   FramePrefetcher frames(std::move(source), route.frames.size(), estimator->lookahead());
   RouteResult result;
@@ -354,16 +358,20 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
   };
   std::vector<Shared> shared(routes.size());
   for (auto& s : shared) s.jobs_left = modes.size();
-  int readers = 0;
-  for (const auto mode : modes) readers += frame_reads(mode);
+
   BatchResult batch;
   batch.results.resize(jobs.size());
   std::mutex mutex;  // guards shared and batch's counters
+  auto readers = [&](const Route& route) {
+    int sum = 0;
+    for (const auto mode : modes) sum += frame_reads(mode, route);
+    return sum;
+  };
   auto store_for = [&](std::size_t r) {
     std::lock_guard lock(mutex);
     if (!shared[r].store) {
       shared[r].store = std::make_shared<FrameStore>(route_frames(routes[r], cache, job_options), routes[r].frames.size(),
-                                                     readers, budget, options.spill_dir);
+                                                     readers(routes[r]), budget, options.spill_dir);
     }
     return shared[r].store;
   };

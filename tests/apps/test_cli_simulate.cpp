@@ -59,7 +59,7 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   r = run_seqloc({"-v", "localize", cache, routes + "/route_000", routes + "/route_001", "-o", spilled, "--mode", "all",
                   "--window", "192", "--threads", "2", "--frame-memory", "0", "--beliefs"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.err.find("20 volumes scored or read once for 5 modes; 20 spilled"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("20 volumes scored or read for 20 frames and 5 modes; 20 spilled"), std::string::npos) << r.err;
   for (const char* route : {"route_000", "route_001"}) {
     for (const char* mode : {"single", "offline", "online", "seqloc", "smooth"}) {
       EXPECT_EQ(test::read_file(dir / "spilled" / route / mode / "poses.csv"),

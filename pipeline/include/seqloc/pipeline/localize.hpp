@@ -127,9 +127,11 @@ struct RouteResult {
 [[nodiscard]] FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache,
                                               const LocalizeOptions& options, int readers = 1);
 
-/// How often a mode reads each frame: 2 for smooth (its forward pass, then its backward pass),
-/// else 1. A FrameStore shared by modes has the sum as its readers.
-[[nodiscard]] int frame_reads(Mode mode);
+/// How often a mode takes each frame of `route` from the route's FrameStore (which holds a frame
+/// until its last reader took it): 1, but 2 for smooth on a route the matcher scores (smooth reads
+/// every frame in its forward and again in its backward pass; a .npy volume is read again rather
+/// than held, a volume the matcher scored is held rather than scored again).
+[[nodiscard]] int frame_reads(Mode mode, const Route& route);
 
 /// The built-in matcher's raw volume for an observation frame: (size, size, headings) float32
 /// log-likelihood scores over the frame's crop (before any calibration). Throws DataError for an
