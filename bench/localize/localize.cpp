@@ -1,6 +1,7 @@
 // bench/localize: frames/s end to end on a 1,000-frame route of 128x128x256 float16 volumes with
 // the default 256x256x256 window (seqloc mode), with the split by stage (reading and preparing
-// volumes on a background task, the filter, writing the outputs) and peak memory. The volumes are
+// volumes on a background task, the filter, writing the outputs) and peak memory; then the same
+// route without self-calibration, and in smooth mode (time per frame against seqloc's, peak memory). The volumes are
 // 16 distinct random ones cycled along the route (128 MB, so the page cache holds them).
 //
 // Then routes of observations (the demo's path): 2 simulated routes x 20 frames of the sample
@@ -164,12 +165,25 @@ int main() {
               "to the filter)\n",
               plain_s, frames / plain_s, without.filter_seconds,
               1000.0 * (result.filter_seconds - without.filter_seconds) / frames);
+  // Smooth on the same route: its time per frame against seqloc's (issue target: at most 3x) and
+  // its own peak memory (target: under 2 GB).
+  reset_peak();
+  const auto t3 = Clock::now();
+  const auto smooth = seqloc::pipeline::localize_route(route, cache, options, seqloc::pipeline::Mode::smooth);
+  const double smooth_s = std::chrono::duration<double>(Clock::now() - t3).count();
+  const double smooth_peak_mb = static_cast<double>(peak_kb()) / 1024.0;
+  std::printf("smooth: %.1f s = %.1f frames/s, %.2fx seqloc's time per frame (target <= 3); filter %.1f s, "
+              "read+prepare %.1f s (every volume read twice); peak memory %.0f MB (target < 2048)\n",
+              smooth_s, frames / smooth_s, smooth_s / run_s, smooth.filter_seconds, smooth.prepare_seconds,
+              smooth_peak_mb);
   const std::string observations = observation_routes(work);
   std::printf("{\"benchmark\": \"localize\", \"frames\": %d, \"frames_per_s\": %.2f, \"total_s\": %.2f, "
               "\"prepare_s\": %.2f, \"filter_s\": %.2f, \"wait_s\": %.2f, \"write_s\": %.3f, \"peak_mb\": %.0f, "
-              "\"no_self_calibration_frames_per_s\": %.2f, \"no_self_calibration_filter_s\": %.2f%s}\n",
+              "\"no_self_calibration_frames_per_s\": %.2f, \"no_self_calibration_filter_s\": %.2f, "
+              "\"smooth_frames_per_s\": %.2f, \"smooth_time_ratio_to_seqloc\": %.2f, \"smooth_peak_mb\": %.0f%s}\n",
               frames, frames / total, total, result.prepare_seconds, result.filter_seconds, result.wait_seconds,
-              write_s, peak_mb, frames / plain_s, without.filter_seconds, observations.c_str());
+              write_s, peak_mb, frames / plain_s, without.filter_seconds, frames / smooth_s, smooth_s / run_s,
+              smooth_peak_mb, observations.c_str());
   fs::remove_all(work);
   return 0;
 }

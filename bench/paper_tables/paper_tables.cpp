@@ -5,7 +5,7 @@
 // JSON.
 //   bench_paper_tables --work DIR --out DIR [--window 160] [--threads 2] [--tables overall,tempered,...]
 // --tables runs only those tables' configurations (overall, ablation, eps, pas, noise, tempered,
-// extras; the overall table's are always run, as the others compare with them).
+// smoothing, extras; the overall table's are always run, as the others compare with them).
 // DIR/<region>.gpkg and DIR/<region>-routes/route_* must exist (bench/paper_tables/run makes them).
 
 #include <algorithm>
@@ -42,7 +42,11 @@ struct Config {
   double noise_t = 0, noise_r = 0;  // odometry noise (% of step, deg per m)
   double sharpen = 1;               // the volumes raised to this power k (k log p: k > 1 overconfident)
   int offline_half_window = 10;     // offline: frames within +-K (all when < 0)
+  int lag = 0;                      // seqloc: fixed-lag smoothing over this many later frames
 };
+
+// Fixed lags of the smoothing table (0 is SeqLoc itself, which the table shows as such).
+constexpr int kLags[] = {5, 10, 20};
 
 // The paper's exact configuration (filter::paper_config: ETU w = 1 - H, unobserved cells at
 // log(1/M), no self-calibration) in the bench's window and threads.
@@ -99,6 +103,11 @@ std::vector<Config> configs() {
   }
   c.push_back({"tempered", tempered_name("online (naive recursion)", kSharpen), M::online, none, 0, 0, kSharpen});
   c.push_back({"tempered", tempered_name("SeqLoc, paper's configuration", kSharpen), M::seqloc, paper, 0, 0, kSharpen});
+  // Batch routes: the whole route's evidence (smooth), and real time with a delay of L frames.
+  c.push_back({"smoothing", "smooth (every frame given the whole route)", M::smooth, none});
+  for (const int lag : kLags) {
+    c.push_back({"smoothing", "SeqLoc, lag " + std::to_string(lag), M::seqloc, none, 0, 0, 1, 10, lag});
+  }
   c.push_back({"extras", "+sub-bin heading", M::seqloc, [](auto& f) { f.subbin_heading = true; }});
   c.push_back({"extras", "+motion noise", M::seqloc, [](auto& f) { f.motion_noise = true; }});
   c.push_back({"extras", "+GPS term (first frame's fix)", M::seqloc, [](auto& f) { f.gps_prior = true; }});
@@ -230,6 +239,7 @@ int main(int argc, char** argv) {
         pipeline::LocalizeOptions o = options;
         o.filter.threads = 1;
         o.offline_half_window = all[c].offline_half_window;
+        o.lag = all[c].lag;
         all[c].tweak(o.filter);
         pipeline::Route r = route;
         // The noise's seed follows the configuration's name (FNV-1a), so that adding or leaving out
@@ -274,6 +284,8 @@ int main(int argc, char** argv) {
       {"noise", "4. Odometry noise (none = SeqLoc)"},
       {"tempered", "5. Backbones out of calibration: the same volumes tempered by k (k log p, renormalized; k > 1 "
                    "overconfident, k < 1 timid; single frames keep their argmax); k = 1 is SeqLoc above"},
+      {"smoothing", "5c. Batch routes: smooth and fixed lag (lag 0 is SeqLoc; offline over all frames is the product "
+                    "smooth computes in linear time, without MGR's and ETU's robustness)"},
       {"extras", "6. Beyond the paper"}};
   for (const std::string group : {"feature-sparse", "urban"}) {
     md << "\n## " << group << "\n";
@@ -283,6 +295,10 @@ int main(int argc, char** argv) {
       if (table == "ablation") md << row("naive recursion", metrics("online (naive recursion)", group));
       if (table == "eps" || table == "pas" || table == "noise" || table == "extras") md << row("SeqLoc", metrics("SeqLoc", group));
       if (table == "tempered") md << row("single frame", metrics("single frame", group));
+      if (table == "smoothing") {
+        md << row("offline (all frames)", metrics("offline (all frames)", group));
+        md << row("SeqLoc (lag 0)", metrics("SeqLoc", group));
+      }
       for (const auto& c : all) {
         if (c.table == table) md << row(c.name, metrics(c.name, group));
         if (c.table == table || (table == "ablation" && c.name == "SeqLoc")) {
@@ -297,10 +313,12 @@ int main(int argc, char** argv) {
       if (table == "ablation") md << row("+MGR+ETU+PAS (SeqLoc)", metrics("SeqLoc", group));
     }
   }
-  md << "\n## Per region (overall and tempered)\n\n" << kHeader;
+  md << "\n## Per region (overall, tempered, smoothing)\n\n" << kHeader;
   for (const auto& [region, group] : regions) {
     for (const auto& c : all) {
-      if (c.table == "overall" || c.table == "tempered") md << row(region + ": " + c.name, metrics(c.name, region));
+      if (c.table == "overall" || c.table == "tempered" || c.table == "smoothing") {
+        md << row(region + ": " + c.name, metrics(c.name, region));
+      }
     }
   }
 
