@@ -51,19 +51,33 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
   // order (the same for any number of threads).
   std::vector<float> best(static_cast<std::size_t>(R));
   std::vector<double> sum(static_cast<std::size_t>(R));
-  detail::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
-    Eigen::ArrayXf product(N);
-    for (int k = k0; k < k1; ++k) {
-      product = ConstArrayMap(forward.slice(k), N) * ConstArrayMap(backward.slice(k), N);
-      best[static_cast<std::size_t>(k)] = product.maxCoeff();
-      sum[static_cast<std::size_t>(k)] = static_cast<double>(product.sum());
-      if (posterior != nullptr) std::copy(product.data(), product.data() + n, posterior->slice(k));
-    }
-  });
-  double total = 0;
-  for (double s : sum) total += s;
+  // With `both` false the forward belief alone (beta taken as uniform).
+  auto reduce = [&](bool both) {
+    detail::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
+      Eigen::ArrayXf product(N);
+      for (int k = k0; k < k1; ++k) {
+        if (both) {
+          product = ConstArrayMap(forward.slice(k), N) * ConstArrayMap(backward.slice(k), N);
+        } else {
+          product = ConstArrayMap(forward.slice(k), N);
+        }
+        best[static_cast<std::size_t>(k)] = product.maxCoeff();
+        sum[static_cast<std::size_t>(k)] = static_cast<double>(product.sum());
+        if (posterior != nullptr) std::copy(product.data(), product.data() + n, posterior->slice(k));
+      }
+    });
+    double total = 0;
+    for (double s : sum) total += s;
+    return total;
+  };
+  bool both = true;
+  double total = reduce(both);
   if (!(total > 0) || !std::isfinite(total)) {
-    throw FilterError("smoothed_result: the forward and backward beliefs share no mass in the window");
+    // The two passes share no mass that float can represent (they placed the vehicle apart with
+    // certainty): the forward belief alone decides, as the filter lets a frame alone decide.
+    both = false;
+    total = reduce(both);
+    if (!(total > 0) || !std::isfinite(total)) throw FilterError("smoothed_result: the forward belief has no mass");
   }
   if (posterior != nullptr) {
     const auto scale = static_cast<float>(1.0 / total);
@@ -80,7 +94,7 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
   const float* b = backward.slice(k_star);
   std::size_t cell = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    if (a[i] * b[i] == best[static_cast<std::size_t>(k_star)]) {
+    if ((both ? a[i] * b[i] : a[i]) == best[static_cast<std::size_t>(k_star)]) {
       cell = i;
       break;
     }
@@ -91,7 +105,9 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
   result.argmax = {static_cast<double>(u_star), static_cast<double>(v_star), forward.bin_heading_deg(k_star)};
   result.pose = result.argmax;
   result.peak_log_belief = static_cast<float>(std::log(best[static_cast<std::size_t>(k_star)] / total));
-  auto gamma = [&](int u, int v, int k) { return static_cast<double>(forward.prob(u, v, k)) * backward.prob(u, v, k); };
+  auto gamma = [&](int u, int v, int k) {
+    return static_cast<double>(forward.prob(u, v, k)) * (both ? backward.prob(u, v, k) : 1.0f);
+  };
   if (config.pas) {
     // PAS on gamma: the mass-weighted mean position over the cells around x* (peak_anchored_position).
     double sm = 0, su = 0, sv = 0;

@@ -3,6 +3,7 @@
 // frame t is the product of every frame's likelihood at the pose the motion chains x to at that
 // frame, computed here cell by cell in double from the conventions alone (no filter code).
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 #include <random>
@@ -231,6 +232,17 @@ TEST(Smoother, TheLastFrameIsTheForwardFiltersAndTheFirstSeesTheWholeRoute) {
   EXPECT_GT(s.results.front().peak_log_belief, first.peak_log_belief + 1.0);
   const BeliefVolume a(kW, kH, kR);
   EXPECT_THROW((void)smoothed_result(a, BeliefVolume(kW, kH, 8), config), FilterError);
+  // Passes certain of different places share no mass: the forward belief alone decides.
+  BeliefVolume here(kW, kH, kR), there(kW, kH, kR);
+  std::fill(here.data(), here.data() + here.size(), 0.0f);
+  std::fill(there.data(), there.data() + there.size(), 0.0f);
+  here.prob(5, 6, 1) = 1;
+  there.prob(20, 21, 3) = 1;
+  const FrameResult apart = smoothed_result(here, there, config);
+  EXPECT_EQ(apart.argmax.u, 5);
+  EXPECT_EQ(apart.argmax.v, 6);
+  EXPECT_EQ(apart.argmax.heading_deg, 90);
+  EXPECT_EQ(apart.pose.u, 5) << "PAS on the forward belief alone";
 }
 
 }  // namespace
