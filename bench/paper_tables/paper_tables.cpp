@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -328,28 +329,31 @@ int main(int argc, char** argv) {
     std::nth_element(x.begin(), x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2), x.end());
     return x[x.size() / 2];
   };
-  md << "\n## 5b. Self-calibration's estimate (median over routes of the power given to the last frame)\n\n"
-     << "| k | 1 / k |";
-  std::vector<std::string> columns = {"feature-sparse", "urban"};
-  for (const auto& [region, group] : regions) columns.push_back(region);
-  for (const auto& col : columns) md << " " << col << " |";
-  md << "\n|---:|---:|";
-  for (std::size_t i = 0; i < columns.size(); ++i) md << "---:|";
-  md << "\n";
-  std::vector<double> ks = {1};
-  ks.insert(ks.end(), std::begin(kTempering), std::end(kTempering));
-  std::sort(ks.begin(), ks.end());
-  for (const double k : ks) {
-    const std::string name = k == 1 ? "SeqLoc" : tempered_name("SeqLoc", k);
-    char b[64];
-    std::snprintf(b, sizeof b, "| %g | %.3f |", k, 1 / k);
-    md << b;
-    for (const auto& col : columns) {
-      std::snprintf(b, sizeof b, " %.3f |", median(last_power[name][col]));
-      md << b;
-      results["self_calibration"][col][std::to_string(k)] = median(last_power[name][col]);
-    }
+  const bool tempered_ran = std::any_of(all.begin(), all.end(), [](const Config& c) { return c.table == "tempered"; });
+  if (tempered_ran) {
+    md << "\n## 5b. Self-calibration's estimate (median over routes of the power given to the last frame)\n\n"
+       << "| k | 1 / k |";
+    std::vector<std::string> columns = {"feature-sparse", "urban"};
+    for (const auto& [region, group] : regions) columns.push_back(region);
+    for (const auto& col : columns) md << " " << col << " |";
+    md << "\n|---:|---:|";
+    for (std::size_t i = 0; i < columns.size(); ++i) md << "---:|";
     md << "\n";
+    std::vector<double> ks = {1};
+    ks.insert(ks.end(), std::begin(kTempering), std::end(kTempering));
+    std::sort(ks.begin(), ks.end());
+    for (const double k : ks) {
+      const std::string name = k == 1 ? "SeqLoc" : tempered_name("SeqLoc", k);
+      char b[64];
+      std::snprintf(b, sizeof b, "| %g | %.3f |", k, 1 / k);
+      md << b;
+      for (const auto& col : columns) {
+        std::snprintf(b, sizeof b, " %.3f |", median(last_power[name][col]));
+        md << b;
+        results["self_calibration"][col][std::to_string(k)] = median(last_power[name][col]);
+      }
+      md << "\n";
+    }
   }
 
   // 7. Does entropy predict error? Single frames per region: recall per entropy tercile and the
@@ -373,20 +377,22 @@ int main(int argc, char** argv) {
     };
     const double rho = spearman(points);
     char b[320];
-    std::snprintf(b, sizeof b, "| %s | %zu | %.3f | %.1f | %.1f | %.1f | %.2f |\n", region.c_str(), n, points[n / 2].first,
-                  recall(2 * n / 3, n), recall(n / 3, 2 * n / 3), recall(0, n / 3), rho);
+    std::snprintf(b, sizeof b, "| %s | %zu | %.3f | %.1f | %.1f | %.1f | %.2f |\n", region.c_str(), n,
+                  points[n / 2].first, recall(2 * n / 3, n), recall(n / 3, 2 * n / 3), recall(0, n / 3), rho);
     md << b;
-    results["entropy"][region] = {{"median", points[n / 2].first},
-                                  {"r5m_by_tercile_sharpest_first", {recall(0, n / 3), recall(n / 3, 2 * n / 3), recall(2 * n / 3, n)}},
-                                  {"spearman_entropy_error", rho}};
+    results["entropy"][region] = {
+        {"median", points[n / 2].first},
+        {"r5m_by_tercile_sharpest_first", {recall(0, n / 3), recall(n / 3, 2 * n / 3), recall(2 * n / 3, n)}},
+        {"spearman_entropy_error", rho}};
     pipeline::Series series{region, {}, {}, true};
     for (const auto& [h, e] : points) {
       series.x.push_back(h);
       series.y.push_back(e);
     }
     const std::string picture = "entropy_scatter_" + region + ".png";
-    pipeline::write_picture(out / picture, pipeline::plot({series}, region + ": single-frame error against entropy",
-                                                          "normalized entropy of the frame's likelihood", "error (m)", 60));
+    pipeline::write_picture(out / picture,
+                            pipeline::plot({series}, region + ": single-frame error against entropy",
+                                           "normalized entropy of the frame's likelihood", "error (m)", 60));
     pictures << "![" << region << "](" << picture << ")\n";
   }
   md << "\n" << pictures.str();
@@ -410,8 +416,8 @@ int main(int argc, char** argv) {
     }
     const auto n = static_cast<double>(v.size());
     char b[320];
-    std::snprintf(b, sizeof b, "| %s (%s) | %zu | %.2f | %.1f%% | %.1f%% | %.1f / %.1f |\n", region.c_str(), group.c_str(),
-                  v.size(), median(elongation), 100.0 * static_cast<double>(ridge) / n,
+    std::snprintf(b, sizeof b, "| %s (%s) | %zu | %.2f | %.1f%% | %.1f%% | %.1f / %.1f |\n", region.c_str(),
+                  group.c_str(), v.size(), median(elongation), 100.0 * static_cast<double>(ridge) / n,
                   100.0 * static_cast<double>(across) / n, median(major), median(minor));
     md << b;
     results["shape"][region] = {{"median_elongation", median(elongation)},
@@ -419,24 +425,34 @@ int main(int argc, char** argv) {
                                 {"across_share", static_cast<double>(across) / n}};
   }
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  md << "\nRun time " << static_cast<int>(seconds) << " s; the matcher took " << static_cast<int>(matcher_seconds) << " s for "
-     << frames_matched << " frames.\n";
+  md << "\nRun time " << static_cast<int>(seconds) << " s; the matcher took " << static_cast<int>(matcher_seconds)
+     << " s for " << frames_matched << " frames.\n";
   std::ofstream(out / "report.md") << md.str();
   std::ofstream(out / "results.json") << results.dump(2) << "\n";
   std::fputs(md.str().c_str(), stdout);
-  const auto r5 = [&](const std::string& config, const std::string& group) {
-    return metrics(config, group).position_recall[2];
+  // The closing line holds the figures of the configurations that ran (a table left out by
+  // --tables leaves its keys out rather than reporting zeros).
+  nlohmann::ordered_json figures = {{"benchmark", "paper_tables"}, {"frames", frames_matched}};
+  const auto r5 = [&](const std::string& key, const std::string& config, const std::string& group) {
+    if (std::none_of(all.begin(), all.end(), [&](const Config& c) { return c.name == config; })) return;
+    figures[key] = std::round(metrics(config, group).position_recall[2] * 10) / 10;
   };
-  std::printf("{\"benchmark\": \"paper_tables\", \"frames\": %zu, \"sparse_single_r5m\": %.1f, \"sparse_online_r5m\": %.1f, "
-              "\"sparse_seqloc_r5m\": %.1f, \"sparse_offline_r5m\": %.1f, \"sparse_offline_all_r5m\": %.1f, "
-              "\"urban_single_r5m\": %.1f, \"urban_seqloc_r5m\": %.1f, \"sparse_seqloc_k4_r5m\": %.1f, "
-              "\"sparse_seqloc_k4_uncalibrated_r5m\": %.1f, \"sparse_seqloc_k0.25_r5m\": %.1f, \"sparse_seqloc_k8_r5m\": %.1f, "
-              "\"seconds\": %.0f}\n",
-              frames_matched, r5("single frame", "feature-sparse"), r5("online (naive recursion)", "feature-sparse"),
-              r5("SeqLoc", "feature-sparse"), r5("offline (+-10 frames)", "feature-sparse"),
-              r5("offline (all frames)", "feature-sparse"), r5("single frame", "urban"), r5("SeqLoc", "urban"),
-              r5(tempered_name("SeqLoc", 4), "feature-sparse"),
-              r5(tempered_name("SeqLoc without self-calibration", 4), "feature-sparse"),
-              r5(tempered_name("SeqLoc", 0.25), "feature-sparse"), r5(tempered_name("SeqLoc", 8), "feature-sparse"), seconds);
+  r5("sparse_single_r5m", "single frame", "feature-sparse");
+  r5("sparse_online_r5m", "online (naive recursion)", "feature-sparse");
+  r5("sparse_seqloc_r5m", "SeqLoc", "feature-sparse");
+  r5("sparse_offline_r5m", "offline (+-10 frames)", "feature-sparse");
+  r5("sparse_offline_all_r5m", "offline (all frames)", "feature-sparse");
+  r5("urban_single_r5m", "single frame", "urban");
+  r5("urban_seqloc_r5m", "SeqLoc", "urban");
+  r5("sparse_seqloc_k4_r5m", tempered_name("SeqLoc", 4), "feature-sparse");
+  r5("sparse_seqloc_k4_uncalibrated_r5m", tempered_name("SeqLoc without self-calibration", 4), "feature-sparse");
+  r5("sparse_seqloc_k0.25_r5m", tempered_name("SeqLoc", 0.25), "feature-sparse");
+  r5("sparse_seqloc_k8_r5m", tempered_name("SeqLoc", 8), "feature-sparse");
+  r5("sparse_smooth_r5m", "smooth (every frame given the whole route)", "feature-sparse");
+  for (const int lag : kLags) {
+    r5("sparse_lag" + std::to_string(lag) + "_r5m", "SeqLoc, lag " + std::to_string(lag), "feature-sparse");
+  }
+  figures["seconds"] = std::round(seconds);
+  std::printf("%s\n", figures.dump().c_str());
   return 0;
 }
