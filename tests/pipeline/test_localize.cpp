@@ -277,10 +277,8 @@ namespace seqloc::pipeline {
 namespace {
 
 // Ridge-shaped volumes along a straight road (the paper's failure case of single frames): every
-// frame says "somewhere on this road, heading east", with noise along the ridge; one frame in
-// the middle is distinctive. Single frames stay ambiguous; SeqLoc locks on and keeps it.
-// A road along which every frame's volume is a ridge (the position along it unknown, noise on the
-// ridge), but for frame kDistinctive, whose volume also says where along it the vehicle is.
+// frame says "somewhere on this road, heading east", with noise along the ridge, but for frame
+// kDistinctive, whose volume also says where along it the vehicle is.
 constexpr int kRidgeFrames = 24, kDistinctive = 10;
 Route ridge_route(const test::ScratchDir& dir, const osm::RegionProjection& projection) {
   std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "ridge"})";
@@ -314,6 +312,14 @@ Route ridge_route(const test::ScratchDir& dir, const osm::RegionProjection& proj
   return read_route(dir.path());
 }
 
+// The ridge route over its region, as each test of it starts.
+struct RidgeCase {
+  std::unique_ptr<Region> region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
+  raster::CacheReader cache{region->cache};
+  test::ScratchDir dir;
+  Route route = ridge_route(dir, cache.metadata().projection());
+};
+
 LocalizeOptions ridge_options() {
   LocalizeOptions options = small_options();
   options.filter.width = options.filter.height = 96;
@@ -327,10 +333,9 @@ double mean_error(const RouteResult& r, int from, int to) {
 }
 
 TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
-  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
-  raster::CacheReader cache(region->cache);
-  test::ScratchDir dir;
-  const Route route = ridge_route(dir, cache.metadata().projection());
+  RidgeCase ridge;
+  const Route& route = ridge.route;
+  raster::CacheReader& cache = ridge.cache;
   const LocalizeOptions options = ridge_options();
   const int frames = kRidgeFrames, distinctive = kDistinctive;
   auto mean_error_after = [&](const RouteResult& r) { return mean_error(r, distinctive + 1, frames); };
@@ -346,10 +351,9 @@ TEST(Localize, RidgesStayAmbiguousAloneAndConvergeInSequence) {
 // Smoothing carries the distinctive frame's evidence back to the frames before it, which the
 // filter alone cannot place; a lag of L carries it back L frames.
 TEST(Smooth, PlacesTheFramesBeforeTheDistinctiveOneAndLagsCarryItBackLFrames) {
-  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
-  raster::CacheReader cache(region->cache);
-  test::ScratchDir dir;
-  const Route route = ridge_route(dir, cache.metadata().projection());
+  RidgeCase ridge;
+  const Route& route = ridge.route;
+  raster::CacheReader& cache = ridge.cache;
   LocalizeOptions options = ridge_options();
   const RouteResult seqloc = localize_route(route, cache, options, Mode::seqloc);
   const RouteResult smooth = localize_route(route, cache, options, Mode::smooth);
@@ -371,10 +375,9 @@ TEST(Smooth, PlacesTheFramesBeforeTheDistinctiveOneAndLagsCarryItBackLFrames) {
 // checkpoints, three stretches here), a lag of L at frame t is smooth over frames 0 .. t + L, and a
 // lag of 0 is the filter itself.
 TEST(Smooth, FixedLagAgreesWithSmoothAndLagZeroWithTheFilter) {
-  const auto region = make_region(47.5, 10.5, -300, 300, 0.006, 0.002);
-  raster::CacheReader cache(region->cache);
-  test::ScratchDir dir;
-  const Route route = ridge_route(dir, cache.metadata().projection());
+  RidgeCase ridge;
+  const Route& route = ridge.route;
+  raster::CacheReader& cache = ridge.cache;
   LocalizeOptions options = ridge_options();
   auto expect_same = [](const FramePose& a, const FramePose& b, const std::string& what) {
     EXPECT_EQ(a.x_m, b.x_m) << what << " frame " << a.frame;
