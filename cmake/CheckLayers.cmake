@@ -1,7 +1,7 @@
 cmake_minimum_required(VERSION 3.20)
 # cmake -DROOT=<tree> -P cmake/CheckLayers.cmake
 # Fails when a module's sources or headers include a header of a module it may not depend on
-# (one above it, or beside it): the layering of README.md's layout table, kept by a test.
+# (one above it, or beside it): the layering of docs/development.md's layout table, kept by a test.
 #   osm <- raster <- pipeline, filter (Eigen only) <- pipeline, raster + filter <- serve,
 #   serve + pipeline <- python, everything <- apps.
 if(NOT ROOT)
