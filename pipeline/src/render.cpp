@@ -238,190 +238,191 @@ std::size_t collapse_frame(const std::filesystem::path& beliefs_dir, std::size_t
   return best;
 }
 
-std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, const Route& route,
-                                                const std::vector<std::pair<std::string, std::vector<FramePose>>>& poses_by_mode,
-                                                const RenderOptions& options, const std::filesystem::path& out_dir) {
-  if (options.frame >= route.frames.size()) {
-    throw UsageError("render: frame " + std::to_string(options.frame) + " of route '" + route.name + "', which has " +
-                     std::to_string(route.frames.size()) + " frames");
+namespace {
+
+using PosesByMode = std::vector<std::pair<std::string, std::vector<FramePose>>>;
+
+// What the likelihood figure shows around frame K, as position marginals over the belief window:
+// the SeqLoc belief the frame arrives on, the frame's own likelihood and the belief after it.
+struct FrameScene {
+  int width = 0, height = 0;                                 // the window, cells
+  std::int64_t origin_u = 0, origin_v = 0;                   // its corner for frame K
+  std::int64_t before_u = 0, before_v = 0;                   // and for frame K - 1
+  std::vector<double> frame_mass, belief_mass, before_mass;  // before_mass empty for K = 0
+  double entropy = 0;                                        // frame K's normalized entropy
+  std::vector<FramePose> poses;                              // SeqLoc's poses the titles quote (empty: none)
+};
+
+std::vector<double> as_double(const std::vector<float>& v) { return {v.begin(), v.end()}; }
+
+// Frame K's own likelihood, placed into the scene's window by its crop as the filter places it.
+void place_frame(FrameScene& scene, const filter::PreparedFrame& f, const GridCrop& crop,
+                 const raster::RegionGrid& grid) {
+  scene.entropy = f.entropy;
+  const int bw = scene.width, bh = scene.height;
+  scene.frame_mass.assign(static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh), 0.0);
+  const filter::CropPose where{grid.region_u(crop.x) - static_cast<double>(scene.origin_u),
+                               grid.region_v(crop.y) - static_cast<double>(scene.origin_v), crop.rotation_deg};
+  const std::vector<double> own = position_marginal(f);
+  for (int v = 0; v < f.height; ++v) {
+    for (int u = 0; u < f.width; ++u) {
+      const filter::Pose cell = filter::volume_cell_pose(f, where, v, u, 0);
+      const auto wu = std::lround(cell.u), wv = std::lround(cell.v);
+      if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) {
+        scene.frame_mass[static_cast<std::size_t>(wv * bw + wu)] += own[detail::flat(v, u, f.width)];
+      }
+    }
   }
-  std::filesystem::create_directories(out_dir);
-  std::vector<std::filesystem::path> written;
+}
+
+// The scene from what `localize --beliefs` kept.
+FrameScene scene_from_kept(raster::CacheReader& cache, const Route& route, const PosesByMode& poses_by_mode,
+                           const RenderOptions& options) {
+  const std::size_t k = options.frame;
+  const KeptBeliefs beliefs(options.beliefs_dir, route.frames.size());
+  FrameScene scene;
+  scene.width = beliefs.width();
+  scene.height = beliefs.height();
+  scene.belief_mass = beliefs.marginal(k);
+  scene.origin_u = beliefs.origin(k)[0];
+  scene.origin_v = beliefs.origin(k)[1];
+  if (k > 0) {
+    scene.before_mass = beliefs.marginal(k - 1);
+    scene.before_u = beliefs.origin(k - 1)[0];
+    scene.before_v = beliefs.origin(k - 1)[1];
+  }
+  const auto frame = stored_route_frames(route, cache, options.localize)(k);  // as localize saw it
+  place_frame(scene, *frame, frame_crop(route.frames[k], cache.grid(), cache.metadata().projection()), cache.grid());
+  for (const auto& [mode, p] : poses_by_mode) {
+    if (mode == "seqloc" && p.size() == route.frames.size()) scene.poses = p;
+  }
+  return scene;
+}
+
+// The scene by running SeqLoc over frames 0 .. K.
+FrameScene scene_by_running(raster::CacheReader& cache, const Route& route, const RenderOptions& options) {
+  const std::size_t k = options.frame;
+  Route head = route;
+  head.frames.resize(k + 1);
+  FrameScene scene;
+  scene.poses = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
+                  if (k > 0 && in.index + 1 == k) {  // the belief the frame arrives on
+                    scene.before_mass = as_double(in.belief->position_marginal());
+                    scene.before_u = in.origin_u;
+                    scene.before_v = in.origin_v;
+                    return;
+                  }
+                  if (in.index != k) return;
+                  scene.width = in.belief->width();
+                  scene.height = in.belief->height();
+                  scene.origin_u = in.origin_u;
+                  scene.origin_v = in.origin_v;
+                  scene.belief_mass = as_double(in.belief->position_marginal());
+                  place_frame(scene, *in.frame, in.crop, cache.grid());
+                }).poses;
+  return scene;
+}
+
+// The qualitative figure: before (when K > 0), the frame's own likelihood, after; each panel over
+// the map of its window, the frame's truth starred.
+Picture likelihood_figure(raster::CacheReader& cache, const Route& route, const FrameScene& scene, std::size_t k) {
   const auto& grid = cache.grid();
   const auto projection = cache.metadata().projection();
-  auto pixel_of = [&](double x, double y) { return cv::Point2d(grid.region_u(x), grid.region_v(y)); };
-  std::vector<cv::Point2d> truth;  // region pixels
-  for (const auto& f : route.frames) {
-    if (!f.truth) continue;
-    const auto g = projection.forward(f.truth->where);
-    truth.push_back(pixel_of(g.x_m, g.y_m));
-  }
-
-  // 1. The qualitative figure: the SeqLoc belief before and after the frame, from what localize
-  // kept (beliefs.npy) or by running SeqLoc up to the frame, and the frame's own likelihood.
-  {
-    std::vector<double> frame_mass, belief_mass, before_mass;
-    std::int64_t ou = 0, ov = 0, before_ou = 0, before_ov = 0;
-    int bw = 0, bh = 0;
-    double entropy = 0;
-    std::vector<FramePose> run_poses;
-    const std::vector<FramePose>* poses_shown = nullptr;
-    auto as_double = [](const std::vector<float>& v) { return std::vector<double>(v.begin(), v.end()); };
-    // The frame's own likelihood, placed by its crop into the window (ou, ov, bw, bh set).
-    auto place_frame = [&](const filter::PreparedFrame& f, const GridCrop& crop) {
-      entropy = f.entropy;
-      frame_mass.assign(static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh), 0.0);
-      // The filter's own map from a volume cell to the window.
-      const filter::CropPose where{grid.region_u(crop.x) - static_cast<double>(ou),
-                                   grid.region_v(crop.y) - static_cast<double>(ov), crop.rotation_deg};
-      const std::vector<double> own = position_marginal(f);
-      for (int v = 0; v < f.height; ++v) {
-        for (int u = 0; u < f.width; ++u) {
-          const filter::Pose cell = filter::volume_cell_pose(f, where, v, u, 0);
-          const auto wu = std::lround(cell.u), wv = std::lround(cell.v);
-          if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) {
-            frame_mass[static_cast<std::size_t>(wv * bw + wu)] += own[detail::flat(v, u, f.width)];
-          }
-        }
-      }
-    };
-    const auto kept = options.beliefs_dir / "beliefs.npy";
-    if (!options.beliefs_dir.empty() && std::filesystem::exists(kept)) {
-      const KeptBeliefs beliefs(options.beliefs_dir, route.frames.size());
-      bw = beliefs.width();
-      bh = beliefs.height();
-      belief_mass = beliefs.marginal(options.frame);
-      ou = beliefs.origin(options.frame)[0];
-      ov = beliefs.origin(options.frame)[1];
-      if (options.frame > 0) {
-        before_mass = beliefs.marginal(options.frame - 1);
-        before_ou = beliefs.origin(options.frame - 1)[0];
-        before_ov = beliefs.origin(options.frame - 1)[1];
-      }
-      const auto frame = stored_route_frames(route, cache, options.localize)(options.frame);  // as localize saw it
-      place_frame(*frame, frame_crop(route.frames[options.frame], grid, projection));
-      for (const auto& [mode, p] : poses_by_mode) {
-        if (mode == "seqloc" && p.size() == route.frames.size()) poses_shown = &p;
-      }
-    } else {
-      Route head = route;
-      head.frames.resize(options.frame + 1);
-      run_poses = localize_route(head, cache, options.localize, Mode::seqloc, {}, {}, [&](const FrameInspection& in) {
-                    if (options.frame > 0 && in.index + 1 == options.frame) {  // the belief the frame arrives on
-                      before_mass = as_double(in.belief->position_marginal());
-                      before_ou = in.origin_u;
-                      before_ov = in.origin_v;
-                      return;
-                    }
-                    if (in.index != options.frame) return;
-                    bw = in.belief->width();
-                    bh = in.belief->height();
-                    ou = in.origin_u;
-                    ov = in.origin_v;
-                    belief_mass = as_double(in.belief->position_marginal());
-                    place_frame(*in.frame, in.crop);
-                  }).poses;
-      poses_shown = &run_poses;
+  const int bw = scene.width, bh = scene.height, factor = bw <= 400 ? 2 : 1;
+  auto window_map = [&](std::int64_t at_u, std::int64_t at_v) {
+    std::vector<std::uint8_t> classes;
+    cache.read_classes(at_u, at_v, bw, bh, classes, /*fill_outside=*/true);
+    Picture base = map_picture(classes, bw, bh);
+    return to_mat(base).clone();
+  };
+  auto panel = [&](const cv::Mat& map, const std::vector<double>& mass, const std::string& title, std::int64_t at_u,
+                   std::int64_t at_v, std::size_t index) {
+    cv::Mat m = map.clone();
+    overlay_mass(m, mass);
+    m = upscale(m, factor);
+    if (const auto& truth = route.frames[index].truth) {
+      const auto g = projection.forward(truth->where);
+      const cv::Point2d p(grid.region_u(g.x_m), grid.region_v(g.y_m));
+      star(m, {(p.x - static_cast<double>(at_u) + 0.5) * factor, (p.y - static_cast<double>(at_v) + 0.5) * factor}, 11);
     }
-    const int factor = bw <= 400 ? 2 : 1;
-    // The map of the window whose corner is (at_u, at_v), read once per window.
-    auto window_map = [&](std::int64_t at_u, std::int64_t at_v) {
-      std::vector<std::uint8_t> classes;
-      cache.read_classes(at_u, at_v, bw, bh, classes, /*fill_outside=*/true);
-      Picture base = map_picture(classes, bw, bh);
-      return to_mat(base).clone();
-    };
-    // A panel: `mass` over that map, and frame `index`'s truth.
-    auto panel = [&](const cv::Mat& map, const std::vector<double>& mass, const std::string& title, std::int64_t at_u,
-                     std::int64_t at_v, std::size_t index) {
-      cv::Mat m = map.clone();
-      overlay_mass(m, mass);
-      m = upscale(m, factor);
-      const auto& f = route.frames[index];
-      if (f.truth) {
-        const auto g = projection.forward(f.truth->where);
-        const auto p = pixel_of(g.x_m, g.y_m);
-        star(m, {(p.x - static_cast<double>(at_u) + 0.5) * factor, (p.y - static_cast<double>(at_v) + 0.5) * factor}, 11);
-      }
-      cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
-      m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
-      text(framed, title, cv::Point(6, 20), 0.5);
-      return framed;
-    };
-    auto error_text = [&](std::size_t index) {
-      if (!poses_shown) return std::string();
-      const FramePose& p = poses_shown->at(index);
-      return p.position_error_m ? ", error " + fmt(*p.position_error_m, 1) + " m" : std::string();
-    };
-    // Before (the belief frame K arrives on, when K > 0), the frame's own likelihood, after.
-    const cv::Mat map = window_map(ou, ov);
-    std::vector<cv::Mat> panels;
-    if (!before_mass.empty()) {
-      const bool moved = before_ou != ou || before_ov != ov;  // the window re-centred for frame K
-      panels.push_back(panel(moved ? window_map(before_ou, before_ov) : map, before_mass,
-                             "SeqLoc belief after frame " + std::to_string(options.frame - 1) +
-                                 error_text(options.frame - 1),
-                             before_ou, before_ov, options.frame - 1));
-    }
-    panels.push_back(panel(map, frame_mass, "frame " + std::to_string(options.frame) + ": its own likelihood (entropy " + fmt(entropy, 3) + ")",
-                           ou, ov, options.frame));
-    panels.push_back(panel(map, belief_mass, "SeqLoc belief after frame " + std::to_string(options.frame) + error_text(options.frame),
-                           ou, ov, options.frame));
-    int width = 0;
-    for (const auto& p : panels) width += p.cols + 10;
-    cv::Mat row(panels.front().rows, width - 10, CV_8UC3, rgb(255, 255, 255));
-    int x = 0;
-    for (const auto& p : panels) {
-      p.copyTo(row(cv::Rect(x, 0, p.cols, p.rows)));
-      x += p.cols + 10;
-    }
-    written.push_back(out_dir / ("likelihood_" + std::to_string(options.frame) + ".png"));
-    write_picture(written.back(), from_mat(row));
-  }
-
-  // 2. The route coloured by the normalized entropy of each frame (SeqLoc's run, else any).
-  const std::vector<FramePose>* poses = nullptr;
-  for (const auto& [mode, p] : poses_by_mode) {
-    if (mode == "seqloc" || !poses) poses = &p;
-  }
-  if (poses && !truth.empty() && poses->size() == route.frames.size()) {
-    double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
-    for (const auto& p : truth) u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
-    const double margin = 60 / kCellM;
-    const auto wu0 = static_cast<std::int64_t>(u0 - margin), wv0 = static_cast<std::int64_t>(v0 - margin);
-    const int ww = static_cast<int>(u1 - u0 + 2 * margin), wh = static_cast<int>(v1 - v0 + 2 * margin);
-    const int down = std::max(1, static_cast<int>(std::ceil(std::max(ww, wh) / 1400.0)));
-    cv::Mat m;
-    if (static_cast<long long>(ww) * wh <= 64LL << 20) {
-      std::vector<std::uint8_t> classes;
-      cache.read_classes(wu0, wv0, ww, wh, classes, true);
-      Picture base = map_picture(classes, ww, wh);
-      cv::resize(to_mat(base), m, cv::Size(ww / down, wh / down), 0, 0, cv::INTER_AREA);
-    } else {
-      m = cv::Mat(wh / down, ww / down, CV_8UC3, rgb(255, 255, 255));
-    }
-    auto at = [&](cv::Point2d p) {
-      return cv::Point(static_cast<int>((p.x - static_cast<double>(wu0)) / down), static_cast<int>((p.y - static_cast<double>(wv0)) / down));
-    };
-    for (std::size_t i = 1; i < truth.size(); ++i) cv::line(m, at(truth[i - 1]), at(truth[i]), rgb(60, 60, 60), 1, cv::LINE_AA);
-    for (std::size_t i = 0; i < truth.size() && i < poses->size(); ++i) {
-      cv::circle(m, at(truth[i]), 5, viridis((*poses)[i].entropy), cv::FILLED, cv::LINE_AA);
-    }
-    // Colour bar.
-    cv::Mat framed(m.rows + 70, std::max(m.cols, 420), CV_8UC3, rgb(255, 255, 255));
+    cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
     m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
-    text(framed, route.name + ": frames coloured by normalized entropy of their likelihood", cv::Point(6, 20), 0.5);
-    for (int i = 0; i < 300; ++i) cv::line(framed, cv::Point(60 + i, m.rows + 40), cv::Point(60 + i, m.rows + 55), viridis(i / 299.0));
-    double lo = 1, hi = 0;
-    for (const auto& p : *poses) lo = std::min(lo, p.entropy), hi = std::max(hi, p.entropy);
-    text(framed, "0", cv::Point(45, m.rows + 53), 0.4);
-    text(framed, "1", cv::Point(365, m.rows + 53), 0.4);
-    text(framed, "range in this route: " + fmt(lo, 3) + " .. " + fmt(hi, 3), cv::Point(60, m.rows + 68), 0.4);
-    written.push_back(out_dir / "entropy_route.png");
-    write_picture(written.back(), from_mat(framed));
+    text(framed, title, cv::Point(6, 20), 0.5);
+    return framed;
+  };
+  auto belief_title = [&](std::size_t index) {
+    std::string title = "SeqLoc belief after frame " + std::to_string(index);
+    if (index < scene.poses.size() && scene.poses[index].position_error_m) {
+      title += ", error " + fmt(*scene.poses[index].position_error_m, 1) + " m";
+    }
+    return title;
+  };
+  const cv::Mat map = window_map(scene.origin_u, scene.origin_v);
+  std::vector<cv::Mat> panels;
+  if (!scene.before_mass.empty()) {
+    const bool moved = scene.before_u != scene.origin_u || scene.before_v != scene.origin_v;  // re-centred for K
+    panels.push_back(panel(moved ? window_map(scene.before_u, scene.before_v) : map, scene.before_mass,
+                           belief_title(k - 1), scene.before_u, scene.before_v, k - 1));
   }
+  panels.push_back(panel(map, scene.frame_mass,
+                         "frame " + std::to_string(k) + ": its own likelihood (entropy " + fmt(scene.entropy, 3) + ")",
+                         scene.origin_u, scene.origin_v, k));
+  panels.push_back(panel(map, scene.belief_mass, belief_title(k), scene.origin_u, scene.origin_v, k));
+  int width = 0;
+  for (const auto& p : panels) width += p.cols + 10;
+  cv::Mat row(panels.front().rows, width - 10, CV_8UC3, rgb(255, 255, 255));
+  int x = 0;
+  for (const auto& p : panels) {
+    p.copyTo(row(cv::Rect(x, 0, p.cols, p.rows)));
+    x += p.cols + 10;
+  }
+  return from_mat(row);
+}
 
-  // 3. Position error over time, one line per mode.
+// The route's truth coloured by the normalized entropy of each frame, over the map around it.
+Picture entropy_route_figure(raster::CacheReader& cache, const Route& route, const std::vector<cv::Point2d>& truth,
+                             const std::vector<FramePose>& poses) {
+  double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
+  for (const auto& p : truth)
+    u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
+  const double margin = 60 / kCellM;
+  const auto wu0 = static_cast<std::int64_t>(u0 - margin), wv0 = static_cast<std::int64_t>(v0 - margin);
+  const int ww = static_cast<int>(u1 - u0 + 2 * margin), wh = static_cast<int>(v1 - v0 + 2 * margin);
+  const int down = std::max(1, static_cast<int>(std::ceil(std::max(ww, wh) / 1400.0)));
+  cv::Mat m;
+  if (static_cast<long long>(ww) * wh <= 64LL << 20) {
+    std::vector<std::uint8_t> classes;
+    cache.read_classes(wu0, wv0, ww, wh, classes, true);
+    Picture base = map_picture(classes, ww, wh);
+    cv::resize(to_mat(base), m, cv::Size(ww / down, wh / down), 0, 0, cv::INTER_AREA);
+  } else {
+    m = cv::Mat(wh / down, ww / down, CV_8UC3, rgb(255, 255, 255));
+  }
+  auto at = [&](cv::Point2d p) {
+    return cv::Point(static_cast<int>((p.x - static_cast<double>(wu0)) / down),
+                     static_cast<int>((p.y - static_cast<double>(wv0)) / down));
+  };
+  for (std::size_t i = 1; i < truth.size(); ++i)
+    cv::line(m, at(truth[i - 1]), at(truth[i]), rgb(60, 60, 60), 1, cv::LINE_AA);
+  for (std::size_t i = 0; i < truth.size() && i < poses.size(); ++i) {
+    cv::circle(m, at(truth[i]), 5, viridis(poses[i].entropy), cv::FILLED, cv::LINE_AA);
+  }
+  // Colour bar.
+  cv::Mat framed(m.rows + 70, std::max(m.cols, 420), CV_8UC3, rgb(255, 255, 255));
+  m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
+  text(framed, route.name + ": frames coloured by normalized entropy of their likelihood", cv::Point(6, 20), 0.5);
+  for (int i = 0; i < 300; ++i)
+    cv::line(framed, cv::Point(60 + i, m.rows + 40), cv::Point(60 + i, m.rows + 55), viridis(i / 299.0));
+  double lo = 1, hi = 0;
+  for (const auto& p : poses) lo = std::min(lo, p.entropy), hi = std::max(hi, p.entropy);
+  text(framed, "0", cv::Point(45, m.rows + 53), 0.4);
+  text(framed, "1", cv::Point(365, m.rows + 53), 0.4);
+  text(framed, "range in this route: " + fmt(lo, 3) + " .. " + fmt(hi, 3), cv::Point(60, m.rows + 68), 0.4);
+  return from_mat(framed);
+}
+
+// Position error over time, one line per mode (none when no mode has ground truth).
+std::vector<Series> error_series(const PosesByMode& poses_by_mode) {
   std::vector<Series> series;
   for (const auto& [mode, p] : poses_by_mode) {
     Series s{mode, {}, {}, false};
@@ -432,10 +433,50 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
     }
     if (!s.x.empty()) series.push_back(std::move(s));
   }
-  if (!series.empty()) {
+  return series;
+}
+
+}  // namespace
+
+std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, const Route& route,
+                                                const PosesByMode& poses_by_mode, const RenderOptions& options,
+                                                const std::filesystem::path& out_dir) {
+  if (options.frame >= route.frames.size()) {
+    throw UsageError("render: frame " + std::to_string(options.frame) + " of route '" + route.name + "', which has " +
+                     std::to_string(route.frames.size()) + " frames");
+  }
+  std::filesystem::create_directories(out_dir);
+  std::vector<std::filesystem::path> written;
+
+  // 1. The SeqLoc belief before and after the frame, from what localize kept (beliefs.npy) or by
+  // running SeqLoc up to the frame, and the frame's own likelihood.
+  const bool kept = !options.beliefs_dir.empty() && std::filesystem::exists(options.beliefs_dir / "beliefs.npy");
+  const FrameScene scene =
+      kept ? scene_from_kept(cache, route, poses_by_mode, options) : scene_by_running(cache, route, options);
+  written.push_back(out_dir / ("likelihood_" + std::to_string(options.frame) + ".png"));
+  write_picture(written.back(), likelihood_figure(cache, route, scene, options.frame));
+
+  // 2. The route coloured by the normalized entropy of each frame (SeqLoc's run, else any).
+  const std::vector<FramePose>* poses = nullptr;
+  for (const auto& [mode, p] : poses_by_mode) {
+    if (mode == "seqloc" || !poses) poses = &p;
+  }
+  std::vector<cv::Point2d> truth;  // region pixels
+  for (const auto& f : route.frames) {
+    if (!f.truth) continue;
+    const auto g = cache.metadata().projection().forward(f.truth->where);
+    truth.emplace_back(cache.grid().region_u(g.x_m), cache.grid().region_v(g.y_m));
+  }
+  if (poses && !truth.empty() && poses->size() == route.frames.size()) {
+    written.push_back(out_dir / "entropy_route.png");
+    write_picture(written.back(), entropy_route_figure(cache, route, truth, *poses));
+  }
+
+  // 3. Position error over time, one line per mode.
+  if (const auto series = error_series(poses_by_mode); !series.empty()) {
     written.push_back(out_dir / "error_over_time.png");
-    write_picture(written.back(), plot(series, route.name + ": position error per frame (clipped at 50 m)", "frame",
-                                       "error (m)", 50));
+    write_picture(written.back(),
+                  plot(series, route.name + ": position error per frame (clipped at 50 m)", "frame", "error (m)", 50));
   }
   return written;
 }
