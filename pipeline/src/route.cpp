@@ -67,14 +67,18 @@ void RouteLimits::validate() const {
   if (!(max_yaw_deg > 0 && max_yaw_deg <= 360)) fail("max_yaw_deg", max_yaw_deg, "must be in (0, 360]");
 }
 
-Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
-  limits.validate();
-  Route route;
-  route.dir = dir;
-  std::error_code ec;
-  if (!std::filesystem::is_directory(dir, ec)) throw DataError(dir.string() + ": not a route directory");
+namespace {
 
-  // route.json
+// Throws DataError naming the file and the line.
+struct LineError {
+  std::filesystem::path file;
+  [[noreturn]] void operator()(int line, const std::string& what) const {
+    throw DataError(file.string() + ":" + std::to_string(line) + ": " + what);
+  }
+};
+
+// route.json: the route's name, volume kind, layout and cell size into `route`.
+void read_route_json(const std::filesystem::path& dir, Route& route) {
   const auto json_path = dir / "route.json";
   std::ifstream json_in(json_path);
   if (!json_in) throw DataError(json_path.string() + ": missing (every route directory has route.json)");
@@ -88,8 +92,8 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
   if (!meta.is_object()) meta_fail("not a JSON object");
   // Unknown keys are errors: a misspelt "volume_knd" would otherwise be read as the default.
   // "simulated" is the provenance `seqloc simulate` records (read by no one, kept for people).
-  static const std::set<std::string> kKnownKeys{"format", "version", "name", "volume_kind", "cell_m", "layout",
-                                                "simulated"};
+  static const std::set<std::string> kKnownKeys{"format", "version", "name",     "volume_kind",
+                                                "cell_m", "layout",  "simulated"};
   for (const auto& [key, value] : meta.items()) {
     if (!kKnownKeys.count(key)) {
       meta_fail("unknown key \"" + key + "\" (known: format, version, name, volume_kind, cell_m, layout, simulated)");
@@ -129,122 +133,152 @@ Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
     route.cell_m = meta["cell_m"].get<double>();
   }
   if (meta.contains("simulated")) route.simulated_json = meta["simulated"].dump();
+}
 
-  // frames.csv
+using Columns = std::map<std::string, std::size_t>;
+
+// frames.csv's header: each column's index, checked for what a route needs.
+Columns read_header(const std::vector<std::string>& fields, int line, const LineError& fail) {
+  Columns column;
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    if (!known_columns().count(fields[i])) fail(line, "unknown column '" + fields[i] + "'");
+    if (column.count(fields[i])) fail(line, "column '" + fields[i] + "' appears twice");
+    column[fields[i]] = i;
+  }
+  auto need = [&](std::initializer_list<const char*> all, const char* what) {
+    for (const char* c : all) {
+      if (!column.count(c)) fail(line, std::string("missing column '") + c + "' (" + what + ")");
+    }
+  };
+  need({"frame", "timestamp", "odo_forward_m", "odo_left_m", "odo_yaw_deg"}, "required");
+  if (column.count("volume") == column.count("observation")) {
+    fail(line, "exactly one of the columns 'volume' and 'observation' is needed");
+  }
+  const bool geo = column.count("crop_lat") || column.count("crop_lon");
+  const bool grid = column.count("crop_x") || column.count("crop_y");
+  if (geo == grid) fail(line, "the crop needs either 'crop_lat, crop_lon' or 'crop_x, crop_y'");
+  if (geo) need({"crop_lat", "crop_lon"}, "crop as lat/lon");
+  if (grid) need({"crop_x", "crop_y"}, "crop in grid coordinates");
+  if (column.count("gps_lat") || column.count("gps_lon") || column.count("gps_sigma_m")) {
+    need({"gps_lat", "gps_lon", "gps_sigma_m"}, "GPS prior");
+  }
+  if (column.count("gt_lat") || column.count("gt_lon") || column.count("gt_heading_deg")) {
+    need({"gt_lat", "gt_lon"}, "ground truth");
+  }
+  return column;
+}
+
+// One row of frames.csv (as many fields as the header) into a frame; its file must exist.
+RouteFrame read_frame_row(const std::vector<std::string>& fields, const Columns& column, int line,
+                          const std::filesystem::path& dir, const LineError& fail) {
+  auto field = [&](const char* name) -> const std::string& { return fields[column.at(name)]; };
+  auto has = [&](const char* name) { return column.count(name) && !fields[column.at(name)].empty(); };
+  auto number = [&](const char* name) {
+    const std::string& s = field(name);
+    double value = 0;
+    const auto [end, error] = std::from_chars(s.data(), s.data() + s.size(), value);
+    if (s.empty() || error != std::errc() || end != s.data() + s.size() || !std::isfinite(value)) {
+      fail(line, std::string(name) + " '" + s + "' is not a finite number");
+    }
+    return value;
+  };
+  RouteFrame f;
+  f.line = line;
+  f.frame = field("frame");
+  if (f.frame.empty()) fail(line, "empty frame id");
+  f.timestamp_s = number("timestamp");
+  const char* data_column = column.count("volume") ? "volume" : "observation";
+  const std::string& relative = field(data_column);
+  if (relative.empty()) fail(line, std::string("empty ") + data_column + " path");
+  const auto absolute =
+      std::filesystem::path(relative).is_absolute() ? std::filesystem::path(relative) : dir / relative;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(absolute, ec)) {
+    fail(line, std::string(data_column) + " '" + relative + "' does not exist");
+  }
+  (column.count("volume") ? f.volume : f.observation) = absolute;
+  if (column.count("crop_lat")) {
+    f.crop_geo = osm::GeoPoint{number("crop_lat"), number("crop_lon")};
+    if (std::abs(f.crop_geo->lat_deg) > 90 || std::abs(f.crop_geo->lon_deg) > 180) {
+      fail(line, "crop_lat/crop_lon outside [-90, 90] x [-180, 180]");
+    }
+  } else {
+    f.crop_grid = osm::GridPoint{number("crop_x"), number("crop_y")};
+  }
+  f.odometry = {number("odo_forward_m"), number("odo_left_m"), number("odo_yaw_deg")};
+  if (has("gps_lat") || has("gps_lon") || has("gps_sigma_m")) {
+    f.gps = GpsPrior{{number("gps_lat"), number("gps_lon")}, number("gps_sigma_m")};
+    if (!(f.gps->sigma_m > 0)) fail(line, "gps_sigma_m must be > 0");
+  }
+  if (has("gt_lat") || has("gt_lon")) {
+    f.truth = GroundTruth{{number("gt_lat"), number("gt_lon")}, std::nullopt};
+    if (has("gt_heading_deg")) f.truth->heading_deg = number("gt_heading_deg");
+  }
+  return f;
+}
+
+// The motion from the previous frame (none for the first): later in time, within the limits.
+void check_motion(const RouteFrame* previous, const RouteFrame& f, const std::string& timestamp,
+                  const RouteLimits& limits, const LineError& fail) {
+  if (!previous) {
+    if (f.odometry.forward_m != 0 || f.odometry.left_m != 0 || f.odometry.yaw_deg != 0) {
+      fail(f.line, "the first frame's odometry must be 0 (it is the motion from the previous frame)");
+    }
+    return;
+  }
+  const double dt = f.timestamp_s - previous->timestamp_s;
+  if (!(dt > 0)) {
+    fail(f.line, "timestamp " + timestamp + " does not come after the previous frame's (line " +
+                     std::to_string(previous->line) + ")");
+  }
+  const double step = std::hypot(f.odometry.forward_m, f.odometry.left_m);
+  std::ostringstream why;
+  if (step > limits.max_step_m) {
+    why << "odometry step of " << step << " m exceeds the limit of " << limits.max_step_m << " m";
+  } else if (step / dt > limits.max_speed_mps) {
+    why << "odometry step of " << step << " m in " << dt << " s is " << step / dt << " m/s, above the limit of "
+        << limits.max_speed_mps << " m/s";
+  } else if (std::abs(f.odometry.yaw_deg) > limits.max_yaw_deg) {
+    why << "odometry yaw of " << f.odometry.yaw_deg << " degrees exceeds the limit of " << limits.max_yaw_deg;
+  }
+  if (!why.str().empty()) fail(f.line, why.str());
+}
+
+}  // namespace
+
+Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
+  limits.validate();
+  Route route;
+  route.dir = dir;
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) throw DataError(dir.string() + ": not a route directory");
+  read_route_json(dir, route);
+
   const auto csv_path = dir / "frames.csv";
   std::ifstream csv(csv_path);
   if (!csv) throw DataError(csv_path.string() + ": missing (every route directory has frames.csv)");
-  auto fail = [&](int line, const std::string& what) {
-    throw DataError(csv_path.string() + ":" + std::to_string(line) + ": " + what);
-  };
+  const LineError fail{csv_path};
   std::string text;
   int line = 0;
-  std::map<std::string, std::size_t> column;
-  std::vector<std::string> names;
+  Columns column;
   while (std::getline(csv, text)) {
     ++line;
     if (!text.empty() && text.back() == '\r') text.pop_back();
     if (line == 1 && text.rfind("\xEF\xBB\xBF", 0) == 0) text.erase(0, 3);  // UTF-8 BOM
-    if (text.find_first_not_of(" \t") == std::string::npos) continue;  // blank line
+    if (text.find_first_not_of(" \t") == std::string::npos) continue;       // blank line
     bool ok = true;
-    auto fields = split_csv(text, ok);
+    const auto fields = split_csv(text, ok);
     if (!ok) fail(line, "unterminated quoted field");
     if (column.empty()) {
-      for (std::size_t i = 0; i < fields.size(); ++i) {
-        if (!known_columns().count(fields[i])) fail(line, "unknown column '" + fields[i] + "'");
-        if (column.count(fields[i])) fail(line, "column '" + fields[i] + "' appears twice");
-        column[fields[i]] = i;
-      }
-      names = fields;
-      auto need = [&](std::initializer_list<const char*> all, const char* what) {
-        for (const char* c : all) {
-          if (!column.count(c)) fail(line, std::string("missing column '") + c + "' (" + what + ")");
-        }
-      };
-      need({"frame", "timestamp", "odo_forward_m", "odo_left_m", "odo_yaw_deg"}, "required");
-      if (column.count("volume") == column.count("observation")) {
-        fail(line, "exactly one of the columns 'volume' and 'observation' is needed");
-      }
-      const bool geo = column.count("crop_lat") || column.count("crop_lon");
-      const bool grid = column.count("crop_x") || column.count("crop_y");
-      if (geo == grid) fail(line, "the crop needs either 'crop_lat, crop_lon' or 'crop_x, crop_y'");
-      if (geo) need({"crop_lat", "crop_lon"}, "crop as lat/lon");
-      if (grid) need({"crop_x", "crop_y"}, "crop in grid coordinates");
-      if (column.count("gps_lat") || column.count("gps_lon") || column.count("gps_sigma_m")) {
-        need({"gps_lat", "gps_lon", "gps_sigma_m"}, "GPS prior");
-      }
-      if (column.count("gt_lat") || column.count("gt_lon") || column.count("gt_heading_deg")) {
-        need({"gt_lat", "gt_lon"}, "ground truth");
-      }
+      column = read_header(fields, line, fail);
       continue;
     }
-    if (fields.size() != names.size()) {
-      fail(line, std::to_string(fields.size()) + " fields, but the header has " + std::to_string(names.size()));
+    if (fields.size() != column.size()) {
+      fail(line, std::to_string(fields.size()) + " fields, but the header has " + std::to_string(column.size()));
     }
-    auto field = [&](const char* name) -> const std::string& { return fields[column.at(name)]; };
-    auto has = [&](const char* name) { return column.count(name) && !fields[column.at(name)].empty(); };
-    auto number = [&](const char* name) {
-      const std::string& s = field(name);
-      double value = 0;
-      const auto [end, error] = std::from_chars(s.data(), s.data() + s.size(), value);
-      if (s.empty() || error != std::errc() || end != s.data() + s.size() || !std::isfinite(value)) {
-        fail(line, std::string(name) + " '" + s + "' is not a finite number");
-      }
-      return value;
-    };
-    RouteFrame f;
-    f.line = line;
-    f.frame = field("frame");
-    if (f.frame.empty()) fail(line, "empty frame id");
-    f.timestamp_s = number("timestamp");
-    const char* data_column = column.count("volume") ? "volume" : "observation";
-    const std::string& relative = field(data_column);
-    if (relative.empty()) fail(line, std::string("empty ") + data_column + " path");
-    const auto absolute = std::filesystem::path(relative).is_absolute() ? std::filesystem::path(relative) : dir / relative;
-    if (!std::filesystem::is_regular_file(absolute, ec)) {
-      fail(line, std::string(data_column) + " '" + relative + "' does not exist");
-    }
-    (column.count("volume") ? f.volume : f.observation) = absolute;
-    if (column.count("crop_lat")) {
-      f.crop_geo = osm::GeoPoint{number("crop_lat"), number("crop_lon")};
-      if (std::abs(f.crop_geo->lat_deg) > 90 || std::abs(f.crop_geo->lon_deg) > 180) {
-        fail(line, "crop_lat/crop_lon outside [-90, 90] x [-180, 180]");
-      }
-    } else {
-      f.crop_grid = osm::GridPoint{number("crop_x"), number("crop_y")};
-    }
-    f.odometry = {number("odo_forward_m"), number("odo_left_m"), number("odo_yaw_deg")};
-    if (has("gps_lat") || has("gps_lon") || has("gps_sigma_m")) {
-      f.gps = GpsPrior{{number("gps_lat"), number("gps_lon")}, number("gps_sigma_m")};
-      if (!(f.gps->sigma_m > 0)) fail(line, "gps_sigma_m must be > 0");
-    }
-    if (has("gt_lat") || has("gt_lon")) {
-      f.truth = GroundTruth{{number("gt_lat"), number("gt_lon")}, std::nullopt};
-      if (has("gt_heading_deg")) f.truth->heading_deg = number("gt_heading_deg");
-    }
-    if (route.frames.empty()) {
-      if (f.odometry.forward_m != 0 || f.odometry.left_m != 0 || f.odometry.yaw_deg != 0) {
-        fail(line, "the first frame's odometry must be 0 (it is the motion from the previous frame)");
-      }
-    } else {
-      const RouteFrame& previous = route.frames.back();
-      const double dt = f.timestamp_s - previous.timestamp_s;
-      if (!(dt > 0)) {
-        fail(line, "timestamp " + field("timestamp") + " does not come after the previous frame's (line " +
-                       std::to_string(previous.line) + ")");
-      }
-      const double step = std::hypot(f.odometry.forward_m, f.odometry.left_m);
-      std::ostringstream why;
-      if (step > limits.max_step_m) {
-        why << "odometry step of " << step << " m exceeds the limit of " << limits.max_step_m << " m";
-      } else if (step / dt > limits.max_speed_mps) {
-        why << "odometry step of " << step << " m in " << dt << " s is " << step / dt << " m/s, above the limit of "
-            << limits.max_speed_mps << " m/s";
-      } else if (std::abs(f.odometry.yaw_deg) > limits.max_yaw_deg) {
-        why << "odometry yaw of " << f.odometry.yaw_deg << " degrees exceeds the limit of " << limits.max_yaw_deg;
-      }
-      if (!why.str().empty()) fail(line, why.str());
-    }
+    RouteFrame f = read_frame_row(fields, column, line, dir, fail);
+    check_motion(route.frames.empty() ? nullptr : &route.frames.back(), f, fields[column.at("timestamp")], limits,
+                 fail);
     route.frames.push_back(std::move(f));
   }
   if (column.empty()) throw DataError(csv_path.string() + ": empty (a header row and one row per frame are needed)");
