@@ -103,8 +103,10 @@ std::filesystem::path staging_directory(const std::filesystem::path& target) {
   return staged;
 }
 
-void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r) {
-  // poses.csv
+namespace {
+
+// poses.csv: one row per frame (docs/localize.md "Outputs").
+std::string poses_csv(const RouteResult& r) {
   std::ostringstream csv;
   csv << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,volume_power,relocalized,position_error_m,"
          "heading_error_deg,lateral_error_m,longitudinal_error_m\n";
@@ -117,12 +119,15 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
         << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
         << optional_number(p.longitudinal_error_m, 4) << "\n";
   }
-  write_file(dir / "poses.csv", csv.str());
+  return csv.str();
+}
 
-  // trajectory.tum and groundtruth.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw
-  // counter-clockwise from the grid's x axis (east): 90 degrees minus the grid heading. The ground
-  // truth has the frames whose truth has a position and a heading, at the same timestamps, so
-  // that `evo_ape tum groundtruth.tum trajectory.tum` needs no projection or association step.
+// trajectory.tum and groundtruth.tum: timestamp x y z qx qy qz qw in the region CRS, the yaw
+// counter-clockwise from the grid's x axis (east): 90 degrees minus the grid heading. The ground
+// truth has the frames whose truth has a position and a heading, at the same timestamps, so
+// that `evo_ape tum groundtruth.tum trajectory.tum` needs no projection or association step.
+std::pair<std::string, std::string> tum_trajectories(const RouteResult& r) {
+  char line[256];
   const auto tum_line = [&line](double t, double x, double y, double grid_heading_deg) {
     const double yaw = (90.0 - grid_heading_deg) * M_PI / 180.0;
     std::snprintf(line, sizeof line, "%.6f %.4f %.4f 0 0 0 %.9f %.9f\n", t, x, y, std::sin(yaw / 2),
@@ -136,11 +141,12 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
       truth_tum << tum_line(p.timestamp_s, p.truth->x_m, p.truth->y_m, *p.truth->grid_heading_deg);
     }
   }
-  write_file(dir / "trajectory.tum", tum.str());
-  if (!truth_tum.str().empty()) write_file(dir / "groundtruth.tum", truth_tum.str());
+  return {tum.str(), truth_tum.str()};
+}
 
-  // track.geojson (RFC 7946: WGS84, [lon, lat]): the estimated track, the ground-truth track when
-  // the route has one, and a point per frame with its values and errors.
+// track.geojson (RFC 7946: WGS84, [lon, lat]): the estimated track, the ground-truth track when
+// the route has one, and a point per frame with its values and errors.
+nlohmann::ordered_json track_geojson(const RouteResult& r) {
   nlohmann::ordered_json features = nlohmann::json::array();
   nlohmann::json coordinates = nlohmann::json::array(), truth_coordinates = nlohmann::json::array();
   for (const auto& p : r.poses) {
@@ -169,9 +175,11 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
                         {"geometry", {{"type", "Point"}, {"coordinates", {p.lon_deg, p.lat_deg}}}},
                         {"properties", props}});
   }
-  const nlohmann::ordered_json track = {{"type", "FeatureCollection"}, {"features", features}};
-  write_file(dir / "track.geojson", track.dump(-1, ' ', false, kReplaceInvalidUtf8) + "\n");
+  return {{"type", "FeatureCollection"}, {"features", features}};
+}
 
+// metrics.json: the route's recall and errors, the lag, and self-calibration's estimate.
+nlohmann::ordered_json route_metrics(const RouteResult& r) {
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   if (r.lag > 0) metrics["lag"] = r.lag;
   metrics.update(metrics_json(compute_metrics(r.poses)));
@@ -183,8 +191,18 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
     std::nth_element(powers.begin(), powers.begin() + static_cast<std::ptrdiff_t>(powers.size() / 2), powers.end());
     metrics["volume_power"] = {{"last", r.poses.back().volume_power}, {"median", powers[powers.size() / 2]}};
   }
-  write_file(dir / "metrics.json", metrics.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
+  return metrics;
+}
 
+}  // namespace
+
+void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r) {
+  write_file(dir / "poses.csv", poses_csv(r));
+  const auto [tum, truth_tum] = tum_trajectories(r);
+  write_file(dir / "trajectory.tum", tum);
+  if (!truth_tum.empty()) write_file(dir / "groundtruth.tum", truth_tum);
+  write_file(dir / "track.geojson", track_geojson(r).dump(-1, ' ', false, kReplaceInvalidUtf8) + "\n");
+  write_file(dir / "metrics.json", route_metrics(r).dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
   if (!r.beliefs.empty()) {
     const auto frames = static_cast<int>(r.belief_origins.size());
     write_file(dir / "beliefs.npy", encode_npy_float32(frames, r.belief_height, r.belief_width, r.beliefs.data()));
