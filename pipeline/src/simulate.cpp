@@ -271,44 +271,118 @@ Observation render_observation(raster::CacheReader& cache, const GridPose& pose,
   return obs;
 }
 
+namespace {
+
+// A path along the roads of options.frames poses, inside the region by kEdgeMarginM and with no
+// turn between frames sharper than odometry's plausibility limit. Throws after kAttempts tries.
+std::vector<GridPose> drive(const RoadGraph& graph, raster::CacheReader& cache, const SimulateOptions& options,
+                            std::mt19937_64& rng) {
+  const auto& grid = cache.grid();
+  auto inside = [&](const GridPose& p) {
+    return p.x > grid.min_x() + kEdgeMarginM && p.x < grid.max_x() - kEdgeMarginM && p.y > grid.min_y() + kEdgeMarginM &&
+           p.y < grid.max_y() - kEdgeMarginM;
+  };
+  const double length = options.frames * options.max_spacing_m + 10;
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    const auto path = walk(graph, length, rng);
+    if (path.empty()) continue;
+    auto poses = sample_poses(graph, path, options, rng);
+    bool ok = static_cast<int>(poses.size()) >= options.frames && std::all_of(poses.begin(), poses.end(), inside);
+    for (std::size_t i = 1; ok && i < poses.size(); ++i) {
+      ok = std::abs(wrap180(poses[i].heading_deg - poses[i - 1].heading_deg)) <= kMaxTurnDeg;
+    }
+    if (ok) return poses;
+  }
+  std::ostringstream s;
+  s << cache.path().string() << ": no road path of " << options.frames << " frames (about "
+    << std::lround(options.frames * (options.min_spacing_m + options.max_spacing_m) / 2)
+    << " m without dead ends or U-turns) found inside the region in " << kAttempts << " tries";
+  throw DataError(s.str());
+}
+
+// One route being recorded: its poses, the crop centre's error (a bounded random walk) and the clock.
+struct Recording {
+  std::vector<GridPose> poses;
+  double error_x = 0, error_y = 0;
+  double timestamp = 0;
+};
+
+// Frame i of route r: what the camera saw (written under dir/observations), the odometry from
+// frame i - 1, the crop centre off by the GPS error, the truth; recorded as a GPS receiver and an
+// odometer would report them (mm, 1e-4 m and degrees, 1e-9 degrees of lat/lon).
+RouteFrame record_frame(raster::CacheReader& cache, const SimulateOptions& options, int r, std::size_t i,
+                        Recording& rec, const std::filesystem::path& dir) {
+  const GridPose& p = rec.poses[i];
+  std::mt19937_64 rng = noise_stream(options.seed, r, static_cast<std::uint32_t>(i));
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  if (i > 0) {
+    rec.error_x += options.gps_drift_m * normal(rng);
+    rec.error_y += options.gps_drift_m * normal(rng);
+    const double norm = std::hypot(rec.error_x, rec.error_y);
+    if (norm > options.gps_error_m) {
+      rec.error_x *= options.gps_error_m / norm;
+      rec.error_y *= options.gps_error_m / norm;
+    }
+  }
+  // What the camera saw: another place now and then, else here with a small pose error.
+  GridPose seen = p;
+  if (uniform(rng) < options.camera.wrong_frame) {
+    const auto n = rec.poses.size();
+    seen = rec.poses[static_cast<std::size_t>(uniform(rng) * static_cast<double>(n)) % n];
+    seen.x += 60 * (uniform(rng) - 0.5);
+    seen.y += 60 * (uniform(rng) - 0.5);
+    seen.heading_deg = 360 * uniform(rng);
+  } else {
+    seen.x += options.camera.jitter_m * normal(rng);
+    seen.y += options.camera.jitter_m * normal(rng);
+    seen.heading_deg = wrap360(seen.heading_deg + options.camera.jitter_deg * normal(rng));
+  }
+  Observation obs = render_observation(cache, seen, options.camera);
+  corrupt(obs, options.camera, rng);
+  std::ostringstream frame;
+  frame << std::setw(6) << std::setfill('0') << i;
+  write_observation(dir / "observations" / (frame.str() + ".png"), obs);
+
+  double odo_f = 0, odo_l = 0, odo_yaw = 0;
+  if (i > 0) {
+    const GridPose& q = rec.poses[i - 1];
+    const double dx = p.x - q.x, dy = p.y - q.y, th = q.heading_deg * M_PI / 180.0;
+    odo_f = dx * std::sin(th) + dy * std::cos(th);
+    odo_l = -dx * std::cos(th) + dy * std::sin(th);
+    odo_yaw = wrap180(q.heading_deg - p.heading_deg);
+    rec.timestamp += std::hypot(dx, dy) / options.speed_mps;
+  }
+  const auto projection = cache.metadata().projection();
+  double gamma = 0;
+  const osm::GeoPoint truth = projection.reverse({p.x, p.y}, gamma);
+  const osm::GeoPoint fix = projection.reverse({p.x + rec.error_x, p.y + rec.error_y});
+  RouteFrame f;
+  f.frame = frame.str();
+  f.timestamp_s = rounded(rec.timestamp, 3);
+  f.observation = dir / "observations" / (frame.str() + ".png");
+  f.crop_grid = osm::GridPoint{rounded(p.x + rec.error_x, 3), rounded(p.y + rec.error_y, 3)};
+  f.odometry = {rounded(odo_f, 4), rounded(odo_l, 4), rounded(odo_yaw, 4)};
+  if (i == 0) {
+    f.gps = GpsPrior{{rounded(fix.lat_deg, 9), rounded(fix.lon_deg, 9)}, rounded(std::max(1.0, options.gps_error_m), 1)};
+  }
+  f.truth = GroundTruth{{rounded(truth.lat_deg, 9), rounded(truth.lon_deg, 9)}, rounded(wrap360(p.heading_deg + gamma), 4)};
+  return f;
+}
+
+}  // namespace
+
 void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options, const std::filesystem::path& out,
                      const std::function<void(int, int)>& progress) {
   options.validate();
   const RoadGraph graph(cache.roads());
   if (graph.edges.empty()) throw DataError(cache.path().string() + ": the cache has no roads to drive along");
-  const auto& grid = cache.grid();
-  const auto projection = cache.metadata().projection();
-  auto inside = [&](const GridPose& p) {
-    return p.x > grid.min_x() + kEdgeMarginM && p.x < grid.max_x() - kEdgeMarginM && p.y > grid.min_y() + kEdgeMarginM &&
-           p.y < grid.max_y() - kEdgeMarginM;
-  };
   const std::filesystem::path partial = staging_directory(out);
   std::filesystem::create_directories(partial);
-
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  const double length = options.frames * options.max_spacing_m + 10;
   for (int r = 0; r < options.routes; ++r) {
     std::mt19937_64 rng = noise_stream(options.seed, r, kRouteStream);  // the path and the first GPS error
-    std::vector<GridPose> poses;
-    for (int attempt = 0; attempt < kAttempts && poses.empty(); ++attempt) {
-      const auto path = walk(graph, length, rng);
-      if (path.empty()) continue;
-      poses = sample_poses(graph, path, options, rng);
-      // Inside the region, and no turn between frames sharper than odometry's plausibility limit.
-      bool ok = static_cast<int>(poses.size()) >= options.frames && std::all_of(poses.begin(), poses.end(), inside);
-      for (std::size_t i = 1; ok && i < poses.size(); ++i) {
-        ok = std::abs(wrap180(poses[i].heading_deg - poses[i - 1].heading_deg)) <= kMaxTurnDeg;
-      }
-      if (!ok) poses.clear();
-    }
-    if (poses.empty()) {
-      std::ostringstream s;
-      s << cache.path().string() << ": no road path of " << options.frames << " frames (about "
-        << std::lround(options.frames * (options.min_spacing_m + options.max_spacing_m) / 2)
-        << " m without dead ends or U-turns) found inside the region in " << kAttempts << " tries";
-      throw DataError(s.str());
-    }
+    Recording rec{drive(graph, cache, options, rng)};
     std::ostringstream name;
     name << "route_" << std::setw(3) << std::setfill('0') << r;
     const auto dir = partial / name.str();
@@ -322,67 +396,11 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
                                           {"fov_deg", options.camera.fov_deg},
                                           {"gps_error_m", options.gps_error_m}}
                                .dump();
-    // The crop centre's error: uniform in the disc, then a bounded random walk.
+    // The crop centre's error starts uniform in the disc.
     const double a0 = uniform(rng) * 2 * M_PI, r0 = options.gps_error_m * std::sqrt(uniform(rng));
-    double ex = r0 * std::cos(a0), ey = r0 * std::sin(a0);
-    double timestamp = 0;
-    for (std::size_t i = 0; i < poses.size(); ++i) {
-      const GridPose& p = poses[i];
-      std::mt19937_64 frame_rng = noise_stream(options.seed, r, static_cast<std::uint32_t>(i));
-      normal.reset();
-      if (i > 0) {
-        ex += options.gps_drift_m * normal(frame_rng);
-        ey += options.gps_drift_m * normal(frame_rng);
-        const double norm = std::hypot(ex, ey);
-        if (norm > options.gps_error_m) {
-          ex *= options.gps_error_m / norm;
-          ey *= options.gps_error_m / norm;
-        }
-      }
-      // What the camera saw: another place now and then, else here with a small pose error.
-      GridPose seen = p;
-      if (uniform(frame_rng) < options.camera.wrong_frame) {
-        seen = poses[static_cast<std::size_t>(uniform(frame_rng) * static_cast<double>(poses.size())) % poses.size()];
-        seen.x += 60 * (uniform(frame_rng) - 0.5);
-        seen.y += 60 * (uniform(frame_rng) - 0.5);
-        seen.heading_deg = 360 * uniform(frame_rng);
-      } else {
-        seen.x += options.camera.jitter_m * normal(frame_rng);
-        seen.y += options.camera.jitter_m * normal(frame_rng);
-        seen.heading_deg = wrap360(seen.heading_deg + options.camera.jitter_deg * normal(frame_rng));
-      }
-      Observation obs = render_observation(cache, seen, options.camera);
-      corrupt(obs, options.camera, frame_rng);
-      std::ostringstream frame;
-      frame << std::setw(6) << std::setfill('0') << i;
-      write_observation(dir / "observations" / (frame.str() + ".png"), obs);
-
-      double odo_f = 0, odo_l = 0, odo_yaw = 0;
-      if (i > 0) {
-        const GridPose& q = poses[i - 1];
-        const double dx = p.x - q.x, dy = p.y - q.y, th = q.heading_deg * M_PI / 180.0;
-        odo_f = dx * std::sin(th) + dy * std::cos(th);
-        odo_l = -dx * std::cos(th) + dy * std::sin(th);
-        odo_yaw = wrap180(q.heading_deg - p.heading_deg);
-        timestamp += std::hypot(dx, dy) / options.speed_mps;
-      }
-      double gamma = 0;
-      const osm::GeoPoint truth = projection.reverse({p.x, p.y}, gamma);
-      const osm::GeoPoint fix = projection.reverse({p.x + ex, p.y + ey});
-      // Recorded as a GPS receiver and an odometer would report them: mm, 1e-4 m and degrees,
-      // 1e-9 degrees of lat/lon.
-      RouteFrame f;
-      f.frame = frame.str();
-      f.timestamp_s = rounded(timestamp, 3);
-      f.observation = dir / "observations" / (frame.str() + ".png");
-      f.crop_grid = osm::GridPoint{rounded(p.x + ex, 3), rounded(p.y + ey, 3)};
-      f.odometry = {rounded(odo_f, 4), rounded(odo_l, 4), rounded(odo_yaw, 4)};
-      if (i == 0) {
-        f.gps = GpsPrior{{rounded(fix.lat_deg, 9), rounded(fix.lon_deg, 9)}, rounded(std::max(1.0, options.gps_error_m), 1)};
-      }
-      f.truth = GroundTruth{{rounded(truth.lat_deg, 9), rounded(truth.lon_deg, 9)}, rounded(wrap360(p.heading_deg + gamma), 4)};
-      route.frames.push_back(std::move(f));
-    }
+    rec.error_x = r0 * std::cos(a0);
+    rec.error_y = r0 * std::sin(a0);
+    for (std::size_t i = 0; i < rec.poses.size(); ++i) route.frames.push_back(record_frame(cache, options, r, i, rec, dir));
     write_route(route, dir);
     if (progress) progress(r + 1, options.routes);
   }
