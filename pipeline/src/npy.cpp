@@ -119,57 +119,54 @@ class HeaderParser {
 
 }  // namespace
 
-NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
-  const std::string name = path.string();
-  const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw DataError(name + ": cannot open (" + std::strerror(errno) + ")");
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
-    ::close(fd);
-    throw DataError(name + ": not a regular file");
+namespace {
+
+// A file descriptor closed on every way out.
+struct FileDescriptor {
+  int fd;
+  explicit FileDescriptor(int f) : fd(f) {}
+  FileDescriptor(const FileDescriptor&) = delete;
+  FileDescriptor& operator=(const FileDescriptor&) = delete;
+  ~FileDescriptor() {
+    if (fd >= 0) ::close(fd);
   }
-  const auto file_bytes = static_cast<std::uint64_t>(st.st_size);
-  auto fail = [&](const std::string& what) {
-    ::close(fd);
-    throw DataError(name + ": " + what);
-  };
-  // Preamble: magic, version, header length.
+};
+
+// Where the header text lies: after the magic, the version and the header's length.
+struct HeaderSpan {
+  std::uint64_t start = 0, length = 0;
+};
+
+HeaderSpan read_preamble(int fd, std::uint64_t file_bytes, const std::string& name) {
+  auto fail = [&](const std::string& what) { throw DataError(name + ": " + what); };
   unsigned char pre[12] = {};
   const ssize_t got = ::pread(fd, pre, sizeof pre, 0);
   if (got < 10 || std::memcmp(pre, "\x93NUMPY", 6) != 0) fail(file_bytes == 0 ? "empty file" : "not a .npy file");
   const int major = pre[6];
-  std::uint64_t header_len = 0, header_start = 0;
+  HeaderSpan span;
   if (major == 1) {
-    header_len = static_cast<std::uint64_t>(pre[8]) | (static_cast<std::uint64_t>(pre[9]) << 8);
-    header_start = 10;
+    span.length = static_cast<std::uint64_t>(pre[8]) | (static_cast<std::uint64_t>(pre[9]) << 8);
+    span.start = 10;
   } else if (major == 2 || major == 3) {
     if (got < 12) fail("truncated .npy preamble");
-    header_len = static_cast<std::uint64_t>(pre[8]) | (static_cast<std::uint64_t>(pre[9]) << 8) |
-                 (static_cast<std::uint64_t>(pre[10]) << 16) | (static_cast<std::uint64_t>(pre[11]) << 24);
-    header_start = 12;
+    span.length = static_cast<std::uint64_t>(pre[8]) | (static_cast<std::uint64_t>(pre[9]) << 8) |
+                  (static_cast<std::uint64_t>(pre[10]) << 16) | (static_cast<std::uint64_t>(pre[11]) << 24);
+    span.start = 12;
   } else {
     fail(".npy format version " + std::to_string(major) + " is not supported (1, 2 or 3)");
   }
-  if (header_len > (1u << 20) || header_start + header_len > file_bytes) fail("truncated .npy header");
-  std::string text(header_len, '\0');
-  if (::pread(fd, text.data(), header_len, static_cast<off_t>(header_start)) != static_cast<ssize_t>(header_len)) {
-    fail("cannot read the .npy header");
-  }
-  Header h;
-  try {
-    h = HeaderParser(text, name).parse();
-  } catch (const DataError&) {
-    ::close(fd);
-    throw;
-  }
-  std::size_t item = 0;
-  if (h.descr == "<f4") {
-    type_ = filter::VolumeType::float32;
-    item = 4;
-  } else if (h.descr == "<f2") {
-    type_ = filter::VolumeType::float16;
-    item = 2;
-  } else {
+  if (span.length > (1u << 20) || span.start + span.length > file_bytes) fail("truncated .npy header");
+  return span;
+}
+
+// The header's dtype as a volume type and its item size; its shape checked as (H, W, N) within
+// kMaxVolumeCells.
+std::pair<filter::VolumeType, std::size_t> check_header(const Header& h, const std::string& name) {
+  auto fail = [&](const std::string& what) { throw DataError(name + ": " + what); };
+  std::pair<filter::VolumeType, std::size_t> type{filter::VolumeType::float32, 4};
+  if (h.descr == "<f2") {
+    type = {filter::VolumeType::float16, 2};
+  } else if (h.descr != "<f4") {
     fail("dtype '" + h.descr + "' is not supported; volumes are little-endian float32 ('<f4') or float16 ('<f2')");
   }
   if (!h.fortran_order || !h.shape) fail("the header lacks 'fortran_order' or 'shape'");
@@ -188,19 +185,40 @@ NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
     fail("shape (" + std::to_string(shape[0]) + ", " + std::to_string(shape[1]) + ", " + std::to_string(shape[2]) +
          ") exceeds the limit of " + std::to_string(kMaxVolumeCells) + " cells");
   }
+  return type;
+}
+
+}  // namespace
+
+NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
+  const std::string name = path.string();
+  const FileDescriptor file(::open(name.c_str(), O_RDONLY | O_CLOEXEC));
+  if (file.fd < 0) throw DataError(name + ": cannot open (" + std::strerror(errno) + ")");
+  struct stat st {};
+  if (::fstat(file.fd, &st) != 0 || !S_ISREG(st.st_mode)) throw DataError(name + ": not a regular file");
+  const auto file_bytes = static_cast<std::uint64_t>(st.st_size);
+  const HeaderSpan span = read_preamble(file.fd, file_bytes, name);
+  std::string text(span.length, '\0');
+  if (::pread(file.fd, text.data(), span.length, static_cast<off_t>(span.start)) != static_cast<ssize_t>(span.length)) {
+    throw DataError(name + ": cannot read the .npy header");
+  }
+  const Header h = HeaderParser(text, name).parse();
+  const auto [type, item] = check_header(h, name);
+  type_ = type;
+  const auto& shape = *h.shape;
   const std::uint64_t cells = shape[0] * shape[1] * shape[2];
-  const std::uint64_t data_start = header_start + header_len;
+  const std::uint64_t data_start = span.start + span.length;
   const std::uint64_t expected = cells * item;
   if (file_bytes - data_start != expected) {
-    fail("the header's shape needs " + std::to_string(expected) + " bytes of data but the file holds " +
-         std::to_string(file_bytes - data_start) + (file_bytes - data_start < expected ? " (truncated)" : ""));
+    throw DataError(name + ": the header's shape needs " + std::to_string(expected) +
+                    " bytes of data but the file holds " + std::to_string(file_bytes - data_start) +
+                    (file_bytes - data_start < expected ? " (truncated)" : ""));
   }
   height_ = static_cast<int>(shape[0]);
   width_ = static_cast<int>(shape[1]);
   bins_ = static_cast<int>(shape[2]);
   mapping_bytes_ = static_cast<std::size_t>(file_bytes);
-  mapping_ = ::mmap(nullptr, mapping_bytes_, PROT_READ, MAP_PRIVATE, fd, 0);
-  ::close(fd);
+  mapping_ = ::mmap(nullptr, mapping_bytes_, PROT_READ, MAP_PRIVATE, file.fd, 0);
   if (mapping_ == MAP_FAILED) {
     mapping_ = nullptr;
     throw DataError(name + ": cannot map the file (" + std::strerror(errno) + ")");
@@ -208,7 +226,7 @@ NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
   data_ = static_cast<const unsigned char*>(mapping_) + data_start;
   if (reinterpret_cast<std::uintptr_t>(data_) % item != 0) {
     release();
-    throw DataError(name + ": data is not aligned to its dtype (header length " + std::to_string(header_len) + ")");
+    throw DataError(name + ": data is not aligned to its dtype (header length " + std::to_string(span.length) + ")");
   }
 }
 
