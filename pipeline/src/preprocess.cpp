@@ -143,20 +143,11 @@ void PreprocessOptions::validate() const {
   }
 }
 
-PreprocessReport preprocess_region(const PreprocessOptions& options,
-                                   const std::function<void(const PreprocessProgress&)>& on_progress) {
-  const auto start = Clock::now();
-  options.validate();
-  std::error_code ec;
-  if (std::filesystem::exists(options.output, ec) && !options.overwrite) {
-    throw UsageError(options.output.string() + ": already exists; pass --overwrite to replace it");
-  }
-  const auto out_dir = options.output.has_parent_path() ? options.output.parent_path() : std::filesystem::path(".");
-  if (!std::filesystem::is_directory(out_dir, ec)) {
-    throw UsageError(options.output.string() + ": output directory '" + out_dir.string() + "' does not exist");
-  }
+namespace {
 
-  // The region: explicit bbox, else the header's, else the data's (which needs the data first).
+// The region's box (explicit, else the .osm.pbf header's, else the data's, which needs the data
+// first) and its features, read once.
+std::pair<osm::GeoBox, osm::FeatureSet> read_region(const PreprocessOptions& options) {
   std::optional<osm::GeoBox> bbox = options.bbox;
   if (!bbox) {
     const auto header = osm::read_osm_header(options.input);
@@ -168,7 +159,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
     const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
     read_options.keep_box = keep_box_for(grid_for(*bbox, projection), projection, options.max_distance_m);
   }
-  const auto features = osm::read_osm(options.input, read_options);
+  auto features = osm::read_osm(options.input, read_options);
   if (!bbox) {
     if (!features.data_box.valid()) throw UsageError(options.input.string() + ": holds no nodes, so no region");
     bbox = features.data_box;
@@ -178,63 +169,14 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
                      (features.data_box.valid() ? " (data bbox " + describe(features.data_box) + ")" : " (no nodes)"));
   }
 
-  const osm::GeoPoint centre = bbox->centre();
-  const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
-  const raster::RegionGrid grid = grid_for(*bbox, projection);
-  const double width_m = grid.max_x() - grid.min_x(), height_m = grid.max_y() - grid.min_y();
-  if (width_m > kMaxRegionExtentM || height_m > kMaxRegionExtentM) {
-    std::ostringstream s;
-    s << "bbox " << describe(*bbox) << " spans " << width_m / 1000 << " x " << height_m / 1000
-      << " km; a region may span at most " << kMaxRegionExtentM / 1000 << " km each way (cut it into several regions)";
-    throw UsageError(s.str());
-  }
+  return {*bbox, std::move(features)};
+}
 
-  PreprocessReport report;
-  report.bbox = *bbox;
-  report.centre_lat = centre.lat_deg;
-  report.centre_lon = centre.lon_deg;
-  report.tiles_wide = grid.tiles_wide();
-  report.tiles_high = grid.tiles_high();
-  report.nodes = features.points.size();
-  report.lines = features.lines.size();
-  report.areas = features.areas.size();
-  report.ways_missing_nodes = features.ways_missing_nodes;
-  report.multipolygon_open_chains = features.multipolygon_open_chains;
-  report.read_seconds = seconds_since(start);
-
-  raster::CacheMetadata metadata;
-  metadata.source_file = options.input.filename().string();
-  metadata.source_sha256 = osm::file_sha256(options.input);
-  metadata.osm_replication_timestamp = features.replication_timestamp;
-  metadata.centre_lat = centre.lat_deg;
-  metadata.centre_lon = centre.lon_deg;
-  metadata.bbox = *bbox;
-  metadata.max_distance_m = options.max_distance_m;
-  metadata.grid = grid;
-  metadata.shard_index = options.shard_index;
-  metadata.shard_count = options.shard_count;
-
-  raster::CacheWriter writer(options.output, metadata);
-  const raster::RegionFeatures pixels = raster::project_features(features, projection);
-  report.roads = pixels.roads.size();
-  writer.write_roads(pixels.roads);
-  const raster::TileRenderer renderer(pixels, grid, options.max_distance_m);
-
-  // The tiles of this shard still to render.
-  std::vector<std::pair<std::int64_t, std::int64_t>> todo;
-  for (std::int64_t row = 0; row < grid.tiles_high(); ++row) {
-    for (std::int64_t col = 0; col < grid.tiles_wide(); ++col) {
-      if (!metadata.shard_owns(col, row)) continue;
-      ++report.tiles_total;
-      if (writer.has_tile(col, row)) {
-        ++report.tiles_resumed;
-      } else {
-        todo.emplace_back(col, row);
-      }
-    }
-  }
-
-  const auto render_start = Clock::now();
+// Renders the tiles of `todo` on the options' threads while the calling thread writes them to
+// the cache in the order they come; adds the stage times to the report.
+void render_tiles(const raster::TileRenderer& renderer, const std::vector<std::pair<std::int64_t, std::int64_t>>& todo,
+                  raster::CacheWriter& writer, const PreprocessOptions& options,
+                  const std::function<void(const PreprocessProgress&)>& on_progress, PreprocessReport& report) {
   const int threads =
       options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   TileQueue queue(static_cast<std::size_t>(threads) * 8);
@@ -299,6 +241,82 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
     report.distance_cpu_seconds += times.distance;
     report.encode_cpu_seconds += times.encode;
   }
+}
+
+}  // namespace
+
+PreprocessReport preprocess_region(const PreprocessOptions& options,
+                                   const std::function<void(const PreprocessProgress&)>& on_progress) {
+  const auto start = Clock::now();
+  options.validate();
+  std::error_code ec;
+  if (std::filesystem::exists(options.output, ec) && !options.overwrite) {
+    throw UsageError(options.output.string() + ": already exists; pass --overwrite to replace it");
+  }
+  const auto out_dir = options.output.has_parent_path() ? options.output.parent_path() : std::filesystem::path(".");
+  if (!std::filesystem::is_directory(out_dir, ec)) {
+    throw UsageError(options.output.string() + ": output directory '" + out_dir.string() + "' does not exist");
+  }
+
+  const auto [bbox, features] = read_region(options);
+  const osm::GeoPoint centre = bbox.centre();
+  const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
+  const raster::RegionGrid grid = grid_for(bbox, projection);
+  const double width_m = grid.max_x() - grid.min_x(), height_m = grid.max_y() - grid.min_y();
+  if (width_m > kMaxRegionExtentM || height_m > kMaxRegionExtentM) {
+    std::ostringstream s;
+    s << "bbox " << describe(bbox) << " spans " << width_m / 1000 << " x " << height_m / 1000
+      << " km; a region may span at most " << kMaxRegionExtentM / 1000 << " km each way (cut it into several regions)";
+    throw UsageError(s.str());
+  }
+
+  PreprocessReport report;
+  report.bbox = bbox;
+  report.centre_lat = centre.lat_deg;
+  report.centre_lon = centre.lon_deg;
+  report.tiles_wide = grid.tiles_wide();
+  report.tiles_high = grid.tiles_high();
+  report.nodes = features.points.size();
+  report.lines = features.lines.size();
+  report.areas = features.areas.size();
+  report.ways_missing_nodes = features.ways_missing_nodes;
+  report.multipolygon_open_chains = features.multipolygon_open_chains;
+  report.read_seconds = seconds_since(start);
+
+  raster::CacheMetadata metadata;
+  metadata.source_file = options.input.filename().string();
+  metadata.source_sha256 = osm::file_sha256(options.input);
+  metadata.osm_replication_timestamp = features.replication_timestamp;
+  metadata.centre_lat = centre.lat_deg;
+  metadata.centre_lon = centre.lon_deg;
+  metadata.bbox = bbox;
+  metadata.max_distance_m = options.max_distance_m;
+  metadata.grid = grid;
+  metadata.shard_index = options.shard_index;
+  metadata.shard_count = options.shard_count;
+
+  raster::CacheWriter writer(options.output, metadata);
+  const raster::RegionFeatures pixels = raster::project_features(features, projection);
+  report.roads = pixels.roads.size();
+  writer.write_roads(pixels.roads);
+  const raster::TileRenderer renderer(pixels, grid, options.max_distance_m);
+
+  // The tiles of this shard still to render.
+  std::vector<std::pair<std::int64_t, std::int64_t>> todo;
+  for (std::int64_t row = 0; row < grid.tiles_high(); ++row) {
+    for (std::int64_t col = 0; col < grid.tiles_wide(); ++col) {
+      if (!metadata.shard_owns(col, row)) continue;
+      ++report.tiles_total;
+      if (writer.has_tile(col, row)) {
+        ++report.tiles_resumed;
+      } else {
+        todo.emplace_back(col, row);
+      }
+    }
+  }
+
+  const auto render_start = Clock::now();
+  render_tiles(renderer, todo, writer, options, on_progress, report);
   const auto finish_start = Clock::now();
   writer.finish();
   report.write_seconds += seconds_since(finish_start);
@@ -306,5 +324,6 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   report.total_seconds = seconds_since(start);
   return report;
 }
+
 
 }  // namespace seqloc::pipeline
