@@ -290,7 +290,9 @@ int main(int argc, char** argv) {
       {"extras", "6. Beyond the paper"}};
   for (const std::string group : {"feature-sparse", "urban"}) {
     md << "\n## " << group << "\n";
-    for (const auto& [table, title] : tables) {
+    for (const auto& entry : tables) {
+      const std::string& table = entry.first;  // a name, not a binding: lambdas capture it
+      const std::string& title = entry.second;
       if (std::none_of(all.begin(), all.end(), [&](const Config& c) { return c.table == table; })) continue;
       md << "\n### " << title << "\n\n" << kHeader;
       if (table == "ablation") md << row("naive recursion", metrics("online (naive recursion)", group));

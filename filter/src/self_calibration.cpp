@@ -55,8 +55,10 @@ void DepthHistogram::add_each(std::span<const float> r, std::span<const float> w
       if (ws[i] > 0) {
         const double wi = ws[i];
         const auto b = static_cast<std::size_t>(bin[i]) * kLanes + static_cast<std::size_t>(i % kLanes);
-        weight_[b] += static_cast<std::int64_t>(wi * scale_.weight + 0.5);
-        depth_sum_[b] += static_cast<std::int64_t>(wi * depth[i] * scale_.depth + 0.5);
+        // wi, depth >= 0: the cast of x + 0.5 rounds half up, without a call per cell.
+        weight_[b] += static_cast<std::int64_t>(wi * scale_.weight + 0.5);  // NOLINT(bugprone-incorrect-roundings)
+        depth_sum_[b] +=
+            static_cast<std::int64_t>(wi * depth[i] * scale_.depth + 0.5);  // NOLINT(bugprone-incorrect-roundings)
       }
     }
   }
@@ -111,7 +113,9 @@ PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share)
   if (!(outlier_share >= 0 && outlier_share < 1)) {
     throw FilterError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share));
   }
-  for (double l = kLog2MinPower; l <= kLog2MaxPower + 1e-9; l += kLog2Step) {
+  const auto steps = static_cast<int>(std::lround((kLog2MaxPower - kLog2MinPower) / kLog2Step));
+  for (int k = 0; k <= steps; ++k) {
+    const double l = kLog2MinPower + k * kLog2Step;  // exact: the step is a power of 2
     kappas_.push_back(std::exp2(l));
     log_prior_.push_back(-0.5 * (l / prior_sigma_log2) * (l / prior_sigma_log2));
   }

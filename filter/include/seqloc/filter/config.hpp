@@ -7,7 +7,8 @@
 
 namespace seqloc::filter {
 
-struct FilterConfig {
+// Fields grouped by the component they set (window, ETU, MGR, ...), not packed: one config per filter.
+struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   // Window (conventions.md section 6).
   int width = 256;     ///< cells (0.5 m)
   int height = 256;    ///< cells

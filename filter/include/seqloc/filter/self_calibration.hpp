@@ -51,8 +51,10 @@ class DepthHistogram {
   void add(double r, double w) {
     const double d = r < 0 ? std::min(-r, kMaxDepthNats) : 0.0;
     const auto i = std::min(static_cast<std::size_t>(d * (1 / kBinNats)), weight_.size() / kLanes - 1) * kLanes;
-    weight_[i] += static_cast<std::int64_t>(w * scale_.weight + 0.5);
-    depth_sum_[i] += static_cast<std::int64_t>(w * d * scale_.depth + 0.5);
+    // w, d >= 0: the cast of x + 0.5 rounds half up, as add_each does per cell, where llround
+    // would cost a call.
+    weight_[i] += static_cast<std::int64_t>(w * scale_.weight + 0.5);     // NOLINT(bugprone-incorrect-roundings)
+    depth_sum_[i] += static_cast<std::int64_t>(w * d * scale_.depth + 0.5);  // NOLINT(bugprone-incorrect-roundings)
   }
   /// add(r[i], w[i]) for every i, r and w of the same length (w[i] <= 0 adds nothing, whatever
   /// r[i] is, NaN included). The bins are found in SIMD, a block at a time: the filter's hot path.
