@@ -255,6 +255,13 @@ struct FrameScene {
 
 std::vector<double> as_double(const std::vector<float>& v) { return {v.begin(), v.end()}; }
 
+// Where a point falls in region pixels.
+cv::Point2d region_pixel(const raster::RegionGrid& grid, const osm::RegionProjection& projection,
+                         const osm::GeoPoint& where) {
+  const auto g = projection.forward(where);
+  return {grid.region_u(g.x_m), grid.region_v(g.y_m)};
+}
+
 // Frame K's own likelihood, placed into the scene's window by its crop as the filter places it.
 void place_frame(FrameScene& scene, const filter::PreparedFrame& f, const GridCrop& crop,
                  const raster::RegionGrid& grid) {
@@ -341,8 +348,7 @@ Picture likelihood_figure(raster::CacheReader& cache, const Route& route, const 
     overlay_mass(m, mass);
     m = upscale(m, factor);
     if (const auto& truth = route.frames[index].truth) {
-      const auto g = projection.forward(truth->where);
-      const cv::Point2d p(grid.region_u(g.x_m), grid.region_v(g.y_m));
+      const cv::Point2d p = region_pixel(grid, projection, truth->where);
       star(m, {(p.x - static_cast<double>(at_u) + 0.5) * factor, (p.y - static_cast<double>(at_v) + 0.5) * factor}, 11);
     }
     cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
@@ -461,11 +467,10 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
   for (const auto& [mode, p] : poses_by_mode) {
     if (mode == "seqloc" || !poses) poses = &p;
   }
+  const auto projection = cache.metadata().projection();
   std::vector<cv::Point2d> truth;  // region pixels
   for (const auto& f : route.frames) {
-    if (!f.truth) continue;
-    const auto g = cache.metadata().projection().forward(f.truth->where);
-    truth.emplace_back(cache.grid().region_u(g.x_m), cache.grid().region_v(g.y_m));
+    if (f.truth) truth.push_back(region_pixel(cache.grid(), projection, f.truth->where));
   }
   if (poses && !truth.empty() && poses->size() == route.frames.size()) {
     written.push_back(out_dir / "entropy_route.png");

@@ -279,8 +279,8 @@ std::vector<GridPose> drive(const RoadGraph& graph, raster::CacheReader& cache, 
                             std::mt19937_64& rng) {
   const auto& grid = cache.grid();
   auto inside = [&](const GridPose& p) {
-    return p.x > grid.min_x() + kEdgeMarginM && p.x < grid.max_x() - kEdgeMarginM && p.y > grid.min_y() + kEdgeMarginM &&
-           p.y < grid.max_y() - kEdgeMarginM;
+    return p.x > grid.min_x() + kEdgeMarginM && p.x < grid.max_x() - kEdgeMarginM &&
+           p.y > grid.min_y() + kEdgeMarginM && p.y < grid.max_y() - kEdgeMarginM;
   };
   const double length = options.frames * options.max_spacing_m + 10;
   for (int attempt = 0; attempt < kAttempts; ++attempt) {
@@ -310,8 +310,9 @@ struct Recording {
 // Frame i of route r: what the camera saw (written under dir/observations), the odometry from
 // frame i - 1, the crop centre off by the GPS error, the truth; recorded as a GPS receiver and an
 // odometer would report them (mm, 1e-4 m and degrees, 1e-9 degrees of lat/lon).
-RouteFrame record_frame(raster::CacheReader& cache, const SimulateOptions& options, int r, std::size_t i,
-                        Recording& rec, const std::filesystem::path& dir) {
+RouteFrame record_frame(raster::CacheReader& cache, const osm::RegionProjection& projection,
+                        const SimulateOptions& options, int r, std::size_t i, Recording& rec,
+                        const std::filesystem::path& dir) {
   const GridPose& p = rec.poses[i];
   std::mt19937_64 rng = noise_stream(options.seed, r, static_cast<std::uint32_t>(i));
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
@@ -353,7 +354,6 @@ RouteFrame record_frame(raster::CacheReader& cache, const SimulateOptions& optio
     odo_yaw = wrap180(q.heading_deg - p.heading_deg);
     rec.timestamp += std::hypot(dx, dy) / options.speed_mps;
   }
-  const auto projection = cache.metadata().projection();
   double gamma = 0;
   const osm::GeoPoint truth = projection.reverse({p.x, p.y}, gamma);
   const osm::GeoPoint fix = projection.reverse({p.x + rec.error_x, p.y + rec.error_y});
@@ -364,9 +364,11 @@ RouteFrame record_frame(raster::CacheReader& cache, const SimulateOptions& optio
   f.crop_grid = osm::GridPoint{rounded(p.x + rec.error_x, 3), rounded(p.y + rec.error_y, 3)};
   f.odometry = {rounded(odo_f, 4), rounded(odo_l, 4), rounded(odo_yaw, 4)};
   if (i == 0) {
-    f.gps = GpsPrior{{rounded(fix.lat_deg, 9), rounded(fix.lon_deg, 9)}, rounded(std::max(1.0, options.gps_error_m), 1)};
+    f.gps =
+        GpsPrior{{rounded(fix.lat_deg, 9), rounded(fix.lon_deg, 9)}, rounded(std::max(1.0, options.gps_error_m), 1)};
   }
-  f.truth = GroundTruth{{rounded(truth.lat_deg, 9), rounded(truth.lon_deg, 9)}, rounded(wrap360(p.heading_deg + gamma), 4)};
+  f.truth =
+      GroundTruth{{rounded(truth.lat_deg, 9), rounded(truth.lon_deg, 9)}, rounded(wrap360(p.heading_deg + gamma), 4)};
   return f;
 }
 
@@ -379,6 +381,7 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
   if (graph.edges.empty()) throw DataError(cache.path().string() + ": the cache has no roads to drive along");
   const std::filesystem::path partial = staging_directory(out);
   std::filesystem::create_directories(partial);
+  const auto projection = cache.metadata().projection();
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   for (int r = 0; r < options.routes; ++r) {
     std::mt19937_64 rng = noise_stream(options.seed, r, kRouteStream);  // the path and the first GPS error
@@ -390,17 +393,20 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
     Route route;
     route.name = name.str();
     route.cell_m = kCellM;
-    route.simulated_json = nlohmann::json{{"seed", options.seed},
-                                          {"cache", cache.path().filename().string()},
-                                          {"range_m", options.camera.range_m},
-                                          {"fov_deg", options.camera.fov_deg},
-                                          {"gps_error_m", options.gps_error_m}}
-                               .dump();
+    route.simulated_json = nlohmann::json{
+        {"seed", options.seed},
+        {"cache", cache.path().filename().string()},
+        {"range_m", options.camera.range_m},
+        {"fov_deg", options.camera.fov_deg},
+        {"gps_error_m",
+         options.gps_error_m}}.dump();
     // The crop centre's error starts uniform in the disc.
     const double a0 = uniform(rng) * 2 * M_PI, r0 = options.gps_error_m * std::sqrt(uniform(rng));
     rec.error_x = r0 * std::cos(a0);
     rec.error_y = r0 * std::sin(a0);
-    for (std::size_t i = 0; i < rec.poses.size(); ++i) route.frames.push_back(record_frame(cache, options, r, i, rec, dir));
+    for (std::size_t i = 0; i < rec.poses.size(); ++i) {
+      route.frames.push_back(record_frame(cache, projection, options, r, i, rec, dir));
+    }
     write_route(route, dir);
     if (progress) progress(r + 1, options.routes);
   }
