@@ -36,6 +36,12 @@ GeoPoint RegionProjection::reverse(GridPoint p, double& gamma_deg) const {
   return {lat, lon};
 }
 
+double RegionProjection::scale(GridPoint p) const {
+  double lat = 0, lon = 0, gamma = 0, k = 0;
+  tm_.Reverse(lon0_, p.x_m, p.y_m + y0_, lat, lon, gamma, k);
+  return k;
+}
+
 std::string RegionProjection::wkt() const {
   char buffer[1024];
   std::snprintf(buffer, sizeof buffer,

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <GeographicLib/Constants.hpp>
+#include <GeographicLib/Geodesic.hpp>
 #include <GeographicLib/TransverseMercatorExact.hpp>
 #include <gtest/gtest.h>
 
@@ -48,6 +49,26 @@ TEST(Projection, RoundTripsAndReportsConvergence) {
   // gamma ~ dlon * sin(lat) for small dlon: 0.3 * sin(42.6 deg) = 0.203 deg.
   EXPECT_NEAR(gamma, 0.3 * std::sin(42.6 * M_PI / 180.0), 0.002);
   EXPECT_GT(std::abs(gamma), 0.1);
+}
+
+// The point scale, measured independently: 10 grid metres along x against the geodesic length
+// of the same two points on the ellipsoid. It grows as about 1 + x^2 / (2 R^2): 0.1 % at 285 km,
+// the bound preprocess puts on a region's edge.
+TEST(Projection, ScaleIsTheRatioOfGridToGroundDistance) {
+  const RegionProjection p(50.0, 11.5);
+  const auto& geodesic = GeographicLib::Geodesic::WGS84();
+  for (double x : {0.0, 100'000.0, 285'000.0, -285'000.0}) {
+    for (double y : {-300'000.0, 0.0, 250'000.0}) {
+      const GeoPoint a = p.reverse({x - 5.0, y}), b = p.reverse({x + 5.0, y});
+      double ground = 0;
+      geodesic.Inverse(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg, ground);
+      EXPECT_NEAR(p.scale({x, y}), 10.0 / ground, 1e-8) << x << ", " << y;
+    }
+    const double r = 6'371'000.0;
+    EXPECT_NEAR(p.scale({x, 0.0}), 1.0 + x * x / (2 * r * r), 2e-5) << x;
+  }
+  EXPECT_GT(p.scale({285'000.0, 0.0}) - 1.0, 0.00099);
+  EXPECT_LT(p.scale({280'000.0, 0.0}) - 1.0, 0.001);
 }
 
 TEST(Projection, WktNamesTheParameters) {

@@ -28,6 +28,10 @@ class RegionProjection {
   [[nodiscard]] GridPoint forward(GeoPoint p, double& gamma_deg) const;
   [[nodiscard]] GeoPoint reverse(GridPoint p) const;
   [[nodiscard]] GeoPoint reverse(GridPoint p, double& gamma_deg) const;
+  /// The point scale k at a grid point: a grid metre there is 1 / k metres on the ground. It is 1
+  /// on the central meridian and grows with the distance east or west of it (about
+  /// 1 + x^2 / (2 R^2): 1.001 at 285 km).
+  [[nodiscard]] double scale(GridPoint p) const;
 
   [[nodiscard]] double lat0_deg() const { return lat0_; }
   [[nodiscard]] double lon0_deg() const { return lon0_; }
