@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <exception>
+#include <memory>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -13,6 +15,8 @@
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "seqloc/raster/tile_renderer.hpp"
+#include "feature_blocks.hpp"
+#include "peak_memory.hpp"
 #include "stopwatch.hpp"
 
 namespace seqloc::pipeline {
@@ -127,6 +131,13 @@ void PreprocessOptions::validate() const {
       << "] (the road distance is stored as UInt16 centimetres)";
     fail(s.str());
   }
+  if (!(corridor() >= 0 && corridor() <= max_distance_m)) {
+    std::ostringstream s;
+    s << "corridor_m = " << corridor() << ": must be in [0, max_distance_m = " << max_distance_m
+      << "] (0 stores every tile; beyond the clamp the distance to the nearest road is not known)";
+    fail(s.str());
+  }
+  if (block_tiles < 1) fail("block_tiles = " + std::to_string(block_tiles) + ": must be >= 1");
   if (threads < 0) fail("threads = " + std::to_string(threads) + ": must be >= 0 (0 = all cores)");
   if (shard_count < 1 || shard_index < 0 || shard_index >= shard_count) {
     fail("shard = " + std::to_string(shard_index) + "/" + std::to_string(shard_count) +
@@ -172,13 +183,22 @@ std::pair<osm::GeoBox, osm::FeatureSet> read_region(const PreprocessOptions& opt
   return {*bbox, std::move(features)};
 }
 
-// Renders the tiles of `todo` on the options' threads while the calling thread writes them to
-// the cache in the order they come; adds the stage times to the report.
-void render_tiles(const raster::TileRenderer& renderer, const std::vector<std::pair<std::int64_t, std::int64_t>>& todo,
-                  raster::CacheWriter& writer, const PreprocessOptions& options,
+// A block's tiles to render: their GeoPackage (col, row) in the region, the renderer of the block
+// (whose tile (0, 0) is the region's (col0, row0)).
+struct BlockJob {
+  const raster::TileRenderer& renderer;
+  std::int64_t col0 = 0, row0 = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>> tiles;
+};
+
+// Renders the tiles of `job` on the options' threads while the calling thread writes them to the
+// cache in the order they come; adds the stage times to the report. Tiles farther than the
+// corridor from every road keep their road distance; their classes are neither drawn nor stored.
+void render_tiles(const BlockJob& job, raster::CacheWriter& writer, const PreprocessOptions& options,
                   const std::function<void(const PreprocessProgress&)>& on_progress, PreprocessReport& report) {
   const int threads =
       options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const auto corridor_cm = static_cast<std::uint16_t>(std::lround(options.corridor() * 100.0));
   TileQueue queue(static_cast<std::size_t>(threads) * 8);
   queue.set_producers(threads);
   std::atomic<std::size_t> next{0};
@@ -199,16 +219,21 @@ void render_tiles(const raster::TileRenderer& renderer, const std::vector<std::p
         raster::TileEncoder encoder;
         std::vector<std::uint8_t> rgb;
         std::vector<std::uint16_t> cm;
-        for (std::size_t i = next++; i < todo.size(); i = next++) {
-          const auto [col, row] = todo[i];
+        for (std::size_t i = next++; i < job.tiles.size(); i = next++) {
+          const auto [col, row] = job.tiles[i];
           auto t0 = Clock::now();
-          const bool any_class = renderer.render_classes(col, row, scratch, rgb);
-          times.classes += seconds_since(t0);
-          t0 = Clock::now();
-          renderer.render_road_distance(col, row, scratch, cm);
+          const bool near_road = job.renderer.render_road_distance(col - job.col0, row - job.row0, scratch, cm);
           times.distance += seconds_since(t0);
+          const bool in_corridor =
+              corridor_cm == 0 || (near_road && *std::min_element(cm.begin(), cm.end()) < corridor_cm);
+          bool any_class = false;
+          if (in_corridor) {
+            t0 = Clock::now();
+            any_class = job.renderer.render_classes(col - job.col0, row - job.row0, scratch, rgb);
+            times.classes += seconds_since(t0);
+          }
           t0 = Clock::now();
-          auto tile = encoder.encode(col, row, rgb, !any_class, cm);
+          auto tile = in_corridor ? encoder.encode(col, row, rgb, !any_class, cm) : encoder.encode_distance(col, row, cm);
           times.encode += seconds_since(t0);
           if (!queue.push(std::move(tile))) break;
         }
@@ -220,15 +245,14 @@ void render_tiles(const raster::TileRenderer& renderer, const std::vector<std::p
       queue.producer_done();
     });
   }
-  PreprocessProgress progress{report.tiles_resumed, report.tiles_total};
   try {
     while (auto tile = queue.pop()) {
       const auto t0 = Clock::now();
       writer.write_tile(*tile);
       report.write_seconds += seconds_since(t0);
       ++report.tiles_written;
-      ++progress.tiles_done;
-      if (on_progress) on_progress(progress);
+      if (tile->classes_png.empty()) ++report.tiles_skipped;
+      if (on_progress) on_progress({report.tiles_resumed + report.tiles_written, report.tiles_total});
     }
   } catch (...) {
     queue.close();
@@ -243,11 +267,60 @@ void render_tiles(const raster::TileRenderer& renderer, const std::vector<std::p
   }
 }
 
+// The largest scale error |k - 1| of the region CRS on the grid's boundary (where it is largest:
+// it grows with the distance from the central meridian).
+double edge_scale_error(const raster::RegionGrid& grid, const osm::RegionProjection& projection) {
+  double worst = 0;
+  constexpr int kSamples = 16;
+  for (int i = 0; i <= kSamples; ++i) {
+    const double t = static_cast<double>(i) / kSamples;
+    const double x = grid.min_x() + t * (grid.max_x() - grid.min_x());
+    const double y = grid.min_y() + t * (grid.max_y() - grid.min_y());
+    for (osm::GridPoint p : {osm::GridPoint{x, grid.min_y()}, osm::GridPoint{x, grid.max_y()},
+                             osm::GridPoint{grid.min_x(), y}, osm::GridPoint{grid.max_x(), y}}) {
+      worst = std::max(worst, std::abs(projection.scale(p) - 1.0));
+    }
+  }
+  return worst;
+}
+
+void check_scale_error(const osm::GeoBox& bbox, const raster::RegionGrid& grid, double scale_error) {
+  if (scale_error <= kMaxScaleError) return;
+  // Transverse Mercator's error grows as x^2 / (2 R^2) with the distance x from the centre line.
+  const double width_m = grid.max_x() - grid.min_x();
+  const double max_width_m = 2.0 * 6'371'000.0 * std::sqrt(2.0 * kMaxScaleError);
+  std::ostringstream s;
+  s.precision(3);
+  s << "bbox " << describe(bbox) << " spans " << width_m / 1000 << " km east-west; at the grid's edge the region "
+    << "CRS would stretch distances by " << scale_error * 100 << " %, beyond the " << kMaxScaleError * 100
+    << " % that keeps the map metric. Cut it into at least " << std::ceil(width_m / max_width_m)
+    << " regions side by side (each under about " << max_width_m / 1000 << " km east-west, any height)";
+  throw UsageError(s.str());
+}
+
+// The features projected to the lattice, written to the roads table and cut into blocks (the
+// geographic features and the projected ones are freed here).
+std::unique_ptr<detail::FeatureBlocks> spill_features(osm::FeatureSet features, const osm::RegionProjection& projection,
+                                                      const raster::RegionGrid& grid, const PreprocessOptions& options,
+                                                      raster::CacheWriter& writer, PreprocessReport& report) {
+  raster::RegionFeatures pixels = raster::project_features(features, projection);
+  features = {};
+  report.roads = pixels.roads.size();
+  writer.write_roads(pixels.roads);
+  pixels.roads = {};
+  const auto spill_dir = options.output.has_parent_path() ? options.output.parent_path() : std::filesystem::path(".");
+  auto blocks = std::make_unique<detail::FeatureBlocks>(pixels, grid, raster::TileRenderer::halo_for(options.max_distance_m),
+                                                        options.block_tiles, spill_dir);
+  report.spilled_bytes = blocks->spilled_bytes();
+  return blocks;
+}
+
 }  // namespace
 
 PreprocessReport preprocess_region(const PreprocessOptions& options,
                                    const std::function<void(const PreprocessProgress&)>& on_progress) {
   const auto start = Clock::now();
+  const double start_mb = detail::rss_mb().value_or(0);
   options.validate();
   std::error_code ec;
   if (std::filesystem::exists(options.output, ec) && !options.overwrite) {
@@ -258,19 +331,14 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
     throw UsageError(options.output.string() + ": output directory '" + out_dir.string() + "' does not exist");
   }
 
-  const auto [bbox, features] = read_region(options);
+  auto [bbox, features] = read_region(options);
   const osm::GeoPoint centre = bbox.centre();
   const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
   const raster::RegionGrid grid = grid_for(bbox, projection);
-  const double width_m = grid.max_x() - grid.min_x(), height_m = grid.max_y() - grid.min_y();
-  if (width_m > kMaxRegionExtentM || height_m > kMaxRegionExtentM) {
-    std::ostringstream s;
-    s << "bbox " << describe(bbox) << " spans " << width_m / 1000 << " x " << height_m / 1000
-      << " km; a region may span at most " << kMaxRegionExtentM / 1000 << " km each way (cut it into several regions)";
-    throw UsageError(s.str());
-  }
 
   PreprocessReport report;
+  report.scale_error = edge_scale_error(grid, projection);
+  check_scale_error(bbox, grid, report.scale_error);
   report.bbox = bbox;
   report.centre_lat = centre.lat_deg;
   report.centre_lon = centre.lon_deg;
@@ -281,7 +349,6 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   report.areas = features.areas.size();
   report.ways_missing_nodes = features.ways_missing_nodes;
   report.multipolygon_open_chains = features.multipolygon_open_chains;
-  report.read_seconds = seconds_since(start);
 
   raster::CacheMetadata metadata;
   metadata.source_file = options.input.filename().string();
@@ -291,39 +358,46 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   metadata.centre_lon = centre.lon_deg;
   metadata.bbox = bbox;
   metadata.max_distance_m = options.max_distance_m;
+  metadata.corridor_m = options.corridor();
   metadata.grid = grid;
   metadata.shard_index = options.shard_index;
   metadata.shard_count = options.shard_count;
 
   raster::CacheWriter writer(options.output, metadata);
-  const raster::RegionFeatures pixels = raster::project_features(features, projection);
-  report.roads = pixels.roads.size();
-  writer.write_roads(pixels.roads);
-  const raster::TileRenderer renderer(pixels, grid, options.max_distance_m);
+  const auto blocks = spill_features(std::move(features), projection, grid, options, writer, report);
+  report.read_seconds = seconds_since(start);
+  report.start_mb = start_mb;
+  report.read_peak_mb = detail::peak_rss_mb().value_or(0);
+  detail::release_free_memory();  // the features' many small blocks, freed above
+  detail::reset_peak_rss();
 
-  // The tiles of this shard still to render.
-  std::vector<std::pair<std::int64_t, std::int64_t>> todo;
-  for (std::int64_t row = 0; row < grid.tiles_high(); ++row) {
-    for (std::int64_t col = 0; col < grid.tiles_wide(); ++col) {
-      if (!metadata.shard_owns(col, row)) continue;
-      ++report.tiles_total;
-      if (writer.has_tile(col, row)) {
-        ++report.tiles_resumed;
-      } else {
-        todo.emplace_back(col, row);
+  // Block by block (32 x 32 tiles, 8.2 km, by default), so that only one block's features and
+  // bins are held while rendering, whatever the region's size.
+  const auto render_start = Clock::now();
+  report.tiles_total = metadata.shard_tile_count();
+  report.tiles_resumed = writer.tiles_stored();
+  for (std::int64_t by = 0; by < blocks->blocks_high(); ++by) {
+    for (std::int64_t bx = 0; bx < blocks->blocks_wide(); ++bx) {
+      const std::int64_t side = options.block_tiles, col0 = bx * side, row0 = by * side;
+      std::vector<std::pair<std::int64_t, std::int64_t>> tiles;
+      for (std::int64_t row = row0; row < std::min(row0 + side, grid.tiles_high()); ++row) {
+        for (std::int64_t col = col0; col < std::min(col0 + side, grid.tiles_wide()); ++col) {
+          if (metadata.shard_owns(col, row) && !writer.has_tile(col, row)) tiles.emplace_back(col, row);
+        }
       }
+      if (tiles.empty()) continue;
+      const raster::RegionFeatures block_features = blocks->load(bx, by);
+      const raster::TileRenderer renderer(block_features, blocks->block_grid(bx, by), options.max_distance_m);
+      render_tiles(BlockJob{renderer, col0, row0, std::move(tiles)}, writer, options, on_progress, report);
     }
   }
-
-  const auto render_start = Clock::now();
-  render_tiles(renderer, todo, writer, options, on_progress, report);
   const auto finish_start = Clock::now();
   writer.finish();
   report.write_seconds += seconds_since(finish_start);
   report.render_seconds = seconds_since(render_start);
+  report.render_peak_mb = detail::peak_rss_mb().value_or(0);
   report.total_seconds = seconds_since(start);
   return report;
 }
-
 
 }  // namespace seqloc::pipeline

@@ -153,6 +153,7 @@ CacheMetadata metadata_from_db(const detail::Database& db) {
   m.centre_lon = number("centre_lon");
   m.bbox = {number("bbox_min_lon"), number("bbox_min_lat"), number("bbox_max_lon"), number("bbox_max_lat")};
   m.max_distance_m = number("max_distance_m");
+  m.corridor_m = number("corridor_m");
   m.grid = {static_cast<std::int64_t>(number("tile_x0")), static_cast<std::int64_t>(number("tile_y0")),
             static_cast<std::int64_t>(number("tile_x1")), static_cast<std::int64_t>(number("tile_y1"))};
   m.shard_index = static_cast<int>(number("shard_index"));
@@ -160,7 +161,7 @@ CacheMetadata metadata_from_db(const detail::Database& db) {
   m.created_utc = get("created_utc");
   m.complete = get("state") == "complete";
   if (m.grid.tiles_wide() <= 0 || m.grid.tiles_high() <= 0 || m.shard_count < 1 || m.shard_index < 0 ||
-      m.shard_index >= m.shard_count) {
+      m.shard_index >= m.shard_count || !(m.corridor_m >= 0 && m.corridor_m <= m.max_distance_m)) {
     throw CacheFormatError(db.path() + ": inconsistent metadata (tile grid or shard)");
   }
   return m;
@@ -174,11 +175,16 @@ bool CacheMetadata::same_build(const CacheMetadata& o) const {
   return format_version == o.format_version && source_sha256 == o.source_sha256 && centre_lat == o.centre_lat &&
          centre_lon == o.centre_lon && bbox.min_lon == o.bbox.min_lon && bbox.min_lat == o.bbox.min_lat &&
          bbox.max_lon == o.bbox.max_lon && bbox.max_lat == o.bbox.max_lat && max_distance_m == o.max_distance_m &&
-         grid == o.grid;
+         corridor_m == o.corridor_m && grid == o.grid;
 }
 
 bool CacheMetadata::shard_owns(std::int64_t col, std::int64_t row) const {
   return (row * grid.tiles_wide() + col) % shard_count == shard_index;
+}
+
+std::int64_t CacheMetadata::shard_tile_count() const {
+  const std::int64_t n = grid.tile_count();
+  return n / shard_count + (shard_index < n % shard_count ? 1 : 0);
 }
 
 std::vector<std::pair<std::string, std::string>> metadata_rows(const CacheMetadata& m) {
@@ -197,6 +203,7 @@ std::vector<std::pair<std::string, std::string>> metadata_rows(const CacheMetada
       {"bbox_max_lon", detail::format_double(m.bbox.max_lon)},
       {"bbox_max_lat", detail::format_double(m.bbox.max_lat)},
       {"max_distance_m", detail::format_double(m.max_distance_m)},
+      {"corridor_m", detail::format_double(m.corridor_m)},
       {"cell_m", detail::format_double(kCellM)},
       {"tile_px", std::to_string(kTilePx)},
       {"tile_x0", std::to_string(m.grid.tx0)},

@@ -49,8 +49,9 @@ void merge_shards(const std::vector<std::filesystem::path>& shards, const std::f
       }
       writer.write_roads(roads);
     }
-    detail::Statement s(db, "SELECT c.tile_column, c.tile_row, c.tile_data, d.tile_data, a.min, a.max, a.mean "
-                            "FROM classes c JOIN road_distance d ON c.tile_column = d.tile_column AND "
+    // Classes may be left out of a corridor cache's tiles, road distances never are.
+    detail::Statement s(db, "SELECT d.tile_column, d.tile_row, c.tile_data, d.tile_data, a.min, a.max, a.mean "
+                            "FROM road_distance d LEFT JOIN classes c ON c.tile_column = d.tile_column AND "
                             "c.tile_row = d.tile_row LEFT JOIN gpkg_2d_gridded_tile_ancillary a ON "
                             "a.tpudt_name = 'road_distance' AND a.tpudt_id = d.id");
     while (s.step()) {

@@ -40,11 +40,14 @@ CacheReader::CacheReader(const std::filesystem::path& path, std::size_t lru_tile
     throw CacheFormatError(path.string() + ": this is shard " + std::to_string(metadata_.shard_index) + "/" +
                            std::to_string(metadata_.shard_count) + "; merge the shards with `seqloc cache merge`");
   }
+  if (metadata_.corridor_m > 0) {
+    far_ = std::make_shared<const std::vector<std::uint8_t>>(std::size_t{kTilePx} * kTilePx * 3, 0);
+  }
 }
 
 CacheReader::~CacheReader() = default;
 
-std::vector<std::uint8_t> CacheReader::tile_blob(Layer layer, std::int64_t col, std::int64_t row) {
+std::optional<std::vector<std::uint8_t>> CacheReader::stored_blob(Layer layer, std::int64_t col, std::int64_t row) {
   const char* table = layer_table(layer);
   if (!grid().contains_tile(col, row)) {
     throw CacheRangeError(path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
@@ -62,13 +65,26 @@ std::vector<std::uint8_t> CacheReader::tile_blob(Layer layer, std::int64_t col, 
   s.bind(1, col).bind(2, row);
   if (!s.step()) {
     s.reset();
-    throw CacheRangeError(path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
-                          table + "' is missing from the cache");
+    return std::nullopt;
   }
   const auto blob = s.column_blob(0);
   std::vector<std::uint8_t> out(blob.begin(), blob.end());
   s.reset();
   return out;
+}
+
+CacheRangeError CacheReader::missing_tile(Layer layer, std::int64_t col, std::int64_t row) const {
+  return CacheRangeError(path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
+                         layer_table(layer) + "' is missing from the cache");
+}
+
+std::vector<std::uint8_t> CacheReader::tile_blob(Layer layer, std::int64_t col, std::int64_t row) {
+  if (auto stored = stored_blob(layer, col, row)) return std::move(*stored);
+  if (layer != Layer::classes || !far_) throw missing_tile(layer, col, row);
+  // Classes left out as outside the corridor: the tile every reader takes them for, encoded.
+  std::lock_guard lock(mutex_);
+  if (far_png_.empty()) far_png_ = encode_png_rgb8(*far_, kTilePx, kTilePx);
+  return far_png_;
 }
 
 bool CacheReader::has_tile(Layer layer, std::int64_t col, std::int64_t row) {
@@ -91,12 +107,16 @@ CacheReader::Decoded CacheReader::load(Layer layer, std::int64_t col, std::int64
     ++stats_.misses;
   }
   // Fetch under the lock (one SQLite connection), decode outside it so threads decode in parallel.
-  const auto blob = tile_blob(layer, col, row);
+  const auto blob = stored_blob(layer, col, row);
+  if (!blob) {
+    if (layer != Layer::classes || !far_) throw missing_tile(layer, col, row);
+    return {far_, nullptr};  // classes left out as outside the corridor
+  }
   const std::string what = path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
                            layer_table(layer) + "'";
   PngImage image;
   try {
-    image = decode_png(blob, what, kTilePx);
+    image = decode_png(*blob, what, kTilePx);
   } catch (const PngError& e) {
     throw CacheFormatError(e.what());
   }

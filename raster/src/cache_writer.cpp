@@ -47,8 +47,10 @@ CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata 
   db_->exec("PRAGMA journal_mode = WAL");
   db_->exec("PRAGMA synchronous = NORMAL");
   if (resumed_) {
-    detail::Statement s(*db_, "SELECT tile_column, tile_row FROM classes");
-    while (s.step()) done_[detail::tile_key(s.column_int(0), s.column_int(1))] = true;
+    detail::Statement s(*db_, "SELECT tile_column, tile_row FROM road_distance");
+    while (s.step()) resumed_tiles_.push_back(detail::tile_key(s.column_int(0), s.column_int(1)));
+    std::sort(resumed_tiles_.begin(), resumed_tiles_.end());
+    stored_ = static_cast<std::int64_t>(resumed_tiles_.size());
   } else {
     create_schema(metadata_.projection());
   }
@@ -63,7 +65,11 @@ CacheWriter::~CacheWriter() {
   }
 }
 
-bool CacheWriter::has_tile(std::int64_t col, std::int64_t row) const { return done_.count(detail::tile_key(col, row)) > 0; }
+bool CacheWriter::has_tile(std::int64_t col, std::int64_t row) const {
+  return std::binary_search(resumed_tiles_.begin(), resumed_tiles_.end(), detail::tile_key(col, row));
+}
+
+std::int64_t CacheWriter::tiles_owned() const { return metadata_.shard_tile_count(); }
 
 void CacheWriter::create_schema(const osm::RegionProjection& projection) {
   auto& db = *db_;
@@ -250,8 +256,13 @@ void CacheWriter::write_tile(const EncodedTile& tile) {
         *db_, "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, scale, offset, min, max, "
               "mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
   }
-  insert_classes_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.classes_png);
-  insert_classes_->run();
+  if (!tile.classes_png.empty()) {
+    insert_classes_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.classes_png);
+    insert_classes_->run();
+  } else if (metadata_.corridor_m <= 0) {
+    throw CacheError(partial_.string() + ": tile (" + std::to_string(tile.col) + ", " + std::to_string(tile.row) +
+                     ") has no classes, but the cache is not a corridor cache");
+  }
   insert_distance_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.distance_png);
   insert_distance_->run();
   const std::int64_t id = sqlite3_last_insert_rowid(db_->get());
@@ -261,20 +272,22 @@ void CacheWriter::write_tile(const EncodedTile& tile) {
       .bind(3, tile.distance_max_m)
       .bind(4, tile.distance_mean_m);
   ancillary.run();
-  done_[detail::tile_key(tile.col, tile.row)] = true;
+  ++stored_;
   if (++pending_ >= detail::kTilesPerTransaction) commit();
 }
 
 void CacheWriter::finish() {
   commit();
-  const RegionGrid& g = metadata_.grid;
-  for (std::int64_t row = 0; row < g.tiles_high(); ++row) {
-    for (std::int64_t col = 0; col < g.tiles_wide(); ++col) {
-      if (metadata_.shard_owns(col, row) && !has_tile(col, row)) {
-        throw CacheError(partial_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) +
-                         ") was never written; the cache is not complete");
-      }
-    }
+  // Every tile of the shard has its road distance (classes may be left out of a corridor cache).
+  // A tile is stored once (the primary key), so counting is enough; nothing is held per tile.
+  std::int64_t rows = 0;
+  {
+    detail::Statement count(*db_, "SELECT COUNT(*) FROM road_distance");
+    if (count.step()) rows = count.column_int(0);
+  }
+  if (rows != tiles_owned()) {
+    throw CacheError(partial_.string() + ": " + std::to_string(rows) + " tiles stored, but the shard has " +
+                     std::to_string(tiles_owned()) + "; the cache is not complete");
   }
   insert_classes_.reset();
   insert_distance_.reset();
@@ -304,6 +317,18 @@ EncodedTile TileEncoder::encode(std::int64_t col, std::int64_t row, const std::v
   } else {
     tile.classes_png = encode_png_rgb8(rgb, kTilePx, kTilePx);
   }
+  EncodedTile distance = encode_distance(col, row, cm);
+  tile.distance_png = std::move(distance.distance_png);
+  tile.distance_min_m = distance.distance_min_m;
+  tile.distance_max_m = distance.distance_max_m;
+  tile.distance_mean_m = distance.distance_mean_m;
+  return tile;
+}
+
+EncodedTile TileEncoder::encode_distance(std::int64_t col, std::int64_t row, const std::vector<std::uint16_t>& cm) {
+  EncodedTile tile;
+  tile.col = col;
+  tile.row = row;
   const auto [lo, hi] = std::minmax_element(cm.begin(), cm.end());
   tile.distance_min_m = *lo * 0.01;
   tile.distance_max_m = *hi * 0.01;

@@ -71,10 +71,14 @@ RegionFeatures project_features(const osm::FeatureSet& features, const osm::Regi
   return out;
 }
 
+int TileRenderer::halo_for(double max_distance_m) {
+  return static_cast<int>(std::ceil(max_distance_m * kPixelsPerMetre)) + 1;
+}
+
 TileRenderer::TileRenderer(const RegionFeatures& features, RegionGrid grid, double max_distance_m)
     : features_(features),
       grid_(grid),
-      halo_px_(static_cast<int>(std::ceil(max_distance_m * kPixelsPerMetre)) + 1),
+      halo_px_(halo_for(max_distance_m)),
       max_cm_(static_cast<std::uint16_t>(std::lround(max_distance_m * 100.0))),
       quantize_(kCellM, max_cm_) {
   assert(max_distance_m > 0 && max_distance_m * 100.0 < 65535.0);

@@ -1,6 +1,7 @@
 // Preprocessing end to end on synthetic maps whose answer is known from their geometry, and the
 // refusal of bad requests before any output is touched.
 
+#include <algorithm>
 #include <fstream>
 #include <thread>
 
@@ -163,6 +164,7 @@ TEST(Preprocess, OrienterNetGoldenPixels) {
   options.input = dir / "map.osm.pbf";
   options.output = dir / "r.gpkg";
   options.bbox = kBox;
+  options.corridor_m = 0;  // the tree beyond the bbox is far from any road
   preprocess_region(options);
   raster::CacheReader reader(options.output);
   const auto& m = reader.metadata();
@@ -252,13 +254,16 @@ TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
   other.bbox = osm::GeoBox{20.0, 10.0, 20.01, 10.01};
   expect_usage_error(other, "does not overlap the data");
   other.bbox = osm::GeoBox{0.0, 40.0, 30.0, 55.0};
-  expect_usage_error(other, "at most 1000 km");
+  expect_usage_error(other, "beyond the 0.1 % that keeps the map metric");
   other.bbox = osm::GeoBox{11.0, 50.0, 10.0, 51.0};
   expect_usage_error(other, "lon0 < lon1");
   other.bbox = kBox;
   other.max_distance_m = 1000;
   expect_usage_error(other, "max_distance_m = 1000");
   other.max_distance_m = 100;
+  other.corridor_m = 150;
+  expect_usage_error(other, "corridor_m = 150: must be in [0, max_distance_m = 100]");
+  other.corridor_m.reset();
   other.shard_index = 3;
   other.shard_count = 2;
   expect_usage_error(other, "shard = 3/2");
@@ -303,6 +308,102 @@ TEST(Preprocess, ReadersKeepReadingWhileACacheIsRebuilt) {
   EXPECT_EQ(reader.metadata().max_distance_m, 50) << "the open reader keeps the cache it opened";
   raster::CacheReader fresh(options.output);
   EXPECT_EQ(fresh.metadata().max_distance_m, 100);
+}
+
+// Every tile's stored PNGs, both layers, in (col, row) order; nothing for a tile not stored.
+std::vector<std::vector<std::uint8_t>> stored_tiles(const std::filesystem::path& cache) {
+  raster::CacheReader reader(cache);
+  std::vector<std::vector<std::uint8_t>> tiles;
+  for (std::int64_t row = 0; row < reader.grid().tiles_high(); ++row) {
+    for (std::int64_t col = 0; col < reader.grid().tiles_wide(); ++col) {
+      for (auto layer : {raster::Layer::classes, raster::Layer::road_distance}) {
+        tiles.push_back(reader.has_tile(layer, col, row) ? reader.tile_blob(layer, col, row)
+                                                         : std::vector<std::uint8_t>{});
+      }
+    }
+  }
+  return tiles;
+}
+
+// Rendering block by block must not change a pixel: the road, the fence and the forest cross
+// tile and block seams (the grid is 4 x 4 tiles; blocks of 1 and 3 tiles cut it everywhere and
+// unevenly), and a single block is the whole region's features at once.
+TEST(Preprocess, BlocksOfAnySizeGiveTheSameTiles) {
+  test::ScratchDir dir;
+  auto options = known_options(dir);
+  preprocess_region(options);
+  const auto whole = stored_tiles(options.output);
+  ASSERT_EQ(whole.size(), 32u);
+  options.overwrite = true;
+  for (int side : {1, 3}) {
+    options.block_tiles = side;
+    const auto report = preprocess_region(options);
+    EXPECT_GT(report.spilled_bytes, 0u);
+    EXPECT_TRUE(stored_tiles(options.output) == whole) << "blocks of " << side << " tiles";
+  }
+}
+
+// A corridor cache stores classes for exactly the tiles that have a cell nearer than the corridor
+// to a road (judged on the full cache's distances) and reads back everywhere as the full cache
+// does, but for the left-out classes: background. Road distances are all stored. The known map's
+// one road runs at y = -50.25 m from x = -100.25 to 100.25 m, so at 40 m only the two tiles south
+// of y = 0 that it crosses keep their classes.
+TEST(Preprocess, CorridorLeavesOutClassesFarFromRoadsAndReadersFillThem) {
+  test::ScratchDir dir;
+  auto options = known_options(dir);
+  options.corridor_m = 0;  // every tile
+  preprocess_region(options);
+  raster::CacheReader full(options.output);
+  const auto grid = full.grid();
+
+  auto corridor = options;
+  corridor.output = dir / "corridor.gpkg";
+  corridor.corridor_m = 40;
+  const auto report = preprocess_region(corridor);
+  raster::CacheReader reader(corridor.output);
+  EXPECT_EQ(reader.metadata().corridor_m, 40);
+
+  int kept = 0;
+  std::size_t lost = 0;  // classes the full cache has in the left-out tiles (the forest)
+  const std::vector<std::uint8_t> background(512 * 512 * 3, 0);
+  for (std::int64_t row = 0; row < grid.tiles_high(); ++row) {
+    for (std::int64_t col = 0; col < grid.tiles_wide(); ++col) {
+      const auto& cm = *full.distance_tile(col, row);
+      const bool near = *std::min_element(cm.begin(), cm.end()) < 4000;
+      kept += near ? 1 : 0;
+      EXPECT_EQ(reader.has_tile(raster::Layer::classes, col, row), near) << col << "," << row;
+      EXPECT_TRUE(reader.has_tile(raster::Layer::road_distance, col, row)) << col << "," << row;
+      EXPECT_EQ(*reader.distance_tile(col, row), cm);
+      const auto& rgb = *full.classes_tile(col, row);
+      EXPECT_EQ(*reader.classes_tile(col, row), near ? rgb : background);
+      if (!near) lost += static_cast<std::size_t>(std::count_if(rgb.begin(), rgb.end(), [](auto c) { return c != 0; }));
+      // The PNG handed to other tools (serve, exports) is there either way.
+      EXPECT_FALSE(reader.tile_blob(raster::Layer::classes, col, row).empty());
+    }
+  }
+  EXPECT_EQ(kept, 2) << "the two tiles the road crosses";
+  EXPECT_EQ(report.tiles_written, grid.tile_count());
+  EXPECT_EQ(report.tiles_skipped, grid.tile_count() - kept);
+  EXPECT_GT(lost, 10000u) << "the forest, 60 m and more from the road";
+
+  // A window across kept and left-out tiles, and one beyond the grid, still refused.
+  std::vector<std::uint8_t> window;
+  reader.read_classes(200, 900, 1200, 300, window);
+  EXPECT_EQ(window.size(), 3u * 360000u);
+  EXPECT_THROW(reader.read_classes(-10, 0, 20, 20, window), raster::CacheRangeError);
+
+  // Sharded, it merges into the same cache.
+  std::vector<std::filesystem::path> shards;
+  for (int i = 0; i < 3; ++i) {
+    auto shard = corridor;
+    shard.output = dir / ("shard" + std::to_string(i) + ".gpkg");
+    shard.shard_index = i;
+    shard.shard_count = 3;
+    preprocess_region(shard);
+    shards.push_back(shard.output);
+  }
+  raster::merge_shards(shards, dir / "merged.gpkg");
+  EXPECT_TRUE(stored_tiles(dir / "merged.gpkg") == stored_tiles(corridor.output));
 }
 
 }  // namespace

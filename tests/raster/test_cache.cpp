@@ -260,7 +260,7 @@ TEST_F(CacheTest, ForeignAndOtherVersionFilesAreRefused) {
       FAIL();
     } catch (const CacheFormatError& e) {
       EXPECT_NE(std::string(e.what()).find(std::string("format version ") + version + ","), std::string::npos) << e.what();
-      EXPECT_NE(std::string(e.what()).find("reads version 2"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("reads version 3"), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find("rebuild the cache with `seqloc preprocess`"), std::string::npos) << e.what();
     }
   }
@@ -279,7 +279,7 @@ TEST_F(CacheTest, InterruptedBuildResumesAndMatchesAFullBuild) {
   {
     CacheWriter writer(dir / "r.gpkg", test_metadata());
     EXPECT_TRUE(writer.resumed());
-    EXPECT_EQ(writer.tiles_stored(), 4u);
+    EXPECT_EQ(writer.tiles_stored(), 4);
   }
   build(dir / "r.gpkg", renderer, features, test_metadata());
   CacheReader full(dir / "full.gpkg"), resumed(dir / "r.gpkg");
@@ -296,7 +296,7 @@ TEST_F(CacheTest, InterruptedBuildResumesAndMatchesAFullBuild) {
   other.max_distance_m = 50;
   CacheWriter writer(dir / "s.gpkg", other);
   EXPECT_FALSE(writer.resumed());
-  EXPECT_EQ(writer.tiles_stored(), 0u);
+  EXPECT_EQ(writer.tiles_stored(), 0);
 }
 
 TEST_F(CacheTest, MergedShardsEqualASingleRunTileForTile) {

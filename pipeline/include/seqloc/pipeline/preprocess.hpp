@@ -12,10 +12,10 @@
 
 namespace seqloc::pipeline {
 
-/// Limits on a region, so that a mistyped bbox fails at once instead of after hours. Transverse
-/// Mercator keeps the scale error under 0.31 % within 500 km of the centre, hence the extent limit;
-/// larger areas are cut into several regions.
-inline constexpr double kMaxRegionExtentM = 1'000'000.0;
+/// Limits on a region, so that a mistyped bbox fails at once instead of after hours. The region
+/// CRS (Transverse Mercator) stretches distances by |k - 1|, which grows with the distance from the
+/// region's central meridian: 0.1 % at about 285 km. Wider areas are cut into several regions.
+inline constexpr double kMaxScaleError = 0.001;
 inline constexpr double kMaxClampM = 650.0;  ///< UInt16 centimetres hold up to 655.35 m
 
 struct PreprocessOptions {
@@ -23,10 +23,17 @@ struct PreprocessOptions {
   std::filesystem::path output;
   std::optional<osm::GeoBox> bbox;  ///< default: the file header's bbox, else the data's
   double max_distance_m = 100.0;    ///< road-distance clamp
+  /// Store classes only for tiles with a cell nearer than this to a road cell, in [0, clamp]; 0
+  /// stores every tile's; unset: the clamp. Road distances are stored for every tile.
+  std::optional<double> corridor_m;
+  [[nodiscard]] double corridor() const { return corridor_m.value_or(max_distance_m); }
   int threads = 0;                  ///< 0: all cores
   int shard_index = 0;
   int shard_count = 1;
   bool overwrite = false;
+  /// Rendering holds the features of one square block of this many tiles a side at a time (the
+  /// tiles do not depend on it; smaller blocks hold less but store long features more often).
+  int block_tiles = 32;
 
   /// Throws UsageError naming the field, its value and the constraint it breaks.
   void validate() const;
@@ -41,6 +48,7 @@ struct PreprocessReport {
   std::int64_t tiles_total = 0;    ///< tiles of this shard
   std::int64_t tiles_written = 0;  ///< rendered by this run
   std::int64_t tiles_resumed = 0;  ///< already in an interrupted build's partial file
+  std::int64_t tiles_skipped = 0;  ///< of those written, farther than the corridor from every road: no classes
   std::int64_t tiles_wide = 0, tiles_high = 0;
   std::size_t nodes = 0, lines = 0, areas = 0, roads = 0;
   std::uint64_t ways_missing_nodes = 0;
@@ -54,6 +62,13 @@ struct PreprocessReport {
   double encode_cpu_seconds = 0;
   double write_seconds = 0;
   int threads = 0;
+  /// Peak resident memory (MB) while reading, classifying, projecting and cutting the features
+  /// into blocks (holds the OSM node index), and while rendering and writing (one block at a time).
+  double start_mb = 0;  ///< resident memory when the call began (the program and its libraries)
+  double read_peak_mb = 0;
+  double render_peak_mb = 0;
+  std::uint64_t spilled_bytes = 0;  ///< the features' temporary file (one copy per block they meet)
+  double scale_error = 0;           ///< the region CRS's largest |k - 1| on the grid's edge
   osm::GeoBox bbox;
   double centre_lat = 0, centre_lon = 0;
 };

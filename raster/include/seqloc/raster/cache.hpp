@@ -54,7 +54,7 @@ class CacheRangeError : public CacheError {
 };
 
 /// Version of the cache layout this build reads and writes.
-inline constexpr int kCacheFormatVersion = 2;
+inline constexpr int kCacheFormatVersion = 3;
 
 enum class Layer { classes, road_distance };
 [[nodiscard]] const char* layer_table(Layer layer);
@@ -69,6 +69,9 @@ struct CacheMetadata {
   double centre_lon = 0;
   osm::GeoBox bbox;  ///< the requested bbox (lon/lat)
   double max_distance_m = 100;
+  /// The classes of tiles farther than this from every road cell are not stored (0: every tile's
+  /// are); readers take them as background. At most max_distance_m. Road distances are complete.
+  double corridor_m = 0;
   RegionGrid grid;
   int shard_index = 0;
   int shard_count = 1;
@@ -81,13 +84,15 @@ struct CacheMetadata {
   [[nodiscard]] osm::RegionProjection projection() const { return {centre_lat, centre_lon}; }
   /// Tiles (col, row) of shard `index` of `count`: every count-th tile in row-major order.
   [[nodiscard]] bool shard_owns(std::int64_t col, std::int64_t row) const;
+  /// How many tiles the shard owns.
+  [[nodiscard]] std::int64_t shard_tile_count() const;
 };
 
 /// One tile of both raster layers, encoded for storage.
 struct EncodedTile {
   std::int64_t col = 0;
   std::int64_t row = 0;
-  std::vector<std::uint8_t> classes_png;
+  std::vector<std::uint8_t> classes_png;  ///< empty: left out, outside a corridor cache's corridor
   std::vector<std::uint8_t> distance_png;
   /// Statistics of the road-distance tile in metres (the coverage's unit, after its scale).
   double distance_min_m = 0;
@@ -105,15 +110,19 @@ class CacheWriter {
   CacheWriter& operator=(const CacheWriter&) = delete;
 
   [[nodiscard]] bool resumed() const { return resumed_; }
-  /// Tiles already stored (from an interrupted build being resumed).
+  /// Whether the interrupted build being resumed stored this tile (false for a new build).
   [[nodiscard]] bool has_tile(std::int64_t col, std::int64_t row) const;
-  [[nodiscard]] std::size_t tiles_stored() const { return done_.size(); }
+  /// Tiles stored so far, the resumed ones included.
+  [[nodiscard]] std::int64_t tiles_stored() const { return stored_; }
+  /// Tiles this cache's shard covers (all the grid's for an unsharded build).
+  [[nodiscard]] std::int64_t tiles_owned() const;
 
   /// Stores the road centerlines (once; a resumed build keeps the ones it has).
   void write_roads(const std::vector<RoadLine>& roads);
   /// Stores one tile of both layers; committed in batches.
   void write_tile(const EncodedTile& tile);
-  /// Commits, marks the cache complete and renames it to its final path (replacing an older one).
+  /// Checks that every tile of the shard was stored (CacheError if not), commits,
+  /// marks the cache complete and renames it to its final path (replacing an older one).
   void finish();
 
   [[nodiscard]] const std::filesystem::path& partial_path() const { return partial_; }
@@ -130,7 +139,8 @@ class CacheWriter {
   std::unique_ptr<detail::Database> db_;
   // Prepared once, used for every tile (declared after db_: finalized before it closes).
   std::unique_ptr<detail::Statement> insert_classes_, insert_distance_, insert_ancillary_;
-  std::unordered_map<std::int64_t, bool> done_;  // key col * 2^32 + row
+  std::vector<std::int64_t> resumed_tiles_;  ///< sorted keys (col << 32 ^ row); empty unless resumed
+  std::int64_t stored_ = 0;
   bool resumed_ = false;
   bool in_transaction_ = false;
   int pending_ = 0;
@@ -141,6 +151,8 @@ class TileEncoder {
  public:
   [[nodiscard]] EncodedTile encode(std::int64_t col, std::int64_t row, const std::vector<std::uint8_t>& rgb,
                                    bool classes_empty, const std::vector<std::uint16_t>& cm);
+  /// The road distance alone, for a tile whose classes a corridor cache leaves out.
+  [[nodiscard]] EncodedTile encode_distance(std::int64_t col, std::int64_t row, const std::vector<std::uint16_t>& cm);
 
  private:
   std::vector<std::uint8_t> empty_classes_;
@@ -167,8 +179,10 @@ class CacheReader {
   /// Decoded tiles, shared with the LRU: RGB interleaved (512 x 512 x 3), or centimetres (512 x 512).
   [[nodiscard]] std::shared_ptr<const std::vector<std::uint8_t>> classes_tile(std::int64_t col, std::int64_t row);
   [[nodiscard]] std::shared_ptr<const std::vector<std::uint16_t>> distance_tile(std::int64_t col, std::int64_t row);
-  /// The stored PNG of a tile.
+  /// The PNG of a tile: the stored one, or for classes a corridor cache left out (far from every
+  /// road), the tile readers take them for: background.
   [[nodiscard]] std::vector<std::uint8_t> tile_blob(Layer layer, std::int64_t col, std::int64_t row);
+  /// Whether the tile is stored (a corridor cache leaves out the classes of tiles far from roads).
   [[nodiscard]] bool has_tile(Layer layer, std::int64_t col, std::int64_t row);
 
   /// A window of the region raster (region pixels, north-west origin), stitched across tiles.
@@ -197,6 +211,9 @@ class CacheReader {
     std::shared_ptr<const std::vector<std::uint16_t>> cm;
   };
   Decoded load(Layer layer, std::int64_t col, std::int64_t row);
+  /// The stored PNG, or nothing when the tile is not stored; CacheRangeError outside the grid.
+  std::optional<std::vector<std::uint8_t>> stored_blob(Layer layer, std::int64_t col, std::int64_t row);
+  [[nodiscard]] CacheRangeError missing_tile(Layer layer, std::int64_t col, std::int64_t row) const;
   void check_window(std::int64_t u0, std::int64_t v0, int width, int height, bool fill_outside, Layer layer) const;
 
   std::filesystem::path path_;
@@ -211,6 +228,8 @@ class CacheReader {
     }
   };
   LruCache<Key, Decoded, KeyHash> lru_;  ///< guarded by mutex_
+  std::shared_ptr<const std::vector<std::uint8_t>> far_;  ///< classes outside the corridor: background
+  std::vector<std::uint8_t> far_png_;                     ///< the same encoded, made on first use
   LruStats stats_;
 };
 

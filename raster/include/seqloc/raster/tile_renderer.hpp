@@ -77,6 +77,9 @@ class TileRenderer {
   /// `max_distance_m` is the clamp of the road distance (conventions.md: default 100 m).
   TileRenderer(const RegionFeatures& features, RegionGrid grid, double max_distance_m);
 
+  /// The halo (pixels) around a tile within which roads set its distances: ceil(2 * clamp) + 1.
+  [[nodiscard]] static int halo_for(double max_distance_m);
+
   [[nodiscard]] const RegionGrid& grid() const { return grid_; }
   [[nodiscard]] int halo_px() const { return halo_px_; }
   [[nodiscard]] std::uint16_t max_distance_cm() const { return max_cm_; }
