@@ -14,6 +14,7 @@
 #include "command.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/region_catalog.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/errors.hpp"
 
@@ -25,10 +26,14 @@ namespace fs = std::filesystem;
 class LocalizeCommand : public Command, public WithOverwrite, public WithProgress {
  public:
   void setup(CLI::App& app) override {
-    app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess)")->required();
+    app.add_option("cache", cache_path_, "Region cache (from seqloc preprocess), or a folder of region caches")
+        ->required();
     app.add_option("routes", route_dirs_, "Route folders (route.json + frames.csv, see docs/route-format.md)")
         ->required();
     app.add_option("-o,--output", out_, "Output folder (written whole, or not at all)")->required();
+    app.add_option("--region", extra_regions_,
+                   "Another region cache or folder of them (repeatable): a route crossing from one region into the "
+                   "next is followed across (single, online and seqloc modes; docs/localize.md)");
     app.add_option("--mode", mode_,
                    "seqloc, online (naive recursion), single, offline (uses future frames), smooth (each frame given "
                    "the whole route: the best poses for batch work), or all")
@@ -134,7 +139,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     // route names and errors do not depend on which shard runs); localize_routes checks the
     // crops of this shard's routes before its first job.
     if (!calibration_.empty()) pipeline::apply_calibration_file(calibration_, options_);
-    raster::CacheReader cache(cache_path_, 256);
+    std::vector<fs::path> region_paths{cache_path_};
+    region_paths.insert(region_paths.end(), extra_regions_.begin(), extra_regions_.end());
+    const pipeline::RegionCatalog catalog(region_paths, 256);
+    if (catalog.size() > 1) log("%zu regions", catalog.size());
     std::vector<fs::path> dirs = route_dirs_;
     std::sort(dirs.begin(), dirs.end());
     std::vector<pipeline::Route> routes;
@@ -145,7 +153,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
       names.insert(route.name);
       if (static_cast<int>(k % static_cast<std::size_t>(shard_count_)) != shard_index_) {
-        pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options_);
+        pipeline::check_route(route, catalog, options_, modes_);
         continue;
       }
       if (noise_t_ > 0 || noise_r_ > 0) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);
@@ -164,7 +172,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       ProgressBar bar(show_progress(), "frames");
       std::atomic<long long> done{0};
       std::mutex progress_mutex;
-      const auto batch = pipeline::localize_routes(routes, cache, options_, modes_, [&] {
+      const auto batch = pipeline::localize_routes(routes, catalog, options_, modes_, [&] {
         const long long d = ++done;
         std::lock_guard lock(progress_mutex);
         bar.update(d, total_frames);
@@ -203,6 +211,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
 
  private:
   fs::path cache_path_;
+  std::vector<fs::path> extra_regions_;
   std::vector<fs::path> route_dirs_;
   fs::path out_;
   fs::path calibration_;

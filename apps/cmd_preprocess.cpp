@@ -111,6 +111,7 @@ class PreprocessCommand : public Command, public WithProgress {
     j["write_seconds"] = r.write_seconds;
     j["start_mb"] = r.start_mb;
     j["read_peak_mb"] = r.read_peak_mb;
+    j["render_start_mb"] = r.render_start_mb;
     j["render_peak_mb"] = r.render_peak_mb;
     j["spilled_bytes"] = r.spilled_bytes;
     j["scale_error"] = r.scale_error;

@@ -7,6 +7,7 @@
 
 #include "command.hpp"
 #include "seqloc/pipeline/errors.hpp"
+#include "seqloc/pipeline/region_catalog.hpp"
 #include "seqloc/serve/server.hpp"
 #include "seqloc/serve/service.hpp"
 
@@ -16,9 +17,9 @@ namespace {
 class ServeCommand : public Command {
  public:
   void setup(CLI::App& app) override {
-    app.add_option("caches", caches_, "Region caches (GeoPackage); each is a region named after its file")
+    app.add_option("caches", caches_, "Region caches (GeoPackage), or folders of them; each is a region named after its file")
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(CLI::ExistingPath);
     app.add_option("--bind", server_.bind, "Address to listen on (loopback unless told otherwise)")
         ->capture_default_str();
     app.add_option("--port", server_.port, "Port (0: any free port, printed at start)")->capture_default_str();
@@ -78,6 +79,7 @@ class ServeCommand : public Command {
                      "stays\n", id.c_str(), error.c_str());
       }
     };
+    caches_ = pipeline::region_cache_files(caches_);
     serve::Service service(caches_, service_);
     serve::HttpServer server(service, server_);
     server.bind();

@@ -533,6 +533,19 @@ void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
 
 const PowerEstimator& SeqLocFilter::calibration() const { return impl_->estimator; }
 
+void SeqLocFilter::rebase(BeliefVolume belief, const std::optional<Pose>& last_estimate) {
+  if (belief.width() != belief_.width() || belief.height() != belief_.height() ||
+      belief.headings() != belief_.headings()) {
+    throw FilterError("rebase: the new belief is " + std::to_string(belief.width()) + " x " +
+                      std::to_string(belief.height()) + " x " + std::to_string(belief.headings()) +
+                      ", the filter's window " + std::to_string(belief_.width()) + " x " +
+                      std::to_string(belief_.height()) + " x " + std::to_string(belief_.headings()));
+  }
+  belief_ = std::move(belief);
+  cached_min_.reset();
+  last_estimate_ = last_estimate;
+}
+
 void SeqLocFilter::recentre(int du, int dv) {
   belief_.recentre(du, dv);
   cached_min_.reset();

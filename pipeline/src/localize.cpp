@@ -17,6 +17,9 @@
 #include "seqloc/pipeline/modes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/observation.hpp"
+#include "seqloc/pipeline/region_catalog.hpp"
+#include "seqloc/pipeline/sequential_localizer.hpp"
+#include "stopwatch.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -116,12 +119,17 @@ filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const Lo
                                options.filter.headings, threads);
 }
 
-FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
+namespace {
+
+// route_frames with each frame's region cache given by `cache_of(i)` (the matcher scores a frame
+// against its own region's classes).
+FrameSource frames_from(const Route& route, std::function<raster::CacheReader&(std::size_t)> cache_of,
+                        const LocalizeOptions& options) {
   auto matcher = std::make_shared<const BevMatcher>(options.matcher);
   auto prepared = [options](const filter::FrameVolume& volume) {  // a copy: the source may outlive the call
     return std::make_shared<const filter::PreparedFrame>(prepare_volume(volume, options));
   };
-  return [&route, &cache, matcher, prepared](std::size_t i) {
+  return [&route, cache_of = std::move(cache_of), matcher, prepared](std::size_t i) {
     const RouteFrame& f = route.frames[i];
     if (f.observation.empty()) {
       const NpyVolume npy(f.volume);
@@ -135,7 +143,7 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
         throw DataError(f.volume.string() + " (frames.csv line " + std::to_string(f.line) + "): " + e.what());
       }
     }
-    auto values = match_frame(f, cache, *matcher);
+    auto values = match_frame(f, cache_of(i), *matcher);
     const int size = matcher->config().size;
     const auto& calibration = matcher->config().calibration;
     if (!calibration.identity()) {
@@ -145,6 +153,12 @@ FrameSource route_frames(const Route& route, raster::CacheReader& cache, const L
                                      size, size, matcher->config().headings, kCellM};
     return prepared(volume);
   };
+}
+
+}  // namespace
+
+FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
+  return frames_from(route, [&cache](std::size_t) -> raster::CacheReader& { return cache; }, options);
 }
 
 FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
@@ -314,6 +328,7 @@ RouteResult run_route(const Route& route, raster::CacheReader& cache, const Loca
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
     const GridCrop crop = frame_crop(route.frames[i], cache.grid(), projection);
     result.poses.push_back(frame_pose(route.frames[i], estimator->estimate(i, crop, frames), projection));
+    result.poses.back().region = cache.path().stem().string();
     if (on_frame) on_frame();
   }
   estimator->finish(result);
@@ -331,11 +346,133 @@ RouteResult localize_route(const Route& route, raster::CacheReader& cache, const
   return run_route(route, cache, options, mode, on_frame, std::move(source), inspect);
 }
 
+namespace {
+
+// A route stays in a region while its crops are half a belief window inside it.
+double region_margin_m(const LocalizeOptions& options) {
+  return std::max(options.filter.width, options.filter.height) * raster::kCellM / 2;
+}
+
+// A route that crosses regions, in a mode that can follow it (single, online, seqloc): each
+// frame's crop, estimate and pose in its own region's grid; the sequential filter's belief is
+// handed over at each crossing (SequentialLocalizer::hand_over).
+RouteResult run_crossing(const Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
+                         const LocalizeOptions& options, Mode mode, const std::function<void()>& on_frame,
+                         FrameSource source) {
+  const std::size_t n = route.frames.size();
+  RouteResult result;
+  result.route = route.name;
+  result.mode = mode;
+  FramePrefetcher frames(std::move(source), n, mode == Mode::single);
+  std::vector<FramePose> poses(n);
+  auto pose_in = [&](std::size_t i, const FrameEstimate& e, std::size_t r) {
+    poses[i] = frame_pose(route.frames[i], e, catalog.projection(r));
+    poses[i].region = catalog.name(r);
+  };
+  auto crop_of = [&](std::size_t i) {
+    const std::size_t r = regions[i];
+    return frame_crop(route.frames[i], catalog.cache(r).grid(), catalog.projection(r));
+  };
+  if (mode == Mode::single) {
+    std::vector<std::unique_ptr<LocalizationMode>> per_region(catalog.size());
+    const FrameInspector none;
+    for (std::size_t i = 0; i < n; ++i) {
+      auto& estimator = per_region[regions[i]];
+      if (!estimator) estimator = make_mode(mode, {route, catalog.cache(regions[i]), options, none});
+      pose_in(i, estimator->estimate(i, crop_of(i), frames), regions[i]);
+      if (on_frame) on_frame();
+    }
+  } else {
+    result.lag = options.lag;
+    std::size_t current = regions[0];
+    SequentialLocalizer localizer(catalog.cache(current), options.filter, mode == Mode::online, options.recentre_margin,
+                                  options.lag);
+    auto collect = [&] {
+      for (const auto& [index, e] : localizer.take_final()) pose_in(index, e, current);
+    };
+    for (std::size_t i = 0; i < n; ++i) {
+      if (regions[i] != current) {
+        localizer.finish();
+        collect();
+        localizer.hand_over(catalog.cache(regions[i]));
+        current = regions[i];
+        ++result.region_crossings;
+      }
+      const RouteFrame& f = route.frames[i];
+      std::optional<GridFix> gps;
+      if (f.gps) {
+        const auto g = catalog.projection(current).forward(f.gps->where);
+        gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
+      }
+      const auto frame = frames.get_shared(i);
+      const auto t0 = detail::Clock::now();
+      (void)localizer.step(frame, crop_of(i), f.odometry, gps);
+      result.filter_seconds += detail::seconds_since(t0);
+      frames.release(i);
+      collect();
+      if (on_frame) on_frame();
+    }
+    localizer.finish();
+    collect();
+    result.recentres = localizer.recentres();
+  }
+  result.poses = std::move(poses);
+  result.prepare_seconds = frames.prepare_seconds();
+  result.wait_seconds = frames.wait_seconds();
+  return result;
+}
+
+// The route's legs (runs of frames in one region) as routes of their own, for check_crops.
+void check_legs(const Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
+                const std::vector<Mode>& modes, const LocalizeOptions& options) {
+  std::size_t begin = 0;
+  for (std::size_t i = 1; i <= regions.size(); ++i) {
+    if (i < regions.size() && regions[i] == regions[begin]) continue;
+    if (begin > 0) {
+      for (const Mode mode : modes) {
+        if (mode == Mode::offline || mode == Mode::smooth) {
+          throw DataError((route.dir / "frames.csv").string() + ":" + std::to_string(route.frames[begin].line) +
+                          ": the route crosses from region " + catalog.name(regions[begin - 1]) + " into " +
+                          catalog.name(regions[begin]) + "; mode " + mode_name(mode) +
+                          " runs within one region (single, online and seqloc follow a route across regions)");
+        }
+      }
+    }
+    Route leg = route;
+    leg.frames.assign(route.frames.begin() + static_cast<std::ptrdiff_t>(begin),
+                      route.frames.begin() + static_cast<std::ptrdiff_t>(i));
+    if (!leg.frames.empty()) leg.frames.front().odometry = {};
+    check_crops(leg, catalog.cache(regions[begin]).grid(), catalog.projection(regions[begin]), options);
+    begin = i;
+  }
+}
+
+}  // namespace
+
+void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options,
+                 const std::vector<Mode>& modes) {
+  check_legs(route, catalog, route_regions(route, catalog, region_margin_m(options)), modes, options);
+}
+
 BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
                             const LocalizeOptions& options, const std::vector<Mode>& modes,
                             const std::function<void()>& on_frame) {
+  RegionCatalog catalog(cache);
+  return localize_routes(routes, catalog, options, modes, on_frame);
+}
+
+BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalog& catalog,
+                            const LocalizeOptions& options, const std::vector<Mode>& modes,
+                            const std::function<void()>& on_frame) {
   options.validate();
-  for (const auto& route : routes) check_crops(route, cache.grid(), cache.metadata().projection(), options);
+  std::vector<std::vector<std::size_t>> regions;
+  for (const auto& route : routes) {
+    regions.push_back(route_regions(route, catalog, region_margin_m(options)));
+    check_legs(route, catalog, regions.back(), modes, options);
+  }
+  auto crosses = [&](std::size_t r) {
+    return std::any_of(regions[r].begin(), regions[r].end(), [&](std::size_t x) { return x != regions[r].front(); });
+  };
   struct Job {
     std::size_t route;
     Mode mode;
@@ -370,8 +507,12 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
   auto store_for = [&](std::size_t r) {
     std::lock_guard lock(mutex);
     if (!shared[r].store) {
-      shared[r].store = std::make_shared<FrameStore>(route_frames(routes[r], cache, job_options), routes[r].frames.size(),
-                                                     readers(routes[r]), budget, options.spill_dir);
+      auto cache_of = [&catalog, &regions, r](std::size_t i) -> raster::CacheReader& {
+        return catalog.cache(regions[r][i]);
+      };
+      shared[r].store = std::make_shared<FrameStore>(frames_from(routes[r], cache_of, job_options),
+                                                     routes[r].frames.size(), readers(routes[r]), budget,
+                                                     options.spill_dir);
     }
     return shared[r].store;
   };
@@ -386,7 +527,11 @@ BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReade
   };
   run_jobs(jobs.size(), workers, [&](std::size_t j) {
     const auto store = store_for(jobs[j].route);
-    batch.results[j] = run_route(routes[jobs[j].route], cache, job_options, jobs[j].mode, on_frame, store->source(), {});
+    const std::size_t r = jobs[j].route;
+    batch.results[j] = crosses(r) ? run_crossing(routes[r], catalog, regions[r], job_options, jobs[j].mode, on_frame,
+                                                 store->source())
+                                  : run_route(routes[r], catalog.cache(regions[r].front()), job_options, jobs[j].mode,
+                                              on_frame, store->source(), {});
     done_with(jobs[j].route);
   });
   return batch;

@@ -109,7 +109,7 @@ namespace {
 std::string poses_csv(const RouteResult& r) {
   std::ostringstream csv;
   csv << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,volume_power,relocalized,position_error_m,"
-         "heading_error_deg,lateral_error_m,longitudinal_error_m\n";
+         "heading_error_deg,lateral_error_m,longitudinal_error_m,region\n";
   char line[512];
   for (const auto& p : r.poses) {
     std::snprintf(line, sizeof line, "%.6f,%.9f,%.9f,%.4f,%.3f,%.3f,%.6f,%.6f,%.6f,%d,", p.timestamp_s, p.lat_deg,
@@ -117,7 +117,7 @@ std::string poses_csv(const RouteResult& r) {
                   p.relocalized ? 1 : 0);
     csv << p.frame << "," << line << optional_number(p.position_error_m, 4) << ","
         << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
-        << optional_number(p.longitudinal_error_m, 4) << "\n";
+        << optional_number(p.longitudinal_error_m, 4) << "," << p.region << "\n";
   }
   return csv.str();
 }
@@ -263,11 +263,16 @@ std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
     std::string cell;
     while (std::getline(ss, cell, ',')) f.push_back(cell);
     if (!text.empty() && text.back() == ',') f.emplace_back();
-    // 15 fields; 14 in files written before volume_power was added (read as power 1).
+    // 16 fields, the region last (its name may hold commas); 15 in files written before the
+    // region was, 14 before volume_power was (read as power 1).
     if (f.size() == 14) f.insert(f.begin() + 9, "1");
-    if (f.size() != 15) {
+    if (f.size() > 16) {
+      for (std::size_t i = 16; i < f.size(); ++i) f[15] += "," + f[i];
+      f.resize(16);
+    }
+    if (f.size() != 15 && f.size() != 16) {
       throw DataError(path.string() + ":" + std::to_string(line) + ": " + std::to_string(f.size()) +
-                      " fields, expected 15 (a poses.csv written by seqloc localize)");
+                      " fields, expected 16 (a poses.csv written by seqloc localize)");
     }
     FramePose p;
     p.frame = f[0];
@@ -285,6 +290,7 @@ std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
     p.heading_error_deg = number(f[12]);
     p.lateral_error_m = number(f[13]);
     p.longitudinal_error_m = number(f[14]);
+    if (f.size() == 16) p.region = f[15];
     poses.push_back(std::move(p));
   }
   return poses;

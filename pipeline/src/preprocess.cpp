@@ -370,6 +370,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   report.read_peak_mb = detail::peak_rss_mb().value_or(0);
   detail::release_free_memory();  // the features' many small blocks, freed above
   detail::reset_peak_rss();
+  report.render_start_mb = detail::rss_mb().value_or(0);
 
   // Block by block (32 x 32 tiles, 8.2 km, by default), so that only one block's features and
   // bins are held while rendering, whatever the region's size.

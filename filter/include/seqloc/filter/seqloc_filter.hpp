@@ -152,6 +152,12 @@ class SeqLocFilter {
   /// The stages, exposed for tests and for callers that move the window between frames.
   void predict(const Odometry& odometry);
   void recentre(int du, int dv);
+  /// The window moved to another grid (a route crossing into the next region): `belief` is the
+  /// belief resampled onto the new window (same size), `last_estimate` the last pose in its cells.
+  /// Self-calibration and ETU keep what they learnt of the route.
+  void rebase(BeliefVolume belief, const std::optional<Pose>& last_estimate);
+  /// The last step's pose (window cells), if any since the last reset.
+  [[nodiscard]] const std::optional<Pose>& last_estimate() const { return last_estimate_; }
   /// step() without the prediction and the relocalization flag: the frame's likelihood multiplied
   /// in, MGR, the argmax and PAS. With `weighting` the frame is weighed as given (a pass repeating
   /// an earlier one: nothing is estimated, self-calibration and ETU's route history are left as

@@ -24,6 +24,8 @@
 
 namespace seqloc::pipeline {
 
+class RegionCatalog;
+
 enum class Mode { seqloc, online, single, offline, smooth };
 [[nodiscard]] const char* mode_name(Mode mode);
 
@@ -86,6 +88,8 @@ struct FramePose {
     std::optional<double> grid_heading_deg;  ///< clockwise from grid north
   };
   std::optional<Truth> truth;
+  /// The region (cache file stem) whose CRS x_m, y_m and the errors are in.
+  std::string region;
 };
 
 struct RouteResult {
@@ -93,6 +97,7 @@ struct RouteResult {
   Mode mode = Mode::seqloc;
   std::vector<FramePose> poses;
   int recentres = 0;  ///< how often the window moved
+  int region_crossings = 0;  ///< how often the route crossed into another region
   int lag = 0;        ///< online and seqloc: the fixed lag the poses were smoothed with (LocalizeOptions::lag)
   /// Where the time went (seconds). Reading and preparing the next frame's volume overlaps the
   /// filter's step on the current one; `wait_seconds` is what the filter waited for it.
@@ -185,6 +190,21 @@ struct BatchResult {
 /// once. `on_frame` (optional) is called after each frame of each job, from the worker threads.
 /// The first error of any job stops the others from starting and is rethrown.
 [[nodiscard]] BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
+                                          const LocalizeOptions& options, const std::vector<Mode>& modes,
+                                          const std::function<void()>& on_frame = {});
+
+/// The same over several regions (region_catalog.hpp): each frame is placed in a region, staying
+/// in one while its crop is half a belief window inside it. A route inside one region runs as
+/// above against that region. A route that crosses regions runs in single, online and seqloc
+/// modes (the filter's belief handed over at each crossing, SequentialLocalizer::hand_over; each
+/// pose in its own region's CRS, FramePose::region); offline and smooth refuse it (DataError).
+/// What localize_routes checks of a route before any work over a catalog: each frame in a
+/// region, each leg's crops (check_crops), and no mode that cannot cross regions on a route that
+/// does. Throws DataError "DIR/frames.csv:LINE: ...".
+void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options,
+                 const std::vector<Mode>& modes);
+
+[[nodiscard]] BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalog& catalog,
                                           const LocalizeOptions& options, const std::vector<Mode>& modes,
                                           const std::function<void()>& on_frame = {});
 

@@ -67,6 +67,7 @@ struct PreprocessReport {
   double start_mb = 0;  ///< resident memory when the call began (the program and its libraries)
   double read_peak_mb = 0;
   double render_peak_mb = 0;
+  double render_start_mb = 0;  ///< resident when rendering began (what reading left allocated)
   std::uint64_t spilled_bytes = 0;  ///< the features' temporary file (one copy per block they meet)
   double scale_error = 0;           ///< the region CRS's largest |k - 1| on the grid's edge
   osm::GeoBox bbox;

@@ -28,6 +28,8 @@ class RegionWindow {
 
   [[nodiscard]] int width() const { return width_; }
   [[nodiscard]] int height() const { return height_; }
+  /// The region cache the window lies in.
+  [[nodiscard]] raster::CacheReader& cache() const { return *cache_; }
   /// Region pixel (u east, v south) of window cell (0, 0).
   [[nodiscard]] std::int64_t origin_u() const { return origin_u_; }
   [[nodiscard]] std::int64_t origin_v() const { return origin_v_; }

@@ -54,6 +54,12 @@ class SequentialLocalizer {
   /// The route ends: the frames still waiting for their lag get their smoothed estimates given
   /// every frame (take_final hands them out).
   void finish();
+  /// The route crosses into another region: the frames waiting for their lag are finished (the
+  /// lag's smoothing does not cross the seam), and the belief is resampled onto a window of the
+  /// same size in `next`'s grid centred where the old one was (nearest cell; headings turned by
+  /// the difference of the two CRSs' meridian convergence, interpolated between bins). The next
+  /// step's crop and estimate are in `next`'s grid.
+  void hand_over(raster::CacheReader& next);
 
   [[nodiscard]] const filter::FilterConfig& config() const { return config_; }
   [[nodiscard]] int lag() const { return lag_; }

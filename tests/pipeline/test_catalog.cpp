@@ -1,0 +1,249 @@
+// Several regions used together: a route that crosses from one region's grid into the next is
+// followed across, the belief handed over at the seam, and gets the poses it gets in one region
+// built over both.
+
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include <GeographicLib/Geodesic.hpp>
+#include <gtest/gtest.h>
+
+#include "seqloc/osm/synthetic.hpp"
+#include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/pipeline/region_catalog.hpp"
+#include "seqloc/pipeline/sequential_localizer.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+constexpr double kLat0 = 47.5, kLon0 = 10.5;
+constexpr int kBins = 64, kSide = 41, kCentre = 20, kFrames = 120, kRidgeFrom = 45;
+
+std::filesystem::path build(const std::filesystem::path& osm, const std::filesystem::path& out, double lon0,
+                            double lon1) {
+  PreprocessOptions options;
+  options.input = osm;
+  options.output = out;
+  options.bbox = osm::GeoBox{lon0, kLat0 - 0.0025, lon1, kLat0 + 0.0025};
+  preprocess_region(options);
+  return out;
+}
+
+// A route east along the road from x = -300 m to +295 m of the map's centre (lon 10.5, where the
+// two regions meet; the route reaches it at frame 60), crops in lat/lon off the truth along the
+// road. The first kRidgeFrom frames' volumes say where the vehicle is; from there on each is a
+// flat ridge along the road (where along it: nobody knows), which only the belief carried from
+// the frames before can place.
+Route ridge_route(const std::filesystem::path& dir) {
+  const osm::RegionProjection local(kLat0, kLon0);
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "across"})";
+  std::ofstream csv(dir / "frames.csv");
+  csv.precision(17);
+  csv << "frame,timestamp,volume,crop_lat,crop_lon,odo_forward_m,odo_left_m,odo_yaw_deg,gt_lat,gt_lon,"
+         "gt_heading_deg\n";
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> offset(-10, 10);
+  for (int t = 0; t < kFrames; ++t) {
+    const double x = -300.25 + 5.0 * t, y = 0.25;
+    const int shift = offset(rng);
+    std::vector<float> v(static_cast<std::size_t>(kSide * kSide * kBins));
+    for (int row = 0; row < kSide; ++row)
+      for (int col = 0; col < kSide; ++col)
+        for (int j = 0; j < kBins; ++j) {
+          const double dj = std::min(std::abs(j - 16), kBins - std::abs(j - 16));
+          auto value = static_cast<float>(-(row - kCentre) * (row - kCentre) / 2.0 - dj * dj / 2.0);
+          if (t < kRidgeFrom) {
+            const double along = col - (kCentre - shift);
+            value -= static_cast<float>(along * along / (2 * 1.5 * 1.5));
+          }
+          v[static_cast<std::size_t>((row * kSide + col) * kBins + j)] = value;
+        }
+    test::write_npy_float32(dir / ("v" + std::to_string(t) + ".npy"), kSide, kSide, kBins, v);
+    double gamma = 0;
+    const auto gt = local.reverse({x, y}, gamma);
+    const auto crop = local.reverse({x + shift * 0.5, y});
+    csv << t << "," << t << ",v" << t << ".npy," << crop.lat_deg << "," << crop.lon_deg << "," << (t ? 5 : 0)
+        << ",0,0," << gt.lat_deg << "," << gt.lon_deg << "," << 90 + gamma << "\n";
+  }
+  csv.close();
+  return read_route(dir);
+}
+
+struct Seam {
+  test::ScratchDir dir;
+  std::filesystem::path whole, west, east;
+  Route route;
+  Seam() {
+    osm::SyntheticMap map(kLat0, kLon0);
+    map.way({{-1400, 0.25}, {1400, 0.25}}, {{"highway", "track"}});
+    map.write(dir / "map.osm.pbf");
+    whole = build(dir / "map.osm.pbf", dir / "whole.gpkg", kLon0 - 0.02, kLon0 + 0.02);
+    std::filesystem::create_directories(dir / "regions");
+    west = build(dir / "map.osm.pbf", dir / "regions" / "west.gpkg", kLon0 - 0.02, kLon0);
+    east = build(dir / "map.osm.pbf", dir / "regions" / "east.gpkg", kLon0, kLon0 + 0.02);
+    route = ridge_route(dir / "route");
+  }
+};
+
+LocalizeOptions options() {
+  LocalizeOptions o;
+  o.filter.width = o.filter.height = 96;
+  o.filter.headings = kBins;
+  return o;
+}
+
+double apart_m(const FramePose& a, const FramePose& b) {
+  double s = 0;
+  GeographicLib::Geodesic::WGS84().Inverse(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg, s);
+  return s;
+}
+
+TEST(RegionCatalog, ARouteAcrossTwoRegionsGetsThePosesOfOneRegionOverBoth) {
+  Seam seam;
+  raster::CacheReader whole(seam.whole);
+  const RegionCatalog one(whole);
+  const RegionCatalog two({seam.dir / "regions"});  // a folder: west.gpkg, east.gpkg
+  ASSERT_EQ(two.size(), 2u);
+  EXPECT_EQ(two.name(0), "east");
+  const std::vector<Mode> modes{Mode::seqloc, Mode::online, Mode::single};
+  const auto a = localize_routes({seam.route}, one, options(), modes);
+  const auto b = localize_routes({seam.route}, two, options(), modes);
+  ASSERT_EQ(a.results.size(), 3u);
+  ASSERT_EQ(b.results.size(), 3u);
+  for (std::size_t m = 0; m < modes.size(); ++m) {
+    const RouteResult& x = a.results[m];
+    const RouteResult& y = b.results[m];
+    ASSERT_EQ(y.poses.size(), static_cast<std::size_t>(kFrames));
+    EXPECT_EQ(x.region_crossings, 0);
+    EXPECT_EQ(y.region_crossings, modes[m] == Mode::single ? 0 : 1) << mode_name(modes[m]);
+    EXPECT_EQ(y.poses.front().region, "west");
+    EXPECT_EQ(y.poses.back().region, "east");
+    EXPECT_EQ(x.poses.back().region, "whole");
+    double worst = 0, sum = 0;
+    for (std::size_t i = 0; i < y.poses.size(); ++i) {
+      const double d = apart_m(x.poses[i], y.poses[i]);
+      worst = std::max(worst, d);
+      sum += d;
+      // Each pose's error is measured in its own region's CRS, against the same truth.
+      EXPECT_NEAR(*x.poses[i].position_error_m, *y.poses[i].position_error_m, 0.75) << mode_name(modes[m]) << " " << i;
+    }
+    std::printf("%s: one region vs two, poses apart by %.3f m on average, %.3f m at most\n", mode_name(modes[m]),
+                sum / kFrames, worst);
+    // The lattices of the three CRSs differ by parts of a cell (0.5 m).
+    EXPECT_LT(sum / kFrames, 0.25) << mode_name(modes[m]);
+    EXPECT_LT(worst, 0.5) << mode_name(modes[m]);
+  }
+  // The belief crossed the seam: along the ridge only the frames before it say where the vehicle
+  // is, and seqloc keeps it to the end of the route, well past the seam; single frames do not.
+  auto mean_error = [](const RouteResult& r, int from, int to) {
+    double sum = 0;
+    for (int t = from; t < to; ++t) sum += *r.poses[static_cast<std::size_t>(t)].position_error_m;
+    return sum / (to - from);
+  };
+  const int after_seam = kFrames - 40;
+  EXPECT_LT(mean_error(b.results[0], after_seam, kFrames), 1.0) << "seqloc after the seam";
+  EXPECT_GT(mean_error(b.results[2], after_seam, kFrames), 2.0) << "single frames along the ridge";
+}
+
+// Where the belief's mass is: its centroid on the ellipsoid, and its circular mean compass heading.
+struct Centroid {
+  osm::GeoPoint where;
+  double compass_deg = 0;
+};
+Centroid centroid(const SequentialLocalizer& localizer) {
+  const auto& b = localizer.filter()->belief();
+  const auto& window = localizer.window();
+  const auto projection = window.cache().metadata().projection();
+  double mass = 0, u = 0, v = 0, s = 0, c = 0;
+  for (int k = 0; k < b.headings(); ++k)
+    for (int y = 0; y < b.height(); ++y)
+      for (int x = 0; x < b.width(); ++x) {
+        const double p = b.prob(x, y, k), theta = b.bin_heading_deg(k) * M_PI / 180.0;
+        mass += p;
+        u += p * x;
+        v += p * y;
+        s += p * std::sin(theta);
+        c += p * std::cos(theta);
+      }
+  double gamma = 0;
+  const osm::GeoPoint where = projection.reverse({window.x_of(u / mass), window.y_of(v / mass)}, gamma);
+  return {where, std::fmod(std::atan2(s, c) * 180.0 / M_PI + gamma + 360.0, 360.0)};
+}
+
+// The hand-over between two regions whose CRSs are 225 km apart, so that their grid norths differ
+// by 1.1 degrees where the vehicle is: the belief moved into the next region's grid stays where it
+// was on the ellipsoid, and its headings are turned so that its compass headings stay too.
+TEST(RegionCatalog, HandOverKeepsTheBeliefsPlaceAndCompassHeading) {
+  test::ScratchDir dir;
+  constexpr double lon = 11.5;
+  osm::SyntheticMap map(kLat0, lon);
+  map.way({{-300, 0.25}, {300, 0.25}}, {{"highway", "track"}});
+  map.write(dir / "map.osm.pbf");
+  raster::CacheReader west(build(dir / "map.osm.pbf", dir / "west.gpkg", 10.0, lon + 0.01));
+  raster::CacheReader east(build(dir / "map.osm.pbf", dir / "east.gpkg", lon - 0.01, 13.0));
+  const auto pw = west.metadata().projection(), pe = east.metadata().projection();
+  double gamma_west = 0, gamma_east = 0;
+  const osm::GeoPoint crop{kLat0 + 0.0001, lon};
+  const auto g = pw.forward(crop, gamma_west);
+  (void)pe.forward(crop, gamma_east);
+  ASSERT_GT(gamma_west - gamma_east, 1.0) << "the two grid norths differ there";
+
+  // One frame: a Gaussian blob (sigma 2 cells) heading 70 degrees true (spread over a few bins).
+  constexpr int side = 31, bins = 256;
+  std::vector<float> values(static_cast<std::size_t>(side * side * bins));
+  for (int row = 0; row < side; ++row)
+    for (int col = 0; col < side; ++col)
+      for (int j = 0; j < bins; ++j) {
+        const double dj = std::remainder(j * 360.0 / bins - 70.0, 360.0) / 3.0;
+        values[static_cast<std::size_t>((row * side + col) * bins + j)] =
+            static_cast<float>(-((row - 12) * (row - 12) + (col - 18) * (col - 18)) / 8.0 - dj * dj / 2.0);
+      }
+  LocalizeOptions o = options();
+  o.filter.headings = bins;
+  const auto frame = prepare_volume({values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
+                                     side, side, bins, 0.5}, o);
+  SequentialLocalizer localizer(west, o.filter, /*online=*/true, o.recentre_margin);
+  (void)localizer.step(frame, GridCrop{g.x_m, g.y_m, -gamma_west}, {}, std::nullopt);
+  const Centroid before = centroid(localizer);
+  localizer.hand_over(east);
+  EXPECT_EQ(&localizer.window().cache(), &east);
+  const Centroid after = centroid(localizer);
+  double apart = 0;
+  GeographicLib::Geodesic::WGS84().Inverse(before.where.lat_deg, before.where.lon_deg, after.where.lat_deg,
+                                           after.where.lon_deg, apart);
+  EXPECT_LT(apart, 0.25) << "the nearest cell of the new grid: at most half a cell's diagonal off";
+  EXPECT_NEAR(after.compass_deg, before.compass_deg, 0.1) << "turned by gamma: " << gamma_west - gamma_east;
+  EXPECT_NEAR(before.compass_deg, 70.0, 0.5);
+}
+
+TEST(RegionCatalog, OfflineAndSmoothRefuseACrossingRouteAndCropsOutsideEveryRegionAreNamed) {
+  Seam seam;
+  const RegionCatalog two({seam.west, seam.east});
+  for (const Mode mode : {Mode::offline, Mode::smooth}) {
+    try {
+      (void)localize_routes({seam.route}, two, options(), {Mode::seqloc, mode});
+      ADD_FAILURE() << mode_name(mode) << " accepted a crossing route";
+    } catch (const DataError& e) {
+      EXPECT_NE(std::string(e.what()).find("crosses from region west into east"), std::string::npos) << e.what();
+    }
+  }
+  // A crop 11 km north of both regions.
+  Route far = seam.route;
+  far.frames[5].crop_geo = osm::GeoPoint{kLat0 + 0.1, kLon0};
+  try {
+    (void)route_regions(far, two, 48);
+    ADD_FAILURE() << "a crop in no region was accepted";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("frames.csv:7: the crop at lat 47.6"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("(west, east)"), std::string::npos) << e.what();
+  }
+  const std::vector<std::filesystem::path> twice{seam.west, seam.west};
+  EXPECT_THROW(RegionCatalog{twice}, UsageError) << "two regions of one name";
+}
+
+}  // namespace
+}  // namespace seqloc::pipeline
