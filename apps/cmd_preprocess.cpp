@@ -32,10 +32,10 @@ class PreprocessCommand : public Command, public WithProgress {
     app.add_option("--max-distance", options_.max_distance_m, "Road-distance clamp in metres")
         ->capture_default_str()
         ->check(CLI::Range(0.01, pipeline::kMaxClampM));
-    app.add_option("--corridor", corridor_,
+    app.add_option("--corridor", options_.corridor_m,
                    "Store only tiles with a cell nearer than this many metres to a road (0: every tile; at most "
                    "--max-distance); readers take a left-out tile as background and the clamp")
-        ->default_str("the clamp")
+        ->capture_default_str()
         ->check(CLI::Range(0.0, pipeline::kMaxClampM));
     app.add_option("--threads", options_.threads, "Worker threads (0: all cores)")->capture_default_str()->check(
         CLI::NonNegativeNumber);
@@ -52,7 +52,6 @@ class PreprocessCommand : public Command, public WithProgress {
 
   void check() override {
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
-    if (corridor_ >= 0) options_.corridor_m = corridor_;
     if (!shard_.empty()) {
       const auto v = parse_numbers<int>(shard_, '/', 2);
       if (!v) throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N, e.g. 0/4");
@@ -72,8 +71,11 @@ class PreprocessCommand : public Command, public WithProgress {
     out.precision(3);
     out << std::fixed << "wrote " << options_.output.string() << ": " << report.tiles_wide << " x " << report.tiles_high
         << " tiles (" << report.tiles_total << " in this shard, " << report.tiles_written << " rendered, "
-        << report.tiles_resumed << " resumed, " << report.tiles_skipped << " left out beyond the "
-        << options_.corridor() << " m corridor), " << report.roads << " roads, " << report.areas << " areas, "
+        << report.tiles_resumed << " resumed";
+    if (options_.corridor_m > 0) {
+      out << ", " << report.tiles_skipped << " without classes beyond the " << options_.corridor_m << " m corridor";
+    }
+    out << "), " << report.roads << " roads, " << report.areas << " areas, "
         << report.lines << " lines, " << report.nodes << " nodes in " << report.total_seconds << " s (read "
         << report.read_seconds << " s, render+write " << report.render_seconds << " s); scale error at the grid's "
         << "edge " << std::defaultfloat << std::setprecision(2) << report.scale_error * 100 << " %\n";
@@ -99,7 +101,7 @@ class PreprocessCommand : public Command, public WithProgress {
     j["tiles_written"] = r.tiles_written;
     j["tiles_resumed"] = r.tiles_resumed;
     j["tiles_skipped"] = r.tiles_skipped;
-    j["corridor_m"] = options_.corridor();
+    j["corridor_m"] = options_.corridor_m;
     j["megapixels_per_layer"] = static_cast<double>(r.tiles_total) * 512.0 * 512.0 / 1e6;
     j["threads"] = r.threads;
     j["read_seconds"] = r.read_seconds;
@@ -126,7 +128,6 @@ class PreprocessCommand : public Command, public WithProgress {
   std::string bbox_;
   std::string shard_;
   std::string report_path_;
-  double corridor_ = -1;  ///< unset: the clamp
 };
 
 }  // namespace

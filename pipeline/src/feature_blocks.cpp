@@ -23,16 +23,6 @@ using raster::RegionGrid;
 
 enum Kind : std::uint8_t { kNode, kLine, kArea };
 
-// One (block, feature) pair; sorted by block, then kind, then index (the features' own order).
-struct Entry {
-  std::uint32_t block;
-  Kind kind;
-  std::uint32_t index;
-  friend bool operator<(const Entry& a, const Entry& b) {
-    return std::tie(a.block, a.kind, a.index) < std::tie(b.block, b.kind, b.index);
-  }
-};
-
 std::int64_t floor_div(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 class Writer {
@@ -92,6 +82,16 @@ class Reader {
 
 }  // namespace
 
+// One (block, feature) pair; sorted by block, then kind, then index (the features' own order).
+struct FeatureBlocks::Entry {
+  std::uint32_t block;
+  Kind kind;
+  std::uint32_t index;
+  friend bool operator<(const Entry& a, const Entry& b) {
+    return std::tie(a.block, a.kind, a.index) < std::tie(b.block, b.kind, b.index);
+  }
+};
+
 FeatureBlocks::FeatureBlocks(const raster::RegionFeatures& features, const RegionGrid& grid, int halo_px,
                              int block_tiles, const std::filesystem::path& spill_dir)
     : grid_(grid), block_tiles_(block_tiles), dir_(spill_dir) {
@@ -130,6 +130,16 @@ FeatureBlocks::FeatureBlocks(const raster::RegionFeatures& features, const Regio
     throw std::runtime_error("cannot create the features' spill file in " + spill_dir.string() + ": " +
                              std::strerror(errno));
   }
+  try {
+    spill(features, entries, block_count);
+  } catch (...) {
+    ::close(fd_);  // the destructor does not run for a constructor that throws
+    throw;
+  }
+}
+
+void FeatureBlocks::spill(const raster::RegionFeatures& features, const std::vector<Entry>& entries,
+                          std::size_t block_count) {
   offsets_.assign(block_count + 1, 0);
   Writer out;
   auto it = entries.begin();

@@ -37,6 +37,9 @@ class FeatureBlocks {
   [[nodiscard]] std::uint64_t spilled_bytes() const { return spilled_; }
 
  private:
+  struct Entry;
+  void spill(const raster::RegionFeatures& features, const std::vector<Entry>& entries, std::size_t block_count);
+
   raster::RegionGrid grid_;
   int block_tiles_;
   std::int64_t blocks_wide_ = 0, blocks_high_ = 0;

@@ -131,9 +131,9 @@ void PreprocessOptions::validate() const {
       << "] (the road distance is stored as UInt16 centimetres)";
     fail(s.str());
   }
-  if (!(corridor() >= 0 && corridor() <= max_distance_m)) {
+  if (!(corridor_m >= 0 && corridor_m <= max_distance_m)) {
     std::ostringstream s;
-    s << "corridor_m = " << corridor() << ": must be in [0, max_distance_m = " << max_distance_m
+    s << "corridor_m = " << corridor_m << ": must be in [0, max_distance_m = " << max_distance_m
       << "] (0 stores every tile; beyond the clamp the distance to the nearest road is not known)";
     fail(s.str());
   }
@@ -198,7 +198,7 @@ void render_tiles(const BlockJob& job, raster::CacheWriter& writer, const Prepro
                   const std::function<void(const PreprocessProgress&)>& on_progress, PreprocessReport& report) {
   const int threads =
       options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  const auto corridor_cm = static_cast<std::uint16_t>(std::lround(options.corridor() * 100.0));
+  const auto corridor_cm = static_cast<std::uint16_t>(std::lround(options.corridor_m * 100.0));
   TileQueue queue(static_cast<std::size_t>(threads) * 8);
   queue.set_producers(threads);
   std::atomic<std::size_t> next{0};
@@ -358,7 +358,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   metadata.centre_lon = centre.lon_deg;
   metadata.bbox = bbox;
   metadata.max_distance_m = options.max_distance_m;
-  metadata.corridor_m = options.corridor();
+  metadata.corridor_m = options.corridor_m;
   metadata.grid = grid;
   metadata.shard_index = options.shard_index;
   metadata.shard_count = options.shard_count;

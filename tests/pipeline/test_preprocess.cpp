@@ -263,7 +263,7 @@ TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
   other.max_distance_m = 100;
   other.corridor_m = 150;
   expect_usage_error(other, "corridor_m = 150: must be in [0, max_distance_m = 100]");
-  other.corridor_m.reset();
+  other.corridor_m = 0;
   other.shard_index = 3;
   other.shard_count = 2;
   expect_usage_error(other, "shard = 3/2");

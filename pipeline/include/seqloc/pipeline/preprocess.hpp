@@ -24,9 +24,8 @@ struct PreprocessOptions {
   std::optional<osm::GeoBox> bbox;  ///< default: the file header's bbox, else the data's
   double max_distance_m = 100.0;    ///< road-distance clamp
   /// Store classes only for tiles with a cell nearer than this to a road cell, in [0, clamp]; 0
-  /// stores every tile's; unset: the clamp. Road distances are stored for every tile.
-  std::optional<double> corridor_m;
-  [[nodiscard]] double corridor() const { return corridor_m.value_or(max_distance_m); }
+  /// stores every tile's. Road distances are stored for every tile.
+  double corridor_m = 0;
   int threads = 0;                  ///< 0: all cores
   int shard_index = 0;
   int shard_count = 1;
