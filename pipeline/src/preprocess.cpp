@@ -6,6 +6,7 @@
 #include <condition_variable>
 #include <deque>
 #include <exception>
+#include <iomanip>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -158,6 +159,8 @@ namespace {
 
 // The region's box (explicit, else the .osm.pbf header's, else the data's, which needs the data
 // first) and its features, read once.
+double checked_scale_error(const osm::GeoBox& bbox);
+
 std::pair<osm::GeoBox, osm::FeatureSet> read_region(const PreprocessOptions& options) {
   std::optional<osm::GeoBox> bbox = options.bbox;
   if (!bbox) {
@@ -166,6 +169,7 @@ std::pair<osm::GeoBox, osm::FeatureSet> read_region(const PreprocessOptions& opt
   }
   osm::ReadOptions read_options;
   if (bbox) {
+    (void)checked_scale_error(*bbox);  // before reading anything
     const osm::GeoPoint centre = bbox->centre();
     const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
     read_options.keep_box = keep_box_for(grid_for(*bbox, projection), projection, options.max_distance_m);
@@ -284,17 +288,24 @@ double edge_scale_error(const raster::RegionGrid& grid, const osm::RegionProject
   return worst;
 }
 
-void check_scale_error(const osm::GeoBox& bbox, const raster::RegionGrid& grid, double scale_error) {
-  if (scale_error <= kMaxScaleError) return;
+// Refuses a region whose CRS would stretch distances by more than kMaxScaleError at the grid's
+// edge; returns the scale error there.
+double checked_scale_error(const osm::GeoBox& bbox) {
+  const osm::GeoPoint centre = bbox.centre();
+  const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
+  const raster::RegionGrid grid = grid_for(bbox, projection);
+  const double scale_error = edge_scale_error(grid, projection);
+  if (scale_error <= kMaxScaleError) return scale_error;
   // Transverse Mercator's error grows as x^2 / (2 R^2) with the distance x from the centre line.
   const double width_m = grid.max_x() - grid.min_x();
   const double max_width_m = 2.0 * 6'371'000.0 * std::sqrt(2.0 * kMaxScaleError);
   std::ostringstream s;
-  s.precision(3);
-  s << "bbox " << describe(bbox) << " spans " << width_m / 1000 << " km east-west; at the grid's edge the region "
-    << "CRS would stretch distances by " << scale_error * 100 << " %, beyond the " << kMaxScaleError * 100
-    << " % that keeps the map metric. Cut it into at least " << std::ceil(width_m / max_width_m)
-    << " regions side by side (each under about " << max_width_m / 1000 << " km east-west, any height)";
+  s << std::fixed << std::setprecision(0) << "bbox " << describe(bbox) << " spans " << width_m / 1000
+    << " km east-west; at the grid's edge the region CRS would stretch distances by " << std::setprecision(2)
+    << scale_error * 100 << " %, beyond the " << std::setprecision(1) << kMaxScaleError * 100
+    << " % that keeps the map metric. Cut it into at least " << std::setprecision(0)
+    << std::ceil(width_m / max_width_m) << " regions side by side (each under about " << max_width_m / 1000
+    << " km east-west, any height)";
   throw UsageError(s.str());
 }
 
@@ -337,8 +348,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   const raster::RegionGrid grid = grid_for(bbox, projection);
 
   PreprocessReport report;
-  report.scale_error = edge_scale_error(grid, projection);
-  check_scale_error(bbox, grid, report.scale_error);
+  report.scale_error = checked_scale_error(bbox);
   report.bbox = bbox;
   report.centre_lat = centre.lat_deg;
   report.centre_lon = centre.lon_deg;

@@ -109,6 +109,13 @@ def main():
                  run("preprocess", path, "-o", cache, "--overwrite", "--no-progress"), 1, fragments, cache, before_cache,
                  "the previous cache, unchanged")
 
+        case("a region too wide for one CRS", "preprocess valley.osm.pbf --bbox 0,40,30,55 -o valley.gpkg --overwrite",
+             run("preprocess", ARGS.sample, "--bbox", "0,40,30,55", "-o", cache, "--overwrite", "--no-progress"), 2,
+             ["0,40,30,55", "beyond the 0.1 %", "at least 5 regions"], cache, before_cache, "the previous cache, unchanged")
+        case("a corridor beyond the road-distance clamp", "preprocess valley.osm.pbf --corridor 150 -o valley.gpkg --overwrite",
+             run("preprocess", ARGS.sample, "--corridor", "150", "-o", cache, "--overwrite", "--no-progress"), 2,
+             ["corridor_m = 150", "max_distance_m = 100"], cache, before_cache, "the previous cache, unchanged")
+
         # A route with volumes, localized once: the previous good output.
         route = os.path.join(w, "route")
         os.makedirs(route)
@@ -177,6 +184,13 @@ def main():
              "--overwrite", run("localize", cache, route, "-o", out, "--overwrite", "--window", "64", "--headings", "16",
                                 "--no-progress", "--calibration", calibration),
              1, ["calibration.json", "version 2"], out, before_out)
+        second = os.path.join(w, "valley-east.gpkg")
+        shutil.copy(cache, second)
+        case("crops in region-grid coordinates with several regions",
+             "localize valley.gpkg route -o out --region valley-east.gpkg --overwrite",
+             run("localize", cache, route, "-o", out, "--region", second, "--overwrite", "--window", "64", "--headings",
+                 "16", "--no-progress"),
+             1, ["frames.csv:2:", "region-grid coordinates", "crop_lat, crop_lon"], out, before_out)
 
         # A cache from another version of the format.
         old = os.path.join(w, "old.gpkg")
