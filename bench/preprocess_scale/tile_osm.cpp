@@ -83,8 +83,15 @@ int main(int argc, char** argv) {
   }
   try {
     const std::string input = argv[1], output = argv[2];
-    const int columns = std::atoi(argv[3]), rows = std::atoi(argv[4]);
-    if (columns < 1 || rows < 1) throw std::runtime_error("COLUMNS and ROWS must be >= 1");
+    auto count = [](const char* text) {
+      char* end = nullptr;
+      const long value = std::strtol(text, &end, 10);
+      if (end == text || *end != '\0' || value < 1 || value > 1000) {
+        throw std::runtime_error(std::string("'") + text + "': COLUMNS and ROWS must be whole numbers in [1, 1000]");
+      }
+      return static_cast<int>(value);
+    };
+    const int columns = count(argv[3]), rows = count(argv[4]);
     const Extent extent = measure(input);
     if (!extent.box.valid()) throw std::runtime_error(input + ": no box in its header and no nodes");
     const double width = extent.box.top_right().lon() - extent.box.bottom_left().lon();

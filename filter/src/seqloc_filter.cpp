@@ -441,7 +441,7 @@ struct SeqLocFilter::Impl {
         for (std::size_t start = 0; start < slice; start += kBlock) {
           const std::size_t len = std::min(kBlock, slice - start);
           const float* x = f.log_prob.data() + static_cast<std::size_t>(j) * slice + start;
-          for (std::size_t i = 0; i < len; ++i) {  // vectorizes
+          for (Eigen::Index i = 0; i < static_cast<Eigen::Index>(len); ++i) {  // vectorizes
             r[i] = std::max(x[i], kLogZero) - f.max_log_prob;
             one[i] = x[i] > kLogZero ? 1.0f : 0.0f;
           }

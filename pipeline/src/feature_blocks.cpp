@@ -15,9 +15,7 @@
 namespace seqloc::pipeline::detail {
 namespace {
 
-using raster::PixelArea;
 using raster::PixelBox;
-using raster::PixelLine;
 using raster::PixelNode;
 using raster::RegionGrid;
 
@@ -62,7 +60,7 @@ class Reader {
   explicit Reader(std::vector<char> bytes) : bytes_(std::move(bytes)) {}
   template <class T>
   T get() {
-    T value;
+    T value{};
     std::memcpy(&value, bytes_.data() + at_, sizeof(T));
     at_ += sizeof(T);
     return value;

@@ -118,7 +118,8 @@ void SequentialLocalizer::hand_over(raster::CacheReader& next) {
   }
   const RegionWindow& old = window_;
   const osm::RegionProjection from = old.cache().metadata().projection(), to = next.metadata().projection();
-  const osm::GeoPoint centre = from.reverse({old.x_of(old.width() / 2), old.y_of(old.height() / 2)});
+  const int centre_u = old.width() / 2, centre_v = old.height() / 2;  // the window's centre cell
+  const osm::GeoPoint centre = from.reverse({old.x_of(centre_u), old.y_of(centre_v)});
   const auto c = to.forward(centre);
   moved.centre_on(c.x_m, c.y_m);
 

@@ -73,14 +73,14 @@ std::optional<std::vector<std::uint8_t>> CacheReader::stored_blob(Layer layer, s
   return out;
 }
 
-CacheRangeError CacheReader::missing_tile(Layer layer, std::int64_t col, std::int64_t row) const {
-  return CacheRangeError(path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
-                         layer_table(layer) + "' is missing from the cache");
+void CacheReader::throw_missing_tile(Layer layer, std::int64_t col, std::int64_t row) const {
+  throw CacheRangeError(path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +
+                        layer_table(layer) + "' is missing from the cache");
 }
 
 std::vector<std::uint8_t> CacheReader::tile_blob(Layer layer, std::int64_t col, std::int64_t row) {
   if (auto stored = stored_blob(layer, col, row)) return std::move(*stored);
-  if (layer != Layer::classes || !far_) throw missing_tile(layer, col, row);
+  if (layer != Layer::classes || !far_) throw_missing_tile(layer, col, row);
   // Classes left out as outside the corridor: the tile every reader takes them for, encoded.
   std::lock_guard lock(mutex_);
   if (far_png_.empty()) far_png_ = encode_png_rgb8(*far_, kTilePx, kTilePx);
@@ -109,7 +109,7 @@ CacheReader::Decoded CacheReader::load(Layer layer, std::int64_t col, std::int64
   // Fetch under the lock (one SQLite connection), decode outside it so threads decode in parallel.
   const auto blob = stored_blob(layer, col, row);
   if (!blob) {
-    if (layer != Layer::classes || !far_) throw missing_tile(layer, col, row);
+    if (layer != Layer::classes || !far_) throw_missing_tile(layer, col, row);
     return {far_, nullptr};  // classes left out as outside the corridor
   }
   const std::string what = path_.string() + ": tile (" + std::to_string(col) + ", " + std::to_string(row) + ") of '" +

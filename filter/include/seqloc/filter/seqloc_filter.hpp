@@ -162,7 +162,7 @@ class SeqLocFilter {
   /// in, MGR, the argmax and PAS. With `weighting` the frame is weighed as given (a pass repeating
   /// an earlier one: nothing is estimated, self-calibration and ETU's route history are left as
   /// they are); without it, as the configuration says.
-  FrameResult update(const PreparedFrame& frame, const CropPose& crop, const float* road_distance_m,
+  FrameResult update(const PreparedFrame& given, const CropPose& crop, const float* road_distance_m,
                      const GpsFix* gps = nullptr, const FrameWeighting* weighting = nullptr);
 
   /// Self-calibration's estimator (its power is what the next step uses).

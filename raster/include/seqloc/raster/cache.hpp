@@ -213,7 +213,7 @@ class CacheReader {
   Decoded load(Layer layer, std::int64_t col, std::int64_t row);
   /// The stored PNG, or nothing when the tile is not stored; CacheRangeError outside the grid.
   std::optional<std::vector<std::uint8_t>> stored_blob(Layer layer, std::int64_t col, std::int64_t row);
-  [[nodiscard]] CacheRangeError missing_tile(Layer layer, std::int64_t col, std::int64_t row) const;
+  [[noreturn]] void throw_missing_tile(Layer layer, std::int64_t col, std::int64_t row) const;
   void check_window(std::int64_t u0, std::int64_t v0, int width, int height, bool fill_outside, Layer layer) const;
 
   std::filesystem::path path_;

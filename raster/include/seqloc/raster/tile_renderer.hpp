@@ -38,12 +38,12 @@ struct PixelNode {
   Pixel at;
 };
 struct PixelLine {
-  osm::Group group;
+  osm::Group group{};
   std::vector<Pixel> points;
   PixelBox box;
 };
 struct PixelArea {
-  osm::Group group;
+  osm::Group group{};
   std::vector<std::vector<Pixel>> rings;
   PixelBox box;
 };
