@@ -438,11 +438,17 @@ void check_legs(const Route& route, const RegionCatalog& catalog, const std::vec
         }
       }
     }
-    Route leg = route;
-    leg.frames.assign(route.frames.begin() + static_cast<std::ptrdiff_t>(begin),
-                      route.frames.begin() + static_cast<std::ptrdiff_t>(i));
-    if (!leg.frames.empty()) leg.frames.front().odometry = {};
-    check_crops(leg, catalog.cache(regions[begin]).grid(), catalog.projection(regions[begin]), options);
+    const raster::RegionGrid& grid = catalog.cache(regions[begin]).grid();
+    if (begin == 0 && i == regions.size()) {
+      check_crops(route, grid, catalog.projection(regions[begin]), options);  // one leg: the route itself
+    } else {
+      Route leg;
+      leg.dir = route.dir;
+      leg.name = route.name;
+      leg.frames.assign(route.frames.begin() + static_cast<std::ptrdiff_t>(begin),
+                        route.frames.begin() + static_cast<std::ptrdiff_t>(i));
+      check_crops(leg, grid, catalog.projection(regions[begin]), options);
+    }
     begin = i;
   }
 }
