@@ -38,7 +38,8 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
   }
   const auto help = run_seqloc({"preprocess", "--help"}).out;
-  for (const char* option : {"--bbox", "--max-distance", "--threads", "--shard", "--progress", "--overwrite", "-o"}) {
+  for (const char* option : {"--bbox", "--max-distance", "--corridor", "--threads", "--shard", "--progress", "--overwrite",
+                             "--report", "-o"}) {
     EXPECT_NE(help.find(option), std::string::npos) << option;
   }
   const auto simulate = run_seqloc({"simulate", "--help"}).out;
@@ -52,7 +53,7 @@ TEST(Cli, HelpOnEverySubcommand) {
   const auto localize = run_seqloc({"localize", "--help"}).out;
   for (const char* option : {"--matcher-temperature", "--volume-temperature", "--etu-reference", "--outside-crop-nats",
                              "--matcher-floor", "--shard", "--frame-memory", "--beliefs", "--no-self-calibrate",
-                             "--paper"}) {
+                             "--paper", "--region", "folder of region caches"}) {
     EXPECT_NE(localize.find(option), std::string::npos) << option;
   }
   const auto match = run_seqloc({"match", "--help"}).out;
