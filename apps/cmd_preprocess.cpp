@@ -1,3 +1,5 @@
+#include <malloc.h>
+
 #include <cstdio>
 #include <iomanip>
 #include <sstream>
@@ -62,6 +64,11 @@ class PreprocessCommand : public Command, public WithProgress {
   }
 
   int run() override {
+    // Buffers of 1 MB and more (the features' larger vectors) come from mmap and go back to the
+    // system when freed. glibc would otherwise raise that threshold as big blocks are freed and
+    // serve later ones from a heap that reading leaves fragmented, which rendering then carries
+    // (10x andorra: 93 MB resident when rendering starts, 63 MB with the fixed threshold).
+    ::mallopt(M_MMAP_THRESHOLD, 1 << 20);
     log("preprocess %s -> %s", options_.input.c_str(), options_.output.c_str());
     ProgressBar bar(show_progress(), "tiles");
     const auto report = pipeline::preprocess_region(
