@@ -21,7 +21,6 @@ using raster::RegionGrid;
 
 enum Kind : std::uint8_t { kNode, kLine, kArea };
 
-std::int64_t floor_div(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 class Writer {
  public:
@@ -99,12 +98,9 @@ FeatureBlocks::FeatureBlocks(const raster::RegionFeatures& features, const Regio
 
   // Which blocks each feature meets, as the renderer's tile bins would (roads with the halo).
   std::vector<Entry> entries;
-  const raster::Pixel o = grid.origin();
   auto add = [&](const PixelBox& box, std::int64_t margin, Kind kind, std::size_t index) {
-    const std::int64_t c0 = std::max<std::int64_t>(0, floor_div(box.u0 - margin - o.u, raster::kTilePx));
-    const std::int64_t c1 = std::min(grid.tiles_wide() - 1, floor_div(box.u1 + margin - o.u, raster::kTilePx));
-    const std::int64_t r0 = std::max<std::int64_t>(0, floor_div(box.v0 - margin - o.v, raster::kTilePx));
-    const std::int64_t r1 = std::min(grid.tiles_high() - 1, floor_div(box.v1 + margin - o.v, raster::kTilePx));
+    const raster::TileSpan t = raster::tiles_meeting(grid, box, margin);
+    const std::int64_t c0 = t.c0, c1 = t.c1, r0 = t.r0, r1 = t.r1;
     for (std::int64_t by = r0 / block_tiles; r0 <= r1 && by <= r1 / block_tiles; ++by) {
       for (std::int64_t bx = c0 / block_tiles; c0 <= c1 && bx <= c1 / block_tiles; ++bx) {
         entries.push_back({static_cast<std::uint32_t>(by * blocks_wide_ + bx), kind, static_cast<std::uint32_t>(index)});

@@ -16,14 +16,9 @@ Pixel to_pixel(const osm::RegionProjection& projection, osm::GeoPoint p) {
 // Calls f(index) for every tile whose pixels intersect the box grown by `margin` pixels.
 template <class F>
 void for_each_tile(const RegionGrid& grid, const PixelBox& box, std::int64_t margin, F&& f) {
-  const Pixel o = grid.origin();
-  auto floor_div = [](std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); };
-  const std::int64_t c0 = std::max<std::int64_t>(0, floor_div(box.u0 - margin - o.u, kTilePx));
-  const std::int64_t c1 = std::min<std::int64_t>(grid.tiles_wide() - 1, floor_div(box.u1 + margin - o.u, kTilePx));
-  const std::int64_t r0 = std::max<std::int64_t>(0, floor_div(box.v0 - margin - o.v, kTilePx));
-  const std::int64_t r1 = std::min<std::int64_t>(grid.tiles_high() - 1, floor_div(box.v1 + margin - o.v, kTilePx));
-  for (std::int64_t r = r0; r <= r1; ++r) {
-    for (std::int64_t c = c0; c <= c1; ++c) f(static_cast<std::size_t>(r * grid.tiles_wide() + c));
+  const TileSpan t = tiles_meeting(grid, box, margin);
+  for (std::int64_t r = t.r0; r <= t.r1; ++r) {
+    for (std::int64_t c = t.c0; c <= t.c1; ++c) f(static_cast<std::size_t>(r * grid.tiles_wide() + c));
   }
 }
 
@@ -33,6 +28,15 @@ inline void paint(std::uint8_t& cell, std::uint8_t code) {
 }
 
 }  // namespace
+
+TileSpan tiles_meeting(const RegionGrid& grid, const PixelBox& box, std::int64_t margin) {
+  const Pixel o = grid.origin();
+  auto floor_div = [](std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); };
+  return {std::max<std::int64_t>(0, floor_div(box.u0 - margin - o.u, kTilePx)),
+          std::min<std::int64_t>(grid.tiles_wide() - 1, floor_div(box.u1 + margin - o.u, kTilePx)),
+          std::max<std::int64_t>(0, floor_div(box.v0 - margin - o.v, kTilePx)),
+          std::min<std::int64_t>(grid.tiles_high() - 1, floor_div(box.v1 + margin - o.v, kTilePx))};
+}
 
 RegionFeatures project_features(const osm::FeatureSet& features, const osm::RegionProjection& projection) {
   RegionFeatures out;

@@ -33,6 +33,14 @@ struct PixelBox {
   }
 };
 
+/// The tiles of a grid, columns [c0, c1] and rows [r0, r1] (empty when c0 > c1 or r0 > r1).
+struct TileSpan {
+  std::int64_t c0 = 0, c1 = -1, r0 = 0, r1 = -1;
+};
+/// The tiles of `grid` whose pixels meet `box` grown by `margin` pixels: the tiles whose bins
+/// name a feature of that box (the renderer's and preprocessing's blocks alike).
+[[nodiscard]] TileSpan tiles_meeting(const RegionGrid& grid, const PixelBox& box, std::int64_t margin);
+
 struct PixelNode {
   osm::Group group{};
   Pixel at;
