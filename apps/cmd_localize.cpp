@@ -33,7 +33,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     app.add_option("-o,--output", out_, "Output folder (written whole, or not at all)")->required();
     app.add_option("--region", extra_regions_,
                    "Another region cache or folder of them (repeatable): a route crossing from one region into the "
-                   "next is followed across (single, online and seqloc modes; docs/localize.md)");
+                   "next is followed across, in every mode (docs/localize.md)");
     app.add_option("--mode", mode_,
                    "seqloc, online (naive recursion), single, offline (uses future frames), smooth (each frame given "
                    "the whole route: the best poses for batch work), or all")
@@ -153,7 +153,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
       names.insert(route.name);
       if (static_cast<int>(k % static_cast<std::size_t>(shard_count_)) != shard_index_) {
-        pipeline::check_route(route, catalog, options_, modes_);
+        pipeline::check_route(route, catalog, options_);
         continue;
       }
       if (noise_t_ > 0 || noise_r_ > 0) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);

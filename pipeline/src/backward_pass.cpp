@@ -38,13 +38,25 @@ FrameEstimate BackwardPass::estimate(const filter::BeliefVolume& alpha, const St
 }
 
 void BackwardPass::step_back(const StepRecord& record, const filter::PreparedFrame& frame, const StepRecord& previous) {
+  step_back(record, frame, previous, window_.cache());
+}
+
+void BackwardPass::step_back(const StepRecord& record, const filter::PreparedFrame& frame, const StepRecord& previous,
+                             raster::CacheReader& previous_region) {
   // beta stands in the window the forward belief ended the step in; the frame was taken in where
   // the window was before that step's re-centring.
   move_window(filter_, window_, record.origin);
   const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
   filter_.absorb(frame, record.crop, record.weighting, road, record.fix ? &*record.fix : nullptr);
   filter_.step_back(record.odometry);
-  move_window(filter_, window_, previous.origin_after);
+  if (&previous_region == &window_.cache()) {
+    move_window(filter_, window_, previous.origin_after);
+    return;
+  }
+  RegionWindow there(previous_region, window_.width(), window_.height());
+  there.move_to(previous.origin_after[0], previous.origin_after[1]);
+  filter_.rebase(carry_belief(filter_.belief(), window_, there));
+  window_ = there;
 }
 
 ForwardReplay::ForwardReplay(raster::CacheReader& cache, const filter::FilterConfig& config)

@@ -315,20 +315,28 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
 namespace {
 
 // localize_route once the options and the route's crops are checked.
+// `catalog` and `regions` (each frame's region) for a route that crosses regions in a mode that
+// follows it by itself (offline, smooth); null for a route in `cache` alone.
 RouteResult run_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
-                      const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
-  const auto& projection = cache.metadata().projection();
+                      const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect,
+                      const RegionCatalog* catalog = nullptr, const std::vector<std::size_t>* regions = nullptr) {
   if (!source) source = stored_route_frames(route, cache, options, frame_reads(mode, route));
-  const auto estimator = make_mode(mode, {route, cache, options, inspect});
+  const auto estimator = make_mode(mode, {route, cache, options, inspect, catalog, regions});
   FramePrefetcher frames(std::move(source), route.frames.size(), estimator->lookahead());
   RouteResult result;
   result.route = route.name;
   result.mode = mode;
   if (mode == Mode::online || mode == Mode::seqloc) result.lag = options.lag;
+  const auto& projection = cache.metadata().projection();
+  const std::string name = cache.path().stem().string();
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
-    const GridCrop crop = frame_crop(route.frames[i], cache.grid(), projection);
-    result.poses.push_back(frame_pose(route.frames[i], estimator->estimate(i, crop, frames), projection));
-    result.poses.back().region = cache.path().stem().string();
+    const std::size_t r = regions ? (*regions)[i] : 0;
+    raster::CacheReader& region = catalog ? catalog->cache(r) : cache;
+    const osm::RegionProjection& crs = catalog ? catalog->projection(r) : projection;
+    const GridCrop crop = frame_crop(route.frames[i], region.grid(), crs);
+    result.poses.push_back(frame_pose(route.frames[i], estimator->estimate(i, crop, frames), crs));
+    result.poses.back().region = catalog ? catalog->name(r) : name;
+    if (i > 0 && r != (regions ? (*regions)[i - 1] : 0)) ++result.region_crossings;
     if (on_frame) on_frame();
   }
   estimator->finish(result);
@@ -353,9 +361,10 @@ double region_margin_m(const LocalizeOptions& options) {
   return std::max(options.filter.width, options.filter.height) * raster::kCellM / 2;
 }
 
-// A route that crosses regions, in a mode that can follow it (single, online, seqloc): each
-// frame's crop, estimate and pose in its own region's grid; the sequential filter's belief is
-// handed over at each crossing (SequentialLocalizer::hand_over).
+// A route that crosses regions in single, online or seqloc mode (offline and smooth follow one
+// by themselves, through run_route): each frame's crop, estimate and pose in its own region's
+// grid; the sequential filter's belief is handed over at each crossing
+// (SequentialLocalizer::hand_over).
 RouteResult run_crossing(const Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
                          const LocalizeOptions& options, Mode mode, const std::function<void()>& on_frame,
                          FrameSource source) {
@@ -424,20 +433,10 @@ RouteResult run_crossing(const Route& route, const RegionCatalog& catalog, const
 
 // The route's legs (runs of frames in one region) as routes of their own, for check_crops.
 void check_legs(const Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
-                const std::vector<Mode>& modes, const LocalizeOptions& options) {
+                const LocalizeOptions& options) {
   std::size_t begin = 0;
   for (std::size_t i = 1; i <= regions.size(); ++i) {
     if (i < regions.size() && regions[i] == regions[begin]) continue;
-    if (begin > 0) {
-      for (const Mode mode : modes) {
-        if (mode == Mode::offline || mode == Mode::smooth) {
-          throw DataError((route.dir / "frames.csv").string() + ":" + std::to_string(route.frames[begin].line) +
-                          ": the route crosses from region " + catalog.name(regions[begin - 1]) + " into " +
-                          catalog.name(regions[begin]) + "; mode " + mode_name(mode) +
-                          " runs within one region (single, online and seqloc follow a route across regions)");
-        }
-      }
-    }
     const raster::RegionGrid& grid = catalog.cache(regions[begin]).grid();
     if (begin == 0 && i == regions.size()) {
       check_crops(route, grid, catalog.projection(regions[begin]), options);  // one leg: the route itself
@@ -455,9 +454,8 @@ void check_legs(const Route& route, const RegionCatalog& catalog, const std::vec
 
 }  // namespace
 
-void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options,
-                 const std::vector<Mode>& modes) {
-  check_legs(route, catalog, route_regions(route, catalog, region_margin_m(options)), modes, options);
+void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options) {
+  check_legs(route, catalog, route_regions(route, catalog, region_margin_m(options)), options);
 }
 
 BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
@@ -474,7 +472,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
   std::vector<std::vector<std::size_t>> regions;
   for (const auto& route : routes) {
     regions.push_back(route_regions(route, catalog, region_margin_m(options)));
-    check_legs(route, catalog, regions.back(), modes, options);
+    check_legs(route, catalog, regions.back(), options);
   }
   auto crosses = [&](std::size_t r) {
     return std::any_of(regions[r].begin(), regions[r].end(), [&](std::size_t x) { return x != regions[r].front(); });
@@ -534,10 +532,13 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
   run_jobs(jobs.size(), workers, [&](std::size_t j) {
     const auto store = store_for(jobs[j].route);
     const std::size_t r = jobs[j].route;
-    batch.results[j] = crosses(r) ? run_crossing(routes[r], catalog, regions[r], job_options, jobs[j].mode, on_frame,
-                                                 store->source())
-                                  : run_route(routes[r], catalog.cache(regions[r].front()), job_options, jobs[j].mode,
-                                              on_frame, store->source(), {});
+    const Mode mode = jobs[j].mode;
+    if (crosses(r) && mode != Mode::offline && mode != Mode::smooth) {
+      batch.results[j] = run_crossing(routes[r], catalog, regions[r], job_options, mode, on_frame, store->source());
+    } else {
+      batch.results[j] = run_route(routes[r], catalog.cache(regions[r].front()), job_options, mode, on_frame,
+                                   store->source(), {}, &catalog, &regions[r]);
+    }
     done_with(jobs[j].route);
   });
   return batch;

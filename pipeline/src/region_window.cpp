@@ -44,4 +44,53 @@ const float* RegionWindow::road_distance_m() {
   return road_m_.data();
 }
 
+
+filter::BeliefVolume carry_belief(const filter::BeliefVolume& belief, const RegionWindow& from,
+                                  const RegionWindow& to) {
+  const osm::RegionProjection p_from = from.cache().metadata().projection(), p_to = to.cache().metadata().projection();
+  const int W = to.width(), H = to.height(), R = belief.headings();
+  filter::BeliefVolume out(W, H, R);
+  const float floor_value = belief.min_value();
+  double total = 0;
+  for (int v = 0; v < H; ++v) {
+    for (int u = 0; u < W; ++u) {
+      double gamma_to = 0, gamma_from = 0;
+      const osm::GeoPoint p = p_to.reverse({to.x_of(u), to.y_of(v)}, gamma_to);
+      const auto g = p_from.forward(p, gamma_from);
+      const auto uf = std::lround(from.u_of(g.x_m)), vf = std::lround(from.v_of(g.y_m));
+      const bool inside = uf >= 0 && vf >= 0 && uf < belief.width() && vf < belief.height();
+      // compass = grid heading + gamma in either CRS: bin k of `to` is bin k + shift of `from`.
+      const double shift = (gamma_to - gamma_from) * R / 360.0;
+      for (int k = 0; k < R; ++k) {
+        float value = floor_value;
+        if (inside) {
+          const double src = k + shift, k0 = std::floor(src), t = src - k0;
+          const int i0 = ((static_cast<int>(k0) % R) + R) % R, i1 = (i0 + 1) % R;
+          const int x = static_cast<int>(uf), y = static_cast<int>(vf);
+          value = static_cast<float>((1 - t) * belief.prob(x, y, i0) + t * belief.prob(x, y, i1));
+        }
+        out.prob(u, v, k) = value;
+        total += value;
+      }
+    }
+  }
+  for (std::size_t i = 0; i < out.size(); ++i) out.data()[i] = static_cast<float>(out.data()[i] / total);
+  return out;
+}
+
+filter::Pose carry_pose(const filter::Pose& pose, const RegionWindow& from, const RegionWindow& to) {
+  double gamma_from = 0, gamma_to = 0;
+  const osm::GeoPoint p =
+      from.cache().metadata().projection().reverse({from.x_of(pose.u), from.y_of(pose.v)}, gamma_from);
+  const auto g = to.cache().metadata().projection().forward(p, gamma_to);
+  return {to.u_of(g.x_m), to.v_of(g.y_m), std::fmod(pose.heading_deg + gamma_from - gamma_to + 360.0, 360.0)};
+}
+
+GridCrop carry_crop(const GridCrop& crop, const osm::RegionProjection& from, const osm::RegionProjection& to) {
+  double gamma_from = 0, gamma_to = 0;
+  const osm::GeoPoint p = from.reverse({crop.x, crop.y}, gamma_from);
+  const auto g = to.forward(p, gamma_to);
+  return {g.x_m, g.y_m, crop.rotation_deg + gamma_from - gamma_to};
+}
+
 }  // namespace seqloc::pipeline

@@ -116,52 +116,13 @@ void SequentialLocalizer::hand_over(raster::CacheReader& next) {
     if (lag_ > 0) backward_.emplace(next, config_);
     return;
   }
+  // The new window centred where the old one was.
   const RegionWindow& old = window_;
-  const osm::RegionProjection from = old.cache().metadata().projection(), to = next.metadata().projection();
-  const int centre_u = old.width() / 2, centre_v = old.height() / 2;  // the window's centre cell
-  const osm::GeoPoint centre = from.reverse({old.x_of(centre_u), old.y_of(centre_v)});
-  const auto c = to.forward(centre);
-  moved.centre_on(c.x_m, c.y_m);
-
-  // Each new cell takes the old cell nearest to the same place; a grid heading there is the old
-  // one turned by gamma_old - gamma_new (compass = grid heading + gamma in either CRS).
-  const filter::BeliefVolume& a = filter_->belief();
-  const int W = config_.width, H = config_.height, R = a.headings();
-  filter::BeliefVolume b(W, H, R);
-  const float floor_value = a.min_value();
-  double total = 0;
-  for (int v = 0; v < H; ++v) {
-    for (int u = 0; u < W; ++u) {
-      double gamma_new = 0, gamma_old = 0;
-      const osm::GeoPoint p = to.reverse({moved.x_of(u), moved.y_of(v)}, gamma_new);
-      const auto g = from.forward(p, gamma_old);
-      const auto ua = std::lround(old.u_of(g.x_m)), va = std::lround(old.v_of(g.y_m));
-      const bool inside = ua >= 0 && va >= 0 && ua < W && va < H;
-      const double shift = (gamma_new - gamma_old) * R / 360.0;  // old bin = new bin + shift
-      for (int k = 0; k < R; ++k) {
-        float value = floor_value;
-        if (inside) {
-          const double src = k + shift, k0 = std::floor(src), t = src - k0;
-          const int i0 = ((static_cast<int>(k0) % R) + R) % R, i1 = (i0 + 1) % R;
-          value = static_cast<float>((1 - t) * a.prob(static_cast<int>(ua), static_cast<int>(va), i0) +
-                                     t * a.prob(static_cast<int>(ua), static_cast<int>(va), i1));
-        }
-        b.prob(u, v, k) = value;
-        total += value;
-      }
-    }
-  }
-  for (std::size_t i = 0; i < b.size(); ++i) b.data()[i] = static_cast<float>(b.data()[i] / total);
-
+  const filter::Pose centre = carry_pose({double(old.width() / 2), double(old.height() / 2), 0}, old, moved);
+  moved.centre_on(moved.x_of(centre.u), moved.y_of(centre.v));
   std::optional<filter::Pose> last = filter_->last_estimate();
-  if (last) {
-    double gamma_old = 0, gamma_new = 0;
-    const osm::GeoPoint p = from.reverse({old.x_of(last->u), old.y_of(last->v)}, gamma_old);
-    const auto g = to.forward(p, gamma_new);
-    last = filter::Pose{moved.u_of(g.x_m), moved.v_of(g.y_m),
-                        std::fmod(last->heading_deg + gamma_old - gamma_new + 360.0, 360.0)};
-  }
-  filter_->rebase(std::move(b), last);
+  if (last) last = carry_pose(*last, old, moved);
+  filter_->rebase(carry_belief(filter_->belief(), old, moved), last);
   window_ = moved;
   if (lag_ > 0) backward_.emplace(next, config_);
 }

@@ -11,6 +11,10 @@
 // alpha * beta. Cost: the forward pass, a replay and a backward pass (neither estimates anything),
 // and every frame read twice. Memory: kCheckpointFrames forward beliefs, three filters and the
 // stretch's frames. Disk: one window of float32 per kCheckpointFrames frames.
+//
+// A route that crosses regions is followed across: the forward belief handed over where the route
+// enters the next region (SequentialLocalizer::hand_over), a stretch starting there (each stretch
+// replayed in one region), and beta carried back into the previous region (BackwardPass::step_back).
 #include <sys/types.h>
 #include <unistd.h>
 
@@ -91,39 +95,50 @@ class SmoothMode final : public LocalizationMode {
   }
 
  private:
+  [[nodiscard]] std::vector<std::size_t> stretch_starts() const;
   void run(FramePrefetcher& frames);
 
   std::vector<FrameEstimate> estimates_;
   int recentres_ = 0;
 };
 
+// The frames where a stretch starts: every kCheckpointFrames-th, and the first of each region a
+// crossing route enters (so that a stretch's replay stays in one region).
+std::vector<std::size_t> SmoothMode::stretch_starts() const {
+  std::vector<std::size_t> starts;
+  for (std::size_t t = 0; t < context_.route.frames.size(); ++t) {
+    if (t == 0 || region_of(t) != region_of(t - 1) || t - starts.back() == kCheckpointFrames) starts.push_back(t);
+  }
+  return starts;
+}
+
 void SmoothMode::run(FramePrefetcher& frames) {
   const Route& route = context_.route;
   const std::size_t n = route.frames.size();
   const LocalizeOptions& options = context_.options;
-  const auto& projection = context_.cache.metadata().projection();
   std::vector<StepRecord> records(n);
-  const std::size_t stretches = (n + kCheckpointFrames - 1) / kCheckpointFrames;
+  const std::vector<std::size_t> starts = stretch_starts();
   CheckpointFile checkpoints(options.spill_dir, static_cast<std::size_t>(options.filter.width) *
                                                     static_cast<std::size_t>(options.filter.height) *
                                                     static_cast<std::size_t>(options.filter.headings));
 
-  // Forward, as the seqloc mode runs.
+  // Forward, as the seqloc mode runs (the belief handed over where the route enters a region).
   {
-    SequentialLocalizer forward(context_.cache, options.filter, /*online=*/false, options.recentre_margin);
+    SequentialLocalizer forward(cache_of(0), options.filter, /*online=*/false, options.recentre_margin);
+    std::size_t stretch = 0;
     for (std::size_t t = 0; t < n; ++t) {
       const RouteFrame& f = route.frames[t];
-      const GridCrop crop = frame_crop(f, context_.cache.grid(), projection);
+      if (t > 0 && region_of(t) != region_of(t - 1)) forward.hand_over(cache_of(t));
       std::optional<GridFix> gps;
       if (f.gps) {
-        const auto g = projection.forward(f.gps->where);
+        const auto g = projection_of(t).forward(f.gps->where);
         gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
       }
       const auto& frame = frames.get(t);
       const auto t0 = Clock::now();
-      (void)forward.step(frame, crop, f.odometry, gps);
+      (void)forward.step(frame, crop_in_region_of(t, t), f.odometry, gps);
       records[t] = forward.last_step();
-      if (t % kCheckpointFrames == 0) checkpoints.write(t / kCheckpointFrames, forward.filter()->belief());
+      if (stretch < starts.size() && starts[stretch] == t) checkpoints.write(stretch++, forward.filter()->belief());
       filter_seconds_ += seconds_since(t0);
       frames.release(t);
     }
@@ -131,25 +146,30 @@ void SmoothMode::run(FramePrefetcher& frames) {
   }
 
   // Backward, a stretch at a time from the route's end; each stretch's frames read again in order,
-  // the next one prepared meanwhile.
+  // the next one prepared meanwhile. A stretch is replayed in its region; beta is carried into
+  // the previous region where the route entered the next.
   frames.set_lookahead(false);
-  frames.prefetch((stretches - 1) * kCheckpointFrames);
-  BackwardPass backward(context_.cache, options.filter);
-  ForwardReplay replay(context_.cache, options.filter);
+  frames.prefetch(starts.back());
+  BackwardPass backward(cache_of(n - 1), options.filter);
+  std::vector<std::unique_ptr<ForwardReplay>> replays;  // by region, made when first needed
   std::vector<filter::BeliefVolume> alpha;
   std::vector<std::shared_ptr<const filter::PreparedFrame>> kept;
   estimates_.resize(n);
   backward.start(records[n - 1]);
-  for (std::size_t s = stretches; s-- > 0;) {
-    const std::size_t first = s * kCheckpointFrames, last = std::min(n, first + kCheckpointFrames) - 1;
+  for (std::size_t s = starts.size(); s-- > 0;) {
+    const std::size_t first = starts[s], last = (s + 1 < starts.size() ? starts[s + 1] : n) - 1;
     const std::size_t count = last - first + 1;
     if (alpha.size() < count) {
       alpha.resize(count, filter::BeliefVolume(options.filter.width, options.filter.height, options.filter.headings));
     }
+    const std::size_t region = region_of(first);
+    if (replays.size() <= region) replays.resize(region + 1);
+    if (!replays[region]) replays[region] = std::make_unique<ForwardReplay>(cache_of(first), options.filter);
+    ForwardReplay& replay = *replays[region];
     kept.assign(count, nullptr);
     for (std::size_t t = first; t <= last; ++t) {
       kept[t - first] = frames.get_shared(t);
-      frames.prefetch(t < last ? t + 1 : (s > 0 ? first - kCheckpointFrames : n));
+      frames.prefetch(t < last ? t + 1 : (s > 0 ? starts[s - 1] : n));
       frames.release(t);
       const auto t0 = Clock::now();
       if (t == first) {
@@ -164,7 +184,7 @@ void SmoothMode::run(FramePrefetcher& frames) {
     const auto t0 = Clock::now();
     for (std::size_t t = last + 1; t-- > first;) {
       estimates_[t] = backward.estimate(alpha[t - first], records[t]);
-      if (t > 0) backward.step_back(records[t], *kept[t - first], records[t - 1]);
+      if (t > 0) backward.step_back(records[t], *kept[t - first], records[t - 1], cache_of(t - 1));
     }
     filter_seconds_ += seconds_since(t0);
   }

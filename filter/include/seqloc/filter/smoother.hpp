@@ -40,6 +40,8 @@ class BackwardFilter {
   void step_back(const Odometry& odometry);
   /// The window moves by whole cells, as BeliefVolume::recentre.
   void recentre(int du, int dv) { filter_.recentre(du, dv); }
+  /// The window moved to another grid: `beta` resampled onto the new window (same size).
+  void rebase(BeliefVolume beta) { filter_.rebase(std::move(beta), std::nullopt); }
 
  private:
   SeqLocFilter filter_;

@@ -42,6 +42,11 @@ class BackwardPass {
   /// Takes frame t in (`record`, `frame`), then moves back to frame t - 1, into the window of
   /// `previous` (its record).
   void step_back(const StepRecord& record, const filter::PreparedFrame& frame, const StepRecord& previous);
+  /// step_back() to a frame of another region (`previous_region`, which the forward pass left at
+  /// frame t): beta is carried into that region's window of `previous` (carry_belief). With the
+  /// region beta is in, this is step_back().
+  void step_back(const StepRecord& record, const filter::PreparedFrame& frame, const StepRecord& previous,
+                 raster::CacheReader& previous_region);
 
  private:
   filter::FilterConfig config_;

@@ -195,14 +195,13 @@ struct BatchResult {
 
 /// The same over several regions (region_catalog.hpp): each frame is placed in a region, staying
 /// in one while its crop is half a belief window inside it. A route inside one region runs as
-/// above against that region. A route that crosses regions runs in single, online and seqloc
-/// modes (the filter's belief handed over at each crossing, SequentialLocalizer::hand_over; each
-/// pose in its own region's CRS, FramePose::region); offline and smooth refuse it (DataError).
+/// above against that region. A route that crosses regions runs in every mode, each pose in its
+/// own frame's region's CRS (FramePose::region): the sequential filter's belief is handed over at
+/// each crossing (SequentialLocalizer::hand_over), smooth's beta carried back the same way, and
+/// offline's window is in frame t's region with its neighbours' crops carried into it.
 /// What localize_routes checks of a route before any work over a catalog: each frame in a
-/// region, each leg's crops (check_crops), and no mode that cannot cross regions on a route that
-/// does. Throws DataError "DIR/frames.csv:LINE: ...".
-void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options,
-                 const std::vector<Mode>& modes);
+/// region and each leg's crops (check_crops). Throws DataError "DIR/frames.csv:LINE: ...".
+void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options);
 
 [[nodiscard]] BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalog& catalog,
                                           const LocalizeOptions& options, const std::vector<Mode>& modes,

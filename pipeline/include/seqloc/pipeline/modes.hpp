@@ -11,9 +11,12 @@
 
 #include <cstddef>
 #include <memory>
+#include <vector>
 
 #include "seqloc/pipeline/frame_prefetcher.hpp"
 #include "seqloc/pipeline/localize.hpp"
+#include "seqloc/pipeline/region_catalog.hpp"
+#include "seqloc/pipeline/region_window.hpp"
 
 namespace seqloc::pipeline {
 
@@ -32,12 +35,17 @@ struct FrameEstimate {
 [[nodiscard]] FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e,
                                    const osm::RegionProjection& projection);
 
-/// What a mode works on: one route against one region cache. The references outlive the mode.
+/// What a mode works on: one route against one region cache, or against the regions of a catalog
+/// for a route that crosses from one into the next. The references outlive the mode.
 struct RouteContext {
   const Route& route;
-  raster::CacheReader& cache;
+  raster::CacheReader& cache;  ///< the first frame's region
   const LocalizeOptions& options;
   const FrameInspector& inspect;  ///< may be empty
+  /// For a crossing route (the modes that take one: offline, smooth): the catalog and each frame's
+  /// region in it. Null when every frame is in `cache`.
+  const RegionCatalog* catalog = nullptr;
+  const std::vector<std::size_t>* regions = nullptr;
 };
 
 class LocalizationMode {
@@ -56,11 +64,19 @@ class LocalizationMode {
   virtual void finish(RouteResult& result);
 
  protected:
-  explicit LocalizationMode(const RouteContext& context) : context_(context) {}
+  explicit LocalizationMode(const RouteContext& context)
+      : context_(context), projection_(context.cache.metadata().projection()) {}
   /// What etu_weight a frame of this entropy gets under the options (reported for every mode).
   [[nodiscard]] double reported_etu_weight(double entropy) const;
+  /// Frame i's region: its index in the catalog (0 for one region), its cache and its CRS.
+  [[nodiscard]] std::size_t region_of(std::size_t i) const;
+  [[nodiscard]] raster::CacheReader& cache_of(std::size_t i) const;
+  [[nodiscard]] const osm::RegionProjection& projection_of(std::size_t i) const;
+  /// Frame s's crop in the grid of frame t's region (frame_crop in its own, carried across).
+  [[nodiscard]] GridCrop crop_in_region_of(std::size_t s, std::size_t t) const;
 
   RouteContext context_;
+  osm::RegionProjection projection_;  ///< context_.cache's
   double filter_seconds_ = 0;
 };
 

@@ -9,7 +9,9 @@
 #include <optional>
 #include <vector>
 
+#include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/osm/projection.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::pipeline {
@@ -72,5 +74,21 @@ class RegionWindow {
   std::vector<float> road_m_;
   bool road_stale_ = true;
 };
+
+/// Across regions (a route crossing from one region's grid into the next). The same place and the
+/// same compass direction in `to` as in `from`: positions through the ellipsoid, grid headings
+/// turned by the difference of the two CRSs' meridian convergence there.
+///
+/// `belief` over window `from` resampled onto window `to`: each cell of `to` takes the cell of
+/// `from` nearest the same place, its headings interpolated between bins; a cell whose place lies
+/// outside `from` takes the belief's least value. The result sums to 1 (a backward filter's beta,
+/// which has no scale of its own, is carried the same way).
+[[nodiscard]] filter::BeliefVolume carry_belief(const filter::BeliefVolume& belief, const RegionWindow& from,
+                                                const RegionWindow& to);
+/// A pose in `from`'s cells as one in `to`'s.
+[[nodiscard]] filter::Pose carry_pose(const filter::Pose& pose, const RegionWindow& from, const RegionWindow& to);
+/// A crop in one region's grid as one in another's (its centre and the direction of its north).
+[[nodiscard]] GridCrop carry_crop(const GridCrop& crop, const osm::RegionProjection& from,
+                                  const osm::RegionProjection& to);
 
 }  // namespace seqloc::pipeline
