@@ -8,10 +8,12 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
 
+#include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/volume_shape.hpp"
@@ -151,6 +153,199 @@ double nice_step(double range) {
   return 10 * p;
 }
 
+// What a legend shows of one item.
+struct LegendItem {
+  enum class Shape { swatch, line, dot, star };
+  std::string name;
+  cv::Scalar colour;
+  Shape shape = Shape::swatch;
+};
+
+cv::Scalar scalar(const std::array<std::uint8_t, 3>& c) { return rgb(c[0], c[1], c[2]); }
+
+cv::Scalar class_colour(std::uint8_t area, std::uint8_t way, std::uint8_t node) {
+  const std::array<std::uint8_t, 3> codes{area, way, node};
+  const auto c = raster::class_colours(codes);
+  return rgb(c[0], c[1], c[2]);
+}
+
+// Which codes of each channel (areas, ways, nodes) occur in a map.
+using SeenClasses = std::array<std::array<bool, 256>, 3>;
+void note_classes(std::span<const std::uint8_t> classes, SeenClasses& seen) {
+  for (std::size_t i = 0; i + 2 < classes.size(); i += 3) {
+    for (std::size_t c = 0; c < 3; ++c) seen[c][classes[i + c]] = true;
+  }
+}
+
+// The map classes seen, named, in the map's colours: areas, then ways, then nodes.
+std::vector<LegendItem> classes_legend(const SeenClasses& seen) {
+  std::vector<LegendItem> items;
+  auto add = [&](osm::Channel channel, std::size_t code, const cv::Scalar& colour) {
+    const auto names = osm::group_names(channel);
+    if (code >= 1 && code <= names.size()) items.push_back({std::string(names[code - 1]), colour});
+  };
+  for (std::size_t code = 1; code < 256; ++code) {
+    if (seen[0][code]) add(osm::Channel::areas, code, class_colour(static_cast<std::uint8_t>(code), 0, 0));
+  }
+  for (std::size_t code = 1; code < 256; ++code) {
+    // Building outlines are drawn around every building: the building's entry says enough.
+    if (seen[1][code] && code != osm::kBuildingOutline.code()) {
+      add(osm::Channel::ways, code, class_colour(0, static_cast<std::uint8_t>(code), 0));
+    }
+  }
+  if (seen[2][1]) add(osm::Channel::nodes, 1, class_colour(0, 0, 1));
+  if (std::any_of(seen[2].begin() + 2, seen[2].end(), [](bool b) { return b; })) {
+    items.push_back({"other nodes", class_colour(0, 0, 2)});
+  }
+  return items;
+}
+
+// The legend's items in rows `width` wide.
+cv::Mat legend_strip(const std::vector<LegendItem>& items, int width) {
+  constexpr double kText = 0.42;
+  constexpr int kRow = 22, kSymbol = 18;
+  std::vector<std::pair<cv::Point, const LegendItem*>> placed;
+  int x = 8, y = 16;
+  for (const auto& item : items) {
+    int baseline = 0;
+    const int w = kSymbol + 5 + cv::getTextSize(item.name, cv::FONT_HERSHEY_SIMPLEX, kText, 1, &baseline).width + 16;
+    if (x > 8 && x + w > width) x = 8, y += kRow;
+    placed.push_back({cv::Point(x, y), &item});
+    x += w;
+  }
+  cv::Mat m(items.empty() ? 0 : y + 10, width, CV_8UC3, rgb(255, 255, 255));
+  for (const auto& [at, item] : placed) {
+    const cv::Point mid = at + cv::Point(kSymbol / 2, -4);
+    switch (item->shape) {
+      case LegendItem::Shape::swatch:
+        cv::rectangle(m, at + cv::Point(0, -11), at + cv::Point(kSymbol, 2), item->colour, cv::FILLED);
+        cv::rectangle(m, at + cv::Point(0, -11), at + cv::Point(kSymbol, 2), rgb(120, 120, 120), 1);
+        break;
+      case LegendItem::Shape::line:
+        cv::line(m, at + cv::Point(0, -4), at + cv::Point(kSymbol, -4), item->colour, 2, cv::LINE_AA);
+        break;
+      case LegendItem::Shape::dot:
+        cv::circle(m, mid, 5, item->colour, cv::FILLED, cv::LINE_AA);
+        break;
+      case LegendItem::Shape::star:
+        star(m, mid, 8);
+        break;
+    }
+    text(m, item->name, at + cv::Point(kSymbol + 5, 0), kText);
+  }
+  return m;
+}
+
+// A scale bar in the bottom-left corner of `map` (the map's area of the picture), on a white box.
+void draw_scale_bar(cv::Mat& m, const cv::Rect& map, double metres_per_px) {
+  const ScaleBar bar = scale_bar_for(map.width, metres_per_px);
+  if (bar.pixels < 8) return;
+  const std::string label = bar.metres >= 1000 ? fmt(bar.metres / 1000, 0) + " km" : fmt(bar.metres, 0) + " m";
+  const int x0 = map.x + 12, y1 = map.y + map.height - 12;
+  cv::rectangle(m, cv::Point(x0 - 6, y1 - 26), cv::Point(x0 + bar.pixels + 6, y1 + 5), rgb(255, 255, 255), cv::FILLED);
+  // Exactly bar.pixels columns of black.
+  cv::rectangle(m, cv::Point(x0, y1 - 4), cv::Point(x0 + bar.pixels - 1, y1), rgb(0, 0, 0), cv::FILLED);
+  text(m, label, cv::Point(x0, y1 - 10), 0.45);
+}
+
+// An arrow to true north in the top-right corner of `map`; grid north is up, and true north is at
+// grid heading -gamma (the CRS's meridian convergence at the map's centre).
+void draw_north_arrow(cv::Mat& m, const cv::Rect& map, double gamma_deg) {
+  const cv::Point2d c(map.x + map.width - 26, map.y + 34);
+  const double a = -gamma_deg * M_PI / 180.0;
+  const cv::Point2d dir(std::sin(a), -std::cos(a)), side(std::cos(a), std::sin(a));
+  cv::circle(m, c, 20, rgb(255, 255, 255), cv::FILLED, cv::LINE_AA);
+  cv::circle(m, c, 20, rgb(120, 120, 120), 1, cv::LINE_AA);
+  const std::vector<cv::Point> head{c + dir * 16, c - dir * 10 + side * 7, c - dir * 4, c - dir * 10 - side * 7};
+  cv::fillPoly(m, std::vector<std::vector<cv::Point>>{head}, rgb(0, 0, 0), cv::LINE_AA);
+  text(m, "N", cv::Point(static_cast<int>(c.x) - 6, static_cast<int>(c.y) - 22), 0.5);
+}
+
+// The convergence at region pixel (u, v): the angle from grid north to true north, clockwise.
+double convergence_at(raster::CacheReader& cache, double u, double v) {
+  const auto& grid = cache.grid();
+  double gamma = 0;
+  (void)cache.metadata().projection().reverse(
+      {grid.min_x() + (u + 0.5) * kCellM, grid.max_y() - (v + 0.5) * kCellM}, gamma);
+  return gamma;
+}
+
+// The map of region pixels [u0, u0 + w) x [v0, v0 + h) at `scale` picture pixels per region
+// pixel (nearest when enlarging, averaged when shrinking), read a band of rows at a time, and the
+// classes that occur in it. Beyond kMaxMapCells the map is left white.
+struct MapLayer {
+  cv::Mat image;
+  std::vector<LegendItem> legend;
+};
+constexpr std::int64_t kMaxMapCells = std::int64_t{256} << 20;
+MapLayer map_layer(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0, int w, int h, double scale) {
+  MapLayer layer;
+  const int out_w = std::max(1, static_cast<int>(std::lround(w * scale)));
+  const int out_h = std::max(1, static_cast<int>(std::lround(h * scale)));
+  layer.image = cv::Mat(out_h, out_w, CV_8UC3, rgb(255, 255, 255));
+  if (static_cast<std::int64_t>(w) * h > kMaxMapCells) return layer;
+  SeenClasses seen{};
+  std::vector<std::uint8_t> classes;
+  const int band = 512;
+  for (int top = 0; top < h; top += band) {
+    const int rows = std::min(band, h - top);
+    cache.read_classes(u0, v0 + top, w, rows, classes, /*fill_outside=*/true);
+    note_classes(classes, seen);
+    Picture colours = map_picture(classes, w, rows);
+    const int y0 = static_cast<int>(std::lround(top * scale)), y1 = static_cast<int>(std::lround((top + rows) * scale));
+    if (y1 <= y0) continue;
+    cv::Mat part;
+    cv::resize(to_mat(colours), part, cv::Size(out_w, y1 - y0), 0, 0, scale >= 1 ? cv::INTER_NEAREST : cv::INTER_AREA);
+    part.copyTo(layer.image(cv::Rect(0, y0, out_w, y1 - y0)));
+  }
+  layer.legend = classes_legend(seen);
+  return layer;
+}
+
+// A figure: its title above, the picture, the legend below.
+cv::Mat titled(const std::string& title, const cv::Mat& body, const std::vector<LegendItem>& legend) {
+  const cv::Mat strip = legend_strip(legend, std::max(body.cols, 420));
+  cv::Mat out(30 + body.rows + strip.rows, std::max(body.cols, strip.cols), CV_8UC3, rgb(255, 255, 255));
+  body.copyTo(out(cv::Rect(0, 30, body.cols, body.rows)));
+  if (!strip.empty()) strip.copyTo(out(cv::Rect(0, 30 + body.rows, strip.cols, strip.rows)));
+  text(out, title, cv::Point(6, 20), 0.5);
+  return out;
+}
+
+// The map around region-pixel points: 40 m beyond them, at most 1400 picture pixels a side and
+// at most 2 per region pixel (0.25 m).
+struct RouteMap {
+  MapLayer layer;
+  MapView view;
+  int width = 0, height = 0;  // region pixels
+};
+RouteMap route_map(raster::CacheReader& cache, const std::vector<cv::Point2d>& points) {
+  double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
+  for (const auto& p : points) u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
+  const double margin = 40 / kCellM;
+  RouteMap map;
+  map.view.u0 = static_cast<std::int64_t>(std::floor(u0 - margin));
+  map.view.v0 = static_cast<std::int64_t>(std::floor(v0 - margin));
+  map.width = static_cast<int>(std::ceil(u1 + margin)) - static_cast<int>(map.view.u0);
+  map.height = static_cast<int>(std::ceil(v1 + margin)) - static_cast<int>(map.view.v0);
+  map.view.scale = std::min(2.0, 1400.0 / std::max(map.width, map.height));
+  map.layer = map_layer(cache, map.view.u0, map.view.v0, map.width, map.height, map.view.scale);
+  return map;
+}
+
+// Scale bar and north arrow on a map picture `m` showing `view` (the map fills m).
+void decorate(cv::Mat& m, raster::CacheReader& cache, const MapView& view) {
+  const cv::Rect all(0, 0, m.cols, m.rows);
+  draw_scale_bar(m, all, view.metres_per_px());
+  const double u = static_cast<double>(view.u0) + m.cols / view.scale / 2, v = static_cast<double>(view.v0) + m.rows / view.scale / 2;
+  draw_north_arrow(m, all, convergence_at(cache, u, v));
+}
+
+cv::Point2d picture_point(const MapView& view, cv::Point2d region_px) {
+  const auto a = view.at(region_px.x, region_px.y);
+  return {a[0], a[1]};
+}
+
 }  // namespace
 
 void write_picture(const std::filesystem::path& path, const Picture& picture) {
@@ -161,6 +356,30 @@ void write_picture(const std::filesystem::path& path, const Picture& picture) {
 Picture map_picture(std::span<const std::uint8_t> classes_rgb, int width, int height) {
   return {width, height,
           raster::class_colours(classes_rgb.first(static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 3))};
+}
+
+ScaleBar scale_bar_for(int width_px, double metres_per_px) {
+  ScaleBar best;
+  if (!(metres_per_px > 0) || width_px <= 0) return best;
+  const double target = width_px * metres_per_px / 5, most = width_px * metres_per_px / 3;
+  double best_miss = std::numeric_limits<double>::max();
+  for (int k = -1; k <= 7; ++k) {
+    for (const double m : {1.0, 2.0, 5.0}) {
+      const double metres = m * std::pow(10.0, k);
+      if (metres > most) continue;
+      const double miss = std::abs(std::log(metres / target));
+      if (miss < best_miss) best_miss = miss, best = {metres, static_cast<int>(std::lround(metres / metres_per_px))};
+    }
+  }
+  return best;
+}
+
+std::array<std::uint8_t, 3> error_colour(std::optional<double> error_m) {
+  if (!error_m) return {150, 150, 150};
+  if (*error_m <= 1) return {26, 152, 80};
+  if (*error_m <= 3) return {145, 207, 96};
+  if (*error_m <= 5) return {253, 174, 97};
+  return {215, 48, 39};
 }
 
 Picture plot(const std::vector<Series>& series, const std::string& title, const std::string& x_label,
@@ -225,15 +444,31 @@ std::size_t spread_cells(std::span<const double> marginal, double mass) {
   return std::max<std::size_t>(cells, 1);
 }
 
-std::size_t collapse_frame(const std::filesystem::path& beliefs_dir, std::size_t frames) {
+std::size_t collapse_frame(const std::filesystem::path& beliefs_dir, std::size_t frames,
+                           std::span<const FramePose> seqloc_poses, double onto_m) {
   const KeptBeliefs beliefs(beliefs_dir, frames);
-  std::size_t best = 0;
-  double best_ratio = 0;
+  std::vector<double> ratio(frames, 0.0);  // spread before frame t over spread after it
   auto before = static_cast<double>(spread_cells(beliefs.marginal(0)));
   for (std::size_t t = 1; t < frames; ++t) {
     const auto after = static_cast<double>(spread_cells(beliefs.marginal(t)));
-    if (before / after > best_ratio) best_ratio = before / after, best = t;
+    ratio[t] = before / after;
     before = after;
+  }
+  auto error = [&](std::size_t t) -> std::optional<double> {
+    return t < seqloc_poses.size() ? seqloc_poses[t].position_error_m : std::nullopt;
+  };
+  // Best: the error falls from beyond onto_m to within it (the belief collapses onto the truth);
+  // else it falls and ends within onto_m; else any frame.
+  auto tier = [&](std::size_t t) {
+    const auto was = error(t - 1), is = error(t);
+    if (!was || !is || *is >= *was || *is > onto_m) return 0;
+    return *was > onto_m ? 2 : 1;
+  };
+  int wanted = 0;
+  for (std::size_t t = 1; t < frames; ++t) wanted = std::max(wanted, tier(t));
+  std::size_t best = 0;
+  for (std::size_t t = 1; t < frames; ++t) {
+    if (tier(t) == wanted && ratio[t] > ratio[best]) best = t;
   }
   return best;
 }
@@ -336,9 +571,11 @@ Picture likelihood_figure(raster::CacheReader& cache, const Route& route, const 
   const auto& grid = cache.grid();
   const auto projection = cache.metadata().projection();
   const int bw = scene.width, bh = scene.height, factor = bw <= 400 ? 2 : 1;
+  SeenClasses seen{};
   auto window_map = [&](std::int64_t at_u, std::int64_t at_v) {
     std::vector<std::uint8_t> classes;
     cache.read_classes(at_u, at_v, bw, bh, classes, /*fill_outside=*/true);
+    note_classes(classes, seen);
     Picture base = map_picture(classes, bw, bh);
     return to_mat(base).clone();
   };
@@ -351,6 +588,7 @@ Picture likelihood_figure(raster::CacheReader& cache, const Route& route, const 
       const cv::Point2d p = region_pixel(grid, projection, truth->where);
       star(m, {(p.x - static_cast<double>(at_u) + 0.5) * factor, (p.y - static_cast<double>(at_v) + 0.5) * factor}, 11);
     }
+    decorate(m, cache, MapView{at_u, at_v, static_cast<double>(factor), 0, 0});
     cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
     m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
     text(framed, title, cv::Point(6, 20), 0.5);
@@ -376,55 +614,45 @@ Picture likelihood_figure(raster::CacheReader& cache, const Route& route, const 
   panels.push_back(panel(map, scene.belief_mass, belief_title(k), scene.origin_u, scene.origin_v, k));
   int width = 0;
   for (const auto& p : panels) width += p.cols + 10;
-  cv::Mat row(panels.front().rows, width - 10, CV_8UC3, rgb(255, 255, 255));
+  std::vector<LegendItem> legend{{"ground truth", rgb(0, 0, 0), LegendItem::Shape::star},
+                                 {"probability (red, opacity from the median to the peak)", rgb(230, 20, 20)}};
+  for (const auto& item : classes_legend(seen)) legend.push_back(item);
+  const cv::Mat strip = legend_strip(legend, width - 10);
+  cv::Mat row(panels.front().rows + strip.rows, width - 10, CV_8UC3, rgb(255, 255, 255));
   int x = 0;
   for (const auto& p : panels) {
     p.copyTo(row(cv::Rect(x, 0, p.cols, p.rows)));
     x += p.cols + 10;
   }
+  strip.copyTo(row(cv::Rect(0, panels.front().rows, strip.cols, strip.rows)));
   return from_mat(row);
 }
 
 // The route's truth coloured by the normalized entropy of each frame, over the map around it.
 Picture entropy_route_figure(raster::CacheReader& cache, const Route& route, const std::vector<cv::Point2d>& truth,
                              const std::vector<FramePose>& poses) {
-  double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
-  for (const auto& p : truth)
-    u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
-  const double margin = 60 / kCellM;
-  const auto wu0 = static_cast<std::int64_t>(u0 - margin), wv0 = static_cast<std::int64_t>(v0 - margin);
-  const int ww = static_cast<int>(u1 - u0 + 2 * margin), wh = static_cast<int>(v1 - v0 + 2 * margin);
-  const int down = std::max(1, static_cast<int>(std::ceil(std::max(ww, wh) / 1400.0)));
-  cv::Mat m;
-  if (static_cast<long long>(ww) * wh <= 64LL << 20) {
-    std::vector<std::uint8_t> classes;
-    cache.read_classes(wu0, wv0, ww, wh, classes, true);
-    Picture base = map_picture(classes, ww, wh);
-    cv::resize(to_mat(base), m, cv::Size(ww / down, wh / down), 0, 0, cv::INTER_AREA);
-  } else {
-    m = cv::Mat(wh / down, ww / down, CV_8UC3, rgb(255, 255, 255));
+  RouteMap map = route_map(cache, truth);
+  cv::Mat m = map.layer.image;
+  for (std::size_t i = 1; i < truth.size(); ++i) {
+    cv::line(m, picture_point(map.view, truth[i - 1]), picture_point(map.view, truth[i]), rgb(60, 60, 60), 1, cv::LINE_AA);
   }
-  auto at = [&](cv::Point2d p) {
-    return cv::Point(static_cast<int>((p.x - static_cast<double>(wu0)) / down),
-                     static_cast<int>((p.y - static_cast<double>(wv0)) / down));
-  };
-  for (std::size_t i = 1; i < truth.size(); ++i)
-    cv::line(m, at(truth[i - 1]), at(truth[i]), rgb(60, 60, 60), 1, cv::LINE_AA);
   for (std::size_t i = 0; i < truth.size() && i < poses.size(); ++i) {
-    cv::circle(m, at(truth[i]), 5, viridis(poses[i].entropy), cv::FILLED, cv::LINE_AA);
+    cv::circle(m, picture_point(map.view, truth[i]), 5, viridis(poses[i].entropy), cv::FILLED, cv::LINE_AA);
   }
+  decorate(m, cache, map.view);
   // Colour bar.
-  cv::Mat framed(m.rows + 70, std::max(m.cols, 420), CV_8UC3, rgb(255, 255, 255));
-  m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
-  text(framed, route.name + ": frames coloured by normalized entropy of their likelihood", cv::Point(6, 20), 0.5);
-  for (int i = 0; i < 300; ++i)
-    cv::line(framed, cv::Point(60 + i, m.rows + 40), cv::Point(60 + i, m.rows + 55), viridis(i / 299.0));
+  cv::Mat bar(40, std::max(m.cols, 420), CV_8UC3, rgb(255, 255, 255));
+  for (int i = 0; i < 300; ++i) cv::line(bar, cv::Point(60 + i, 8), cv::Point(60 + i, 23), viridis(i / 299.0));
   double lo = 1, hi = 0;
   for (const auto& p : poses) lo = std::min(lo, p.entropy), hi = std::max(hi, p.entropy);
-  text(framed, "0", cv::Point(45, m.rows + 53), 0.4);
-  text(framed, "1", cv::Point(365, m.rows + 53), 0.4);
-  text(framed, "range in this route: " + fmt(lo, 3) + " .. " + fmt(hi, 3), cv::Point(60, m.rows + 68), 0.4);
-  return from_mat(framed);
+  text(bar, "0", cv::Point(45, 21), 0.4);
+  text(bar, "1", cv::Point(365, 21), 0.4);
+  text(bar, "range in this route: " + fmt(lo, 3) + " .. " + fmt(hi, 3), cv::Point(60, 36), 0.4);
+  cv::Mat body(m.rows + bar.rows, std::max(m.cols, bar.cols), CV_8UC3, rgb(255, 255, 255));
+  m.copyTo(body(cv::Rect(0, 0, m.cols, m.rows)));
+  bar.copyTo(body(cv::Rect(0, m.rows, bar.cols, bar.rows)));
+  return from_mat(titled(route.name + ": frames at their ground truth, coloured by normalized entropy of their likelihood",
+                         body, map.layer.legend));
 }
 
 // Position error over time, one line per mode (none when no mode has ground truth).
@@ -443,6 +671,55 @@ std::vector<Series> error_series(const PosesByMode& poses_by_mode) {
 }
 
 }  // namespace
+
+MapFigure route_overview(raster::CacheReader& cache, const Route& route, const std::string& mode,
+                         const std::vector<FramePose>& poses) {
+  const auto& grid = cache.grid();
+  const auto projection = cache.metadata().projection();
+  std::vector<cv::Point2d> truth, estimates, all;
+  for (const auto& f : route.frames) {
+    if (f.truth) truth.push_back(region_pixel(grid, projection, f.truth->where));
+  }
+  for (const auto& p : poses) estimates.push_back(region_pixel(grid, projection, {p.lat_deg, p.lon_deg}));
+  all = truth;
+  all.insert(all.end(), estimates.begin(), estimates.end());
+  if (all.empty()) throw UsageError("render: route '" + route.name + "' has neither ground truth nor poses to draw");
+  RouteMap map = route_map(cache, all);
+  cv::Mat m = map.layer.image;
+  for (std::size_t i = 1; i < truth.size(); ++i) {
+    cv::line(m, picture_point(map.view, truth[i - 1]), picture_point(map.view, truth[i]), rgb(0, 0, 0), 2, cv::LINE_AA);
+  }
+  // The worst drawn last, so that no good estimate hides a bad one.
+  std::vector<std::size_t> order(estimates.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  auto error = [&](std::size_t i) { return poses[i].position_error_m.value_or(-1.0); };
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return error(a) < error(b); });
+  for (const std::size_t i : order) {
+    cv::circle(m, picture_point(map.view, estimates[i]), 4, scalar(error_colour(poses[i].position_error_m)), cv::FILLED,
+               cv::LINE_AA);
+  }
+  decorate(m, cache, map.view);
+
+  std::size_t within5 = 0, judged = 0;
+  for (const auto& p : poses) {
+    if (!p.position_error_m) continue;
+    ++judged;
+    if (*p.position_error_m <= 5) ++within5;
+  }
+  std::string title = route.name + ": " + mode + " estimates coloured by position error, ground truth in black";
+  if (judged > 0) title += " (" + fmt(100.0 * static_cast<double>(within5) / static_cast<double>(judged), 1) + " % within 5 m)";
+  std::vector<LegendItem> legend{{"ground truth", rgb(0, 0, 0), LegendItem::Shape::line},
+                                 {"error <= 1 m", scalar(error_colour(1.0)), LegendItem::Shape::dot},
+                                 {"<= 3 m", scalar(error_colour(3.0)), LegendItem::Shape::dot},
+                                 {"<= 5 m", scalar(error_colour(5.0)), LegendItem::Shape::dot},
+                                 {"> 5 m", scalar(error_colour(5.1)), LegendItem::Shape::dot}};
+  legend.insert(legend.end(), map.layer.legend.begin(), map.layer.legend.end());
+  MapFigure figure;
+  figure.picture = from_mat(titled(title, m, legend));
+  figure.view = map.view;
+  figure.view.top = 30;
+  return figure;
+}
 
 std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, const Route& route,
                                                 const PosesByMode& poses_by_mode, const RenderOptions& options,
@@ -477,7 +754,17 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
     write_picture(written.back(), entropy_route_figure(cache, route, truth, *poses));
   }
 
-  // 3. Position error over time, one line per mode.
+  // 3. The whole route: SeqLoc's estimates (else any mode's) over the map, coloured by error.
+  if (poses && poses->size() == route.frames.size()) {
+    std::string mode = "seqloc";
+    for (const auto& [name, p] : poses_by_mode) {
+      if (&p == poses) mode = name;
+    }
+    written.push_back(out_dir / "overview.png");
+    write_picture(written.back(), route_overview(cache, route, mode, *poses).picture);
+  }
+
+  // 4. Position error over time, one line per mode.
   if (const auto series = error_series(poses_by_mode); !series.empty()) {
     written.push_back(out_dir / "error_over_time.png");
     write_picture(written.back(),
