@@ -1,6 +1,7 @@
 """The viewer page in headless Chromium: `seqloc serve` with the built page, a track from
 `seqloc localize` on the sample region; the page must load the region's tiles without errors and
-draw every frame of the track, and the screenshot must show the map and the track's colours. Twice:
+draw every frame of the track, and the screenshot must show the map, the ground truth and the
+frames coloured by position error. Twice:
 in the region's own projection, and over a Web Mercator view from the server's XYZ tiles (?web=1)."""
 
 import argparse
@@ -84,12 +85,18 @@ def check_page(chromium_binary, url, d, label):
     outline = ((r < 30) & (g < 30) & (b < 30)).sum()
     if outline < 50:
         failures.append("no track outline (black) pixels on the map")
-    # The ground truth (the simulated route has it): a dashed green line, rgb(0, 140, 60).
-    truth = ((r < 60) & (g > 110) & (g < 170) & (b > 30) & (b < 90)).sum()
+    # The ground truth (the simulated route has it): a dashed blue line, rgb(30, 90, 220).
+    truth = ((r < 70) & (g > 60) & (g < 130) & (b > 180)).sum()
     if truth < 20:
-        failures.append(f"no ground-truth (green) pixels on the map ({truth})")
+        failures.append(f"no ground-truth (blue) pixels on the map ({truth})")
+    # The frames coloured by position error (the default with ground truth), in render's classes.
+    classes = {"<= 1 m": (26, 152, 80), "<= 3 m": (145, 207, 96), "<= 5 m": (253, 174, 97), "> 5 m": (215, 48, 39)}
+    by_error = {name: int(((abs(r - c[0]) <= 6) & (abs(g - c[1]) <= 6) & (abs(b - c[2]) <= 6)).sum())
+                for name, c in classes.items()}
+    if sum(by_error.values()) < 30:
+        failures.append(f"no frames coloured by position error ({by_error})")
     print(f"viewer, {label}: {tiles} tiles, {errors} errors, {points} track points, {distinct} colours, "
-          f"{outline} dark px, {truth} ground-truth px")
+          f"{outline} dark px, {truth} ground-truth px, error classes {by_error}")
     return failures
 
 

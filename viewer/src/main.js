@@ -1,6 +1,7 @@
 // The seqloc viewer: a region's tiles in the region's own Transverse Mercator projection (no Web
 // Mercator reprojection: cells stay square and north stays grid north), with a localize track on
-// top coloured by its per-frame entropy and the ground truth dashed beside it. Everything comes
+// top coloured by each frame's position error (the recall thresholds, as `seqloc render`'s
+// overview) or by its entropy, and the ground truth dashed beside it. Everything comes
 // from `seqloc serve`: /catalog, a region's tilejson.json (its CRS and tile matrix) and its tiles.
 // With ?web=1 the same layers come as the server's Web Mercator XYZ tiles, as in any web map.
 
@@ -55,21 +56,40 @@ function viridis(t) {
 }
 
 const lineStyle = new Style({ stroke: new Stroke({ color: 'rgba(0,0,0,0.7)', width: 2 }) });
-// The ground truth (track.geojson's "track": "ground_truth" line), dashed beside the estimate.
-const truthStyle = new Style({ stroke: new Stroke({ color: 'rgba(0,140,60,0.9)', width: 2, lineDash: [6, 4] }) });
+// The ground truth (track.geojson's "track": "ground_truth" line), dashed blue beside the estimate.
+const truthStyle = new Style({ stroke: new Stroke({ color: 'rgb(30,90,220)', width: 2, lineDash: [6, 4] }) });
+// Position error classes: up to 1 m, 3 m, 5 m, beyond (render.cpp's error_colour).
+const ERROR_CLASSES = [[1, 'rgb(26,152,80)'], [3, 'rgb(145,207,96)'], [5, 'rgb(253,174,97)'],
+                       [Infinity, 'rgb(215,48,39)']];
+function errorColour(e) {
+  return ERROR_CLASSES.find(([limit]) => e <= limit)[1];
+}
+let colourBy = 'error';  // or 'entropy'
 const pointStyles = new globalThis.Map();
+function pointStyle(colour) {
+  if (!pointStyles.has(colour)) {
+    pointStyles.set(colour, new Style({ image: new Circle({ radius: 5, fill: new Fill({ color: colour }),
+                                                            stroke: new Stroke({ color: '#000', width: 1 }) }) }));
+  }
+  return pointStyles.get(colour);
+}
 function trackStyle(feature) {
   if (feature.getGeometry().getType() !== 'Point') {
     return feature.get('track') === 'ground_truth' ? truthStyle : lineStyle;
   }
-  const e = Number(feature.get('entropy'));
-  const key = Number.isFinite(e) ? Math.round(e * 50) : -1;
-  if (!pointStyles.has(key)) {
-    const colour = key < 0 ? '#888' : viridis(key / 50);
-    pointStyles.set(key, new Style({ image: new Circle({ radius: 5, fill: new Fill({ color: colour }),
-                                                         stroke: new Stroke({ color: '#000', width: 1 }) }) }));
+  const value = Number(feature.get(colourBy === 'error' ? 'position_error_m' : 'entropy'));
+  if (feature.get(colourBy === 'error' ? 'position_error_m' : 'entropy') === undefined || !Number.isFinite(value)) {
+    return pointStyle('#888');
   }
-  return pointStyles.get(key);
+  return pointStyle(colourBy === 'error' ? errorColour(value) : viridis(Math.round(value * 50) / 50));
+}
+
+// Shows the legend of the colouring in use.
+function setColourBy(mode) {
+  colourBy = mode;
+  document.getElementById('entropy-legend').hidden = mode !== 'entropy';
+  document.getElementById('error-legend').hidden = mode !== 'error';
+  trackSource.changed();
 }
 
 function tileLayer(region, tj, layer, visible, opacity) {
@@ -109,7 +129,14 @@ function addTrack(text, name) {
                                                 featureProjection: map.getView().getProjection() });
   trackSource.clear();
   trackSource.addFeatures(features);
-  status.trackPoints = features.filter((f) => f.getGeometry().getType() === 'Point').length;
+  const points = features.filter((f) => f.getGeometry().getType() === 'Point');
+  status.trackPoints = points.length;
+  // A track without ground truth has no errors to colour by.
+  const hasErrors = points.some((f) => f.get('position_error_m') !== undefined);
+  const select = document.getElementById('colour-by');
+  select.querySelector('option[value=error]').disabled = !hasErrors;
+  if (!hasErrors && select.value === 'error') select.value = 'entropy';
+  setColourBy(select.value);
   showStatus();
   if (features.length) map.getView().fit(trackSource.getExtent(), { padding: [40, 40, 40, 40], maxZoom: trackMaxZoom });
   document.getElementById('info').textContent = `track ${name}: ${status.trackPoints} frames`;
@@ -217,6 +244,10 @@ async function main() {
     status.error = e.message;
     showStatus();
   }
+  const colourSelect = document.getElementById('colour-by');
+  if (params.get('colour') === 'entropy') colourSelect.value = 'entropy';
+  colourSelect.onchange = () => setColourBy(colourSelect.value);
+  setColourBy(colourSelect.value);
   document.getElementById('track-form').onsubmit = (e) => {
     e.preventDefault();
     loadTrack(document.getElementById('track-url').value);
