@@ -32,11 +32,7 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
 
   void check() override {
     options_.filter.threads = options_.matcher.threads;
-    try {
-      options_.validate();
-    } catch (const std::exception& e) {
-      throw pipeline::UsageError(e.what());
-    }
+    validate_options([&] { options_.validate(); });
     check_overwrite(out_);
   }
 

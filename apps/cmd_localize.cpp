@@ -90,12 +90,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
 
   void check() override {
     options_.filter.width = options_.filter.height = window_;
-    try {
+    validate_options([&] {
       options_.validate();
       limits_.validate();
-    } catch (const std::exception& e) {
-      throw pipeline::UsageError(e.what());  // option values, not data
-    }
+    });
     check_overwrite(out_);
     std::error_code ec;
     const auto parent = out_.has_parent_path() ? out_.parent_path() : fs::path(".");

@@ -31,11 +31,7 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
   }
 
   void check() override {
-    try {
-      options_.validate();
-    } catch (const std::exception& e) {
-      throw pipeline::UsageError(e.what());
-    }
+    validate_options([&] { options_.validate(); });
     check_overwrite(out_);
   }
 

@@ -37,11 +37,7 @@ class RenderCommand : public Command {
   void check() override {
     options_.localize.filter.width = options_.localize.filter.height = window_;
     options_.localize.matcher.threads = options_.localize.filter.threads;
-    try {
-      options_.localize.validate();
-    } catch (const std::exception& e) {
-      throw pipeline::UsageError(e.what());
-    }
+    validate_options([&] { options_.localize.validate(); });
     if (frame_ == "collapse" && localized_.empty()) {
       throw pipeline::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
     }

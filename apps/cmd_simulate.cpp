@@ -47,11 +47,7 @@ class SimulateCommand : public Command, public WithOverwrite, public WithProgres
       auto& c = options_.camera;
       c.class_miss = c.cell_dropout = c.spurious_blobs = c.jitter_m = c.jitter_deg = c.wrong_frame = 0;
     }
-    try {
-      options_.validate();
-    } catch (const std::exception& e) {
-      throw pipeline::UsageError(e.what());
-    }
+    validate_options([&] { options_.validate(); });
     check_overwrite(out_);
   }
 

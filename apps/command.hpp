@@ -15,12 +15,14 @@
 #include <string>
 #include <string_view>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/osm/features.hpp"
+#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::raster {
 class CacheReader;
@@ -105,6 +107,17 @@ void add_matcher_options(CLI::App& app, pipeline::MatcherConfig& matcher);
                                                                raster::CacheReader& cache,
                                                                const pipeline::LocalizeOptions& options);
 [[nodiscard]] std::size_t frame_count(const std::vector<pipeline::Route>& routes);
+
+/// Runs `validate` (the checks of option values): whatever it throws is a usage error (exit 2),
+/// the options being wrong, not the data.
+template <class Validate>
+void validate_options(Validate&& validate) {
+  try {
+    std::forward<Validate>(validate)();
+  } catch (const std::exception& e) {
+    throw pipeline::UsageError(e.what());
+  }
+}
 
 /// --overwrite for the commands that write an output (osmium-tool's option mixins).
 class WithOverwrite {

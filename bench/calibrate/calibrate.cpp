@@ -15,6 +15,7 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 
@@ -157,12 +158,8 @@ int main(int argc, char** argv) {
         if (!f.truth || !f.truth->heading_deg || f.observation.empty()) continue;
         const auto scores = pl::match_frame(f, cache, matcher);
         const pl::GridCrop crop = pl::frame_crop(f, cache.grid(), projection);
-        double gamma = 0;
-        const auto truth = projection.forward(f.truth->where, gamma);
-        const double grid_heading = *f.truth->heading_deg - gamma;
-        const auto u = static_cast<int>(std::lround((truth.x_m - crop.x) / 0.5 + (size - 1) / 2.0));
-        const auto v = static_cast<int>(std::lround(-(truth.y_m - crop.y) / 0.5 + (size - 1) / 2.0));
-        const int b = static_cast<int>(((std::lround(grid_heading * bins / 360.0) % bins) + bins) % bins);
+        const auto cell = pl::true_volume_cell(f, crop, projection, size, size, bins, 0.5);
+        const auto [v, u, b] = *cell;  // the frame has ground truth with a heading
         fit.add(scores, size, size, bins, v, u, b);
         if (u >= 0 && u < size && v >= 0 && v < size) {
           const auto true_cell = (static_cast<std::size_t>(b) * size + static_cast<std::size_t>(v)) * size +
