@@ -190,6 +190,61 @@ void rotated_copy(const cv::Mat& correlation, int q, int s, float* dst) {
   }
 }
 
+// What every heading's scoring shares: the bodies (t x t) and the spectra of their map terms,
+// turned by each quarter turn.
+struct HeadingJob {
+  const std::vector<std::vector<float>>& bodies;
+  const std::vector<std::array<cv::Mat, 4>>& map_spectra;
+  int t = 0, s = 0, n = 0, n_bins = 0;
+  float scale = 1;
+};
+
+// Scores headings j0 .. j1 - 1 of the first quarter turn, and with them the same headings of the
+// other three, into `volume` (s, s, n_bins). Slices go to the volume a batch of consecutive
+// headings at a time, so that each cell's run of bins is written whole (one slice at a time would
+// touch every cache line of the volume once per heading).
+void score_headings(const HeadingJob& job, int j0, int j1, float* volume) {
+  constexpr int kBatch = 16;
+  const int t = job.t, s = job.s, n = job.n, quarter = job.n_bins / 4;
+  const auto plane = static_cast<std::size_t>(s) * static_cast<std::size_t>(s);
+  std::array<cv::Mat, 4> acc;
+  for (auto& a : acc) a.create(n, n, CV_32F);
+  cv::Mat correlation, template_spectrum;
+  cv::Mat padded = cv::Mat::zeros(n, n, CV_32F);  // the template's t x t corner is rewritten each time
+  std::vector<std::vector<float>> templates;
+  std::vector<float> batch(static_cast<std::size_t>(4 * kBatch) * plane);  // [q][heading - jb][v][u]
+  for (int jb = j0; jb < j1; jb += kBatch) {
+    const int je = std::min(j1, jb + kBatch);
+    for (int j = jb; j < je; ++j) {
+      rotate_bodies(job.bodies, t, j * 360.0 / job.n_bins, templates);
+      for (std::size_t o = 0; o < job.bodies.size(); ++o) {
+        cv::Mat(t, t, CV_32F, templates[o].data()).copyTo(padded(cv::Rect(0, 0, t, t)));
+        cv::dft(padded, template_spectrum, 0, t);
+        accumulate_spectra(template_spectrum, job.map_spectra[o], acc, n, /*assign=*/o == 0);
+      }
+      if (job.bodies.empty()) {
+        for (auto& a : acc) a.setTo(0);
+      }
+      // corr(R_q A, M) = R_q corr(A, R_q^-1 M): heading + q quarter turns from one template.
+      // Only the first s rows of the correlation are wanted.
+      for (int q = 0; q < 4; ++q) {
+        cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE, s);
+        rotated_copy(correlation, q, s,
+                     batch.data() + (static_cast<std::size_t>(q) * kBatch + static_cast<std::size_t>(j - jb)) * plane);
+      }
+    }
+    const auto count = static_cast<std::size_t>(je - jb);
+    for (std::size_t cell = 0; cell < plane; ++cell) {
+      float* out = volume + cell * static_cast<std::size_t>(job.n_bins);
+      for (std::size_t q = 0; q < 4; ++q) {
+        float* run = out + flat(static_cast<int>(q), jb, quarter);  // bins jb .. je - 1 of quarter q
+        const float* src = batch.data() + q * kBatch * plane + cell;
+        for (std::size_t k = 0; k < count; ++k) run[k] = src[k * plane] * job.scale;
+      }
+    }
+  }
+}
+
 }  // namespace
 
 void MatcherConfig::validate() const {
@@ -288,26 +343,13 @@ std::vector<std::array<int, 2>> BevMatcher::observed_codes(const Observation& ob
   return codes;
 }
 
-std::vector<float> BevMatcher::match(const Observation& observation, std::span<const std::uint8_t> map_rgb) const {
-  const int t = observation.size, s = config_.size, n_bins = config_.headings;
-  const int side = map_side(t);
-  if (t < 1 || t % 2 == 0 || observation.classes.size() != observation.cells() * 3 ||
-      observation.visible.size() != observation.cells()) {
-    throw std::invalid_argument("matcher: the observation must be square with an odd side");
-  }
-  if (map_rgb.size() != static_cast<std::size_t>(side) * static_cast<std::size_t>(side) * 3) {
-    std::ostringstream m;
-    m << "matcher: the map crop must be " << side << " x " << side << " cells for an observation of side " << t;
-    throw std::invalid_argument(m.str());
-  }
-  // An even transform size: accumulate_spectra reads the CCS packing of even sizes.
-  int n = cv::getOptimalDFTSize(side);
-  while (n % 2) n = cv::getOptimalDFTSize(n + 1);
-  // The score of a pose sums, over the observed codes o, the map term s(o, .) under the rotated
-  // indicator T_o. The indicators of one channel's codes partition the visible disc V, so with one
-  // reference code r(c) per channel, sum_o T_o s(o) = V * sum_c s(r(c)) + sum_{o != r} T_o (s(o) -
-  // s(r(c))): a frame costs one template for V plus one per code beyond the first of each channel
-  // (about 3 instead of 5 on rural frames); the same sum, up to float rounding.
+// The score of a pose sums, over the observed codes o, the map term s(o, .) under the rotated
+// indicator T_o. The indicators of one channel's codes partition the visible disc V, so with one
+// reference code r(c) per channel, sum_o T_o s(o) = V * sum_c s(r(c)) + sum_{o != r} T_o (s(o) -
+// s(r(c))): a frame costs one template for V plus one per code beyond the first of each channel
+// (about 3 instead of 5 on rural frames); the same sum, up to float rounding.
+std::pair<std::vector<std::vector<float>>, std::vector<std::vector<float>>> BevMatcher::correlands(
+    const Observation& observation, std::span<const std::uint8_t> map_rgb, int side) const {
   const auto codes = observed_codes(observation);
   std::vector<std::vector<float>> bodies;  // [0]: V; then the non-reference codes
   std::vector<std::vector<float>> terms;   // the map term each body is correlated with
@@ -331,6 +373,25 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
     bodies.push_back(body_indicator(observation, channel, code));
     terms.push_back(std::move(term));
   }
+  return {std::move(bodies), std::move(terms)};
+}
+
+std::vector<float> BevMatcher::match(const Observation& observation, std::span<const std::uint8_t> map_rgb) const {
+  const int t = observation.size, s = config_.size, n_bins = config_.headings;
+  const int side = map_side(t);
+  if (t < 1 || t % 2 == 0 || observation.classes.size() != observation.cells() * 3 ||
+      observation.visible.size() != observation.cells()) {
+    throw std::invalid_argument("matcher: the observation must be square with an odd side");
+  }
+  if (map_rgb.size() != static_cast<std::size_t>(side) * static_cast<std::size_t>(side) * 3) {
+    std::ostringstream m;
+    m << "matcher: the map crop must be " << side << " x " << side << " cells for an observation of side " << t;
+    throw std::invalid_argument(m.str());
+  }
+  // An even transform size: accumulate_spectra reads the CCS packing of even sizes.
+  int n = cv::getOptimalDFTSize(side);
+  while (n % 2) n = cv::getOptimalDFTSize(n + 1);
+  auto [bodies, terms] = correlands(observation, map_rgb, side);
   // Each map term, turned counter-clockwise by q quarter turns, transformed.
   std::vector<std::array<cv::Mat, 4>> map_spectra(terms.size());
   for (std::size_t o = 0; o < terms.size(); ++o) {
@@ -339,57 +400,16 @@ std::vector<float> BevMatcher::match(const Observation& observation, std::span<c
   }
 
   std::vector<float> volume(static_cast<std::size_t>(s) * static_cast<std::size_t>(s) * static_cast<std::size_t>(n_bins));
+  const HeadingJob job{bodies, map_spectra, t, s, n, n_bins, static_cast<float>(1.0 / config_.temperature)};
   const int quarter = n_bins / 4;
-  const auto scale = static_cast<float>(1.0 / config_.temperature);
-  const auto plane = static_cast<std::size_t>(s) * static_cast<std::size_t>(s);
-  // Slices go to the (H, W, N) volume a batch of consecutive headings at a time, so that each
-  // cell's run of bins is written whole (one slice at a time would touch every cache line of
-  // the volume once per heading).
-  constexpr int kBatch = 16;
-  auto work = [&](int j0, int j1) {
-    std::array<cv::Mat, 4> acc;
-    for (auto& a : acc) a.create(n, n, CV_32F);
-    cv::Mat correlation, template_spectrum;
-    cv::Mat padded = cv::Mat::zeros(n, n, CV_32F);  // the template's t x t corner is rewritten each time
-    std::vector<std::vector<float>> templates;
-    std::vector<float> batch(static_cast<std::size_t>(4 * kBatch) * plane);  // [q][heading - jb][v][u]
-    for (int jb = j0; jb < j1; jb += kBatch) {
-      const int je = std::min(j1, jb + kBatch);
-      for (int j = jb; j < je; ++j) {
-        rotate_bodies(bodies, t, j * 360.0 / n_bins, templates);
-        for (std::size_t o = 0; o < bodies.size(); ++o) {
-          cv::Mat(t, t, CV_32F, templates[o].data()).copyTo(padded(cv::Rect(0, 0, t, t)));
-          cv::dft(padded, template_spectrum, 0, t);
-          accumulate_spectra(template_spectrum, map_spectra[o], acc, n, /*assign=*/o == 0);
-        }
-        if (bodies.empty()) {
-          for (auto& a : acc) a.setTo(0);
-        }
-        // corr(R_q A, M) = R_q corr(A, R_q^-1 M): heading + q quarter turns from one template.
-        // Only the first s rows of the correlation are wanted.
-        for (int q = 0; q < 4; ++q) {
-          cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE,
-                  s);
-          rotated_copy(correlation, q, s,
-                       batch.data() + (static_cast<std::size_t>(q) * kBatch + static_cast<std::size_t>(j - jb)) * plane);
-        }
-      }
-      const auto count = static_cast<std::size_t>(je - jb);
-      for (std::size_t cell = 0; cell < plane; ++cell) {
-        float* out = volume.data() + cell * static_cast<std::size_t>(n_bins);
-        for (std::size_t q = 0; q < 4; ++q) {
-          float* run = out + flat(static_cast<int>(q), jb, quarter);  // bins jb .. je - 1 of quarter q
-          const float* src = batch.data() + q * kBatch * plane + cell;
-          for (std::size_t k = 0; k < count; ++k) run[k] = src[k * plane] * scale;
-        }
-      }
-    }
-  };
   const int threads = std::max(1, std::min(config_.threads, quarter));
   {
     std::vector<std::jthread> workers;
-    for (int w = 1; w < threads; ++w) workers.emplace_back(work, quarter * w / threads, quarter * (w + 1) / threads);
-    work(0, quarter / threads);
+    for (int w = 1; w < threads; ++w) {
+      workers.emplace_back(score_headings, std::cref(job), quarter * w / threads, quarter * (w + 1) / threads,
+                           volume.data());
+    }
+    score_headings(job, 0, quarter / threads, volume.data());
   }
   return volume;
 }

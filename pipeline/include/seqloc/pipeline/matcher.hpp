@@ -14,6 +14,7 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "seqloc/pipeline/calibration.hpp"
@@ -75,6 +76,10 @@ class BevMatcher {
   [[nodiscard]] static std::vector<std::array<int, 2>> observed_codes(const Observation& observation);
 
  private:
+  /// The bodies (visible disc, then one indicator per observed code beyond each channel's first)
+  /// and the map term each is correlated with (match()'s reference-code decomposition).
+  [[nodiscard]] std::pair<std::vector<std::vector<float>>, std::vector<std::vector<float>>> correlands(
+      const Observation& observation, std::span<const std::uint8_t> map_rgb, int side) const;
   MatcherConfig config_;
   std::array<std::vector<double>, 3> likelihood_;  ///< [channel][observed * (K+1) + map] = P(o | m)
 };
