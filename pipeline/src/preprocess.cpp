@@ -326,6 +326,30 @@ std::unique_ptr<detail::FeatureBlocks> spill_features(osm::FeatureSet features, 
   return blocks;
 }
 
+// Block by block (32 x 32 tiles, 8.2 km, by default), so that only one block's features and bins
+// are held while rendering, whatever the region's size; the tiles the shard owns and the cache
+// does not hold yet.
+void render_blocks(const detail::FeatureBlocks& blocks, const raster::RegionGrid& grid,
+                   const raster::CacheMetadata& metadata, raster::CacheWriter& writer, const PreprocessOptions& options,
+                   const std::function<void(const PreprocessProgress&)>& on_progress, PreprocessReport& report) {
+  for (std::int64_t by = 0; by < blocks.blocks_high(); ++by) {
+    for (std::int64_t bx = 0; bx < blocks.blocks_wide(); ++bx) {
+      const std::int64_t side = options.block_tiles, col0 = bx * side, row0 = by * side;
+      std::vector<std::pair<std::int64_t, std::int64_t>> tiles;
+      for (std::int64_t row = row0; row < std::min(row0 + side, grid.tiles_high()); ++row) {
+        for (std::int64_t col = col0; col < std::min(col0 + side, grid.tiles_wide()); ++col) {
+          if (metadata.shard_owns(col, row) && !writer.has_tile(col, row)) tiles.emplace_back(col, row);
+        }
+      }
+      if (tiles.empty()) continue;
+      const raster::RegionFeatures block_features = blocks.load(bx, by);
+      const raster::TileRenderer renderer(block_features, blocks.block_grid(bx, by), options.max_distance_m);
+      render_tiles(BlockJob{renderer, col0, row0, std::move(tiles)}, writer, options, on_progress, report);
+      detail::release_free_memory();  // the block's features and bins
+    }
+  }
+}
+
 }  // namespace
 
 PreprocessReport preprocess_region(const PreprocessOptions& options,
@@ -382,26 +406,10 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   detail::reset_peak_rss();
   report.render_start_mb = detail::rss_mb().value_or(0);
 
-  // Block by block (32 x 32 tiles, 8.2 km, by default), so that only one block's features and
-  // bins are held while rendering, whatever the region's size.
   const auto render_start = Clock::now();
   report.tiles_total = metadata.shard_tile_count();
   report.tiles_resumed = writer.tiles_stored();
-  for (std::int64_t by = 0; by < blocks->blocks_high(); ++by) {
-    for (std::int64_t bx = 0; bx < blocks->blocks_wide(); ++bx) {
-      const std::int64_t side = options.block_tiles, col0 = bx * side, row0 = by * side;
-      std::vector<std::pair<std::int64_t, std::int64_t>> tiles;
-      for (std::int64_t row = row0; row < std::min(row0 + side, grid.tiles_high()); ++row) {
-        for (std::int64_t col = col0; col < std::min(col0 + side, grid.tiles_wide()); ++col) {
-          if (metadata.shard_owns(col, row) && !writer.has_tile(col, row)) tiles.emplace_back(col, row);
-        }
-      }
-      if (tiles.empty()) continue;
-      const raster::RegionFeatures block_features = blocks->load(bx, by);
-      const raster::TileRenderer renderer(block_features, blocks->block_grid(bx, by), options.max_distance_m);
-      render_tiles(BlockJob{renderer, col0, row0, std::move(tiles)}, writer, options, on_progress, report);
-    }
-  }
+  render_blocks(*blocks, grid, metadata, writer, options, on_progress, report);
   const auto finish_start = Clock::now();
   writer.finish();
   report.write_seconds += seconds_since(finish_start);
