@@ -223,7 +223,8 @@ TEST(Simulate, CleanObservationsAreLocalizedAtTheTruth) {
   ro.frame = 6;
   ro.localize = lo;
   const auto files = render_route(cache, route, {{"single", single.poses}, {"seqloc", seqloc.poses}}, ro, out / "figures");
-  ASSERT_EQ(files.size(), 3u);
+  ASSERT_EQ(files.size(), 4u);  // likelihood_6, entropy_route, overview, error_over_time
+  EXPECT_EQ(files[2].filename(), "overview.png");
   for (const auto& f : files) {
     const auto bytes = test::read_file(f);
     EXPECT_GT(bytes.size(), 1000u) << f;
