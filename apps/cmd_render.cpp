@@ -23,15 +23,16 @@ class RenderCommand : public Command {
                    "are run here");
     app.add_option("--frame", frame_,
                    "Frame of the likelihood figure (index from 0); 'collapse': the frame on which the SeqLoc belief "
-                   "kept by localize --beliefs shrinks most while its error falls to 5 m or less (needs --localized); 'sharpest': the frame after the first "
-                   "whose own likelihood has the lowest entropy")
+                   "kept by localize --beliefs shrinks most while its error falls to 5 m or less (needs --localized); "
+                   "'sharpest': the frame after the first whose own likelihood has the lowest entropy")
         ->default_val("0");
     app.add_option("--window", window_, "Belief window, cells")->capture_default_str();
     app.add_option("--threads", options_.localize.filter.threads, "Threads")->default_val(2);
-    app.footer("Writes overview.png (the route's estimates over the map, coloured by position error, and the ground\n"
-               "truth), likelihood_K.png (the frame's own likelihood and the SeqLoc belief over the map, the ground\n"
-               "truth as a star), entropy_route.png and error_over_time.png; every map with a scale bar, north arrow\n"
-               "and legend (docs/render.md).");
+    app.footer(
+        "Writes overview.png (the route's estimates over the map, coloured by position error, and the ground\n"
+        "truth), likelihood_K.png (the frame's own likelihood and the SeqLoc belief over the map, the ground\n"
+        "truth as a star), entropy_route.png and error_over_time.png; every map with a scale bar, north arrow\n"
+        "and legend (docs/render.md).");
   }
 
   void check() override {

@@ -228,7 +228,8 @@ void score_headings(const HeadingJob& job, int j0, int j1, float* volume) {
       // corr(R_q A, M) = R_q corr(A, R_q^-1 M): heading + q quarter turns from one template.
       // Only the first s rows of the correlation are wanted.
       for (int q = 0; q < 4; ++q) {
-        cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE, s);
+        cv::dft(acc[static_cast<std::size_t>(q)], correlation, cv::DFT_INVERSE | cv::DFT_REAL_OUTPUT | cv::DFT_SCALE,
+                s);
         rotated_copy(correlation, q, s,
                      batch.data() + (static_cast<std::size_t>(q) * kBatch + static_cast<std::size_t>(j - jb)) * plane);
       }

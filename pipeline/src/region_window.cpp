@@ -44,7 +44,6 @@ const float* RegionWindow::road_distance_m() {
   return road_m_.data();
 }
 
-
 filter::BeliefVolume carry_belief(const filter::BeliefVolume& belief, const RegionWindow& from,
                                   const RegionWindow& to) {
   const osm::RegionProjection p_from = from.cache().metadata().projection(), p_to = to.cache().metadata().projection();

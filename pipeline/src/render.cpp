@@ -13,13 +13,13 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "flat_index.hpp"
 #include "seqloc/osm/classes.hpp"
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/outputs.hpp"
 #include "seqloc/pipeline/volume_shape.hpp"
 #include "seqloc/raster/palette.hpp"
 #include "seqloc/raster/png_codec.hpp"
-#include "flat_index.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -265,8 +265,8 @@ void draw_north_arrow(cv::Mat& m, const cv::Rect& map, double gamma_deg) {
 double convergence_at(raster::CacheReader& cache, double u, double v) {
   const auto& grid = cache.grid();
   double gamma = 0;
-  (void)cache.metadata().projection().reverse(
-      {grid.min_x() + (u + 0.5) * kCellM, grid.max_y() - (v + 0.5) * kCellM}, gamma);
+  (void)cache.metadata().projection().reverse({grid.min_x() + (u + 0.5) * kCellM, grid.max_y() - (v + 0.5) * kCellM},
+                                              gamma);
   return gamma;
 }
 
@@ -321,7 +321,8 @@ struct RouteMap {
 };
 RouteMap route_map(raster::CacheReader& cache, const std::vector<cv::Point2d>& points) {
   double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
-  for (const auto& p : points) u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
+  for (const auto& p : points)
+    u0 = std::min(u0, p.x), v0 = std::min(v0, p.y), u1 = std::max(u1, p.x), v1 = std::max(v1, p.y);
   const double margin = 40 / kCellM;
   RouteMap map;
   map.view.u0 = static_cast<std::int64_t>(std::floor(u0 - margin));
@@ -337,7 +338,8 @@ RouteMap route_map(raster::CacheReader& cache, const std::vector<cv::Point2d>& p
 void decorate(cv::Mat& m, raster::CacheReader& cache, const MapView& view) {
   const cv::Rect all(0, 0, m.cols, m.rows);
   draw_scale_bar(m, all, view.metres_per_px());
-  const double u = static_cast<double>(view.u0) + m.cols / view.scale / 2, v = static_cast<double>(view.v0) + m.rows / view.scale / 2;
+  const double u = static_cast<double>(view.u0) + m.cols / view.scale / 2,
+               v = static_cast<double>(view.v0) + m.rows / view.scale / 2;
   draw_north_arrow(m, all, convergence_at(cache, u, v));
 }
 
@@ -634,7 +636,8 @@ Picture entropy_route_figure(raster::CacheReader& cache, const Route& route, con
   RouteMap map = route_map(cache, truth);
   cv::Mat m = map.layer.image;
   for (std::size_t i = 1; i < truth.size(); ++i) {
-    cv::line(m, picture_point(map.view, truth[i - 1]), picture_point(map.view, truth[i]), rgb(60, 60, 60), 1, cv::LINE_AA);
+    cv::line(m, picture_point(map.view, truth[i - 1]), picture_point(map.view, truth[i]), rgb(60, 60, 60), 1,
+             cv::LINE_AA);
   }
   for (std::size_t i = 0; i < truth.size() && i < poses.size(); ++i) {
     cv::circle(m, picture_point(map.view, truth[i]), 5, viridis(poses[i].entropy), cv::FILLED, cv::LINE_AA);
@@ -651,8 +654,9 @@ Picture entropy_route_figure(raster::CacheReader& cache, const Route& route, con
   cv::Mat body(m.rows + bar.rows, std::max(m.cols, bar.cols), CV_8UC3, rgb(255, 255, 255));
   m.copyTo(body(cv::Rect(0, 0, m.cols, m.rows)));
   bar.copyTo(body(cv::Rect(0, m.rows, bar.cols, bar.rows)));
-  return from_mat(titled(route.name + ": frames at their ground truth, coloured by normalized entropy of their likelihood",
-                         body, map.layer.legend));
+  return from_mat(
+      titled(route.name + ": frames at their ground truth, coloured by normalized entropy of their likelihood", body,
+             map.layer.legend));
 }
 
 // Position error over time, one line per mode (none when no mode has ground truth).
@@ -707,7 +711,8 @@ MapFigure route_overview(raster::CacheReader& cache, const Route& route, const s
     if (*p.position_error_m <= 5) ++within5;
   }
   std::string title = route.name + ": " + mode + " estimates coloured by position error, ground truth in black";
-  if (judged > 0) title += " (" + fmt(100.0 * static_cast<double>(within5) / static_cast<double>(judged), 1) + " % within 5 m)";
+  if (judged > 0)
+    title += " (" + fmt(100.0 * static_cast<double>(within5) / static_cast<double>(judged), 1) + " % within 5 m)";
   std::vector<LegendItem> legend{{"ground truth", rgb(0, 0, 0), LegendItem::Shape::line},
                                  {"error <= 1 m", scalar(error_colour(1.0)), LegendItem::Shape::dot},
                                  {"<= 3 m", scalar(error_colour(3.0)), LegendItem::Shape::dot},

@@ -193,8 +193,10 @@ TEST(RegionCatalog, SmoothCarriesTheLaterFramesBackAcrossTheSeam) {
   ASSERT_GT(west, 40);
   smooth_error /= west;
   seqloc_error /= west;
-  std::printf("smooth, reversed ridge: one region vs two %.3f m apart at most; mean error in the west "
-              "(%d frames) %.2f m (seqloc %.2f m)\n", worst, west, smooth_error, seqloc_error);
+  std::printf(
+      "smooth, reversed ridge: one region vs two %.3f m apart at most; mean error in the west "
+      "(%d frames) %.2f m (seqloc %.2f m)\n",
+      worst, west, smooth_error, seqloc_error);
   EXPECT_LT(worst, 0.5);
   EXPECT_LT(smooth_error, 1.0) << "the west's frames placed by the frames across the seam";
   EXPECT_GT(seqloc_error, 2.0) << "forward alone cannot place them";

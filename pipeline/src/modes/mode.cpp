@@ -8,9 +8,7 @@ double LocalizationMode::reported_etu_weight(double entropy) const {
   return filter::etu_weight(entropy, context_.options.filter.etu_reference_entropy);
 }
 
-std::size_t LocalizationMode::region_of(std::size_t i) const {
-  return context_.regions ? (*context_.regions)[i] : 0;
-}
+std::size_t LocalizationMode::region_of(std::size_t i) const { return context_.regions ? (*context_.regions)[i] : 0; }
 
 raster::CacheReader& LocalizationMode::cache_of(std::size_t i) const {
   return context_.catalog ? context_.catalog->cache(region_of(i)) : context_.cache;

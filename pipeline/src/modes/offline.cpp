@@ -15,8 +15,7 @@ namespace {
 
 class OfflineMode final : public LocalizationMode {
  public:
-  explicit OfflineMode(const RouteContext& context)
-      : LocalizationMode(context), aggregator_(context.options.filter) {}
+  explicit OfflineMode(const RouteContext& context) : LocalizationMode(context), aggregator_(context.options.filter) {}
 
   [[nodiscard]] bool lookahead() const override { return false; }
 
