@@ -42,7 +42,8 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
     const std::size_t frames = frame_count(routes);
     ProgressBar bar(show_progress(), "frames");
     std::size_t done = 0;
-    const auto fit = pipeline::fit_backbone_calibration(routes, cache, options_, [&] { bar.update(++done, frames); });
+    const auto fit = pipeline::fit_backbone_calibration(
+        routes, cache, options_, [&] { bar.update(static_cast<long long>(++done), static_cast<long long>(frames)); });
     bar.done();
     const auto& b = fit.best;
     std::printf("frames %zu (true cell outside the volume: %zu)\n", b.frames, b.skipped);

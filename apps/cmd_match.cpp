@@ -43,7 +43,8 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
     ProgressBar bar(show_progress(), "frames");
     std::size_t done = 0;
     for (const auto& route : routes) {
-      pipeline::write_volume_route(route, cache, options_, staged / route.name, [&] { bar.update(++done, frames); });
+      pipeline::write_volume_route(route, cache, options_, staged / route.name,
+                                   [&] { bar.update(static_cast<long long>(++done), static_cast<long long>(frames)); });
     }
     bar.done();
     pipeline::commit_directory(staged, out_);

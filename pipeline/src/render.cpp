@@ -210,7 +210,7 @@ cv::Mat legend_strip(const std::vector<LegendItem>& items, int width) {
     int baseline = 0;
     const int w = kSymbol + 5 + cv::getTextSize(item.name, cv::FONT_HERSHEY_SIMPLEX, kText, 1, &baseline).width + 16;
     if (x > 8 && x + w > width) x = 8, y += kRow;
-    placed.push_back({cv::Point(x, y), &item});
+    placed.emplace_back(cv::Point(x, y), &item);
     x += w;
   }
   cv::Mat m(items.empty() ? 0 : y + 10, width, CV_8UC3, rgb(255, 255, 255));

@@ -118,7 +118,8 @@ void SequentialLocalizer::hand_over(raster::CacheReader& next) {
   }
   // The new window centred where the old one was.
   const RegionWindow& old = window_;
-  const filter::Pose centre = carry_pose({double(old.width() / 2), double(old.height() / 2), 0}, old, moved);
+  const int centre_u = old.width() / 2, centre_v = old.height() / 2;  // the window's centre cell
+  const filter::Pose centre = carry_pose({static_cast<double>(centre_u), static_cast<double>(centre_v), 0}, old, moved);
   moved.centre_on(moved.x_of(centre.u), moved.y_of(centre.v));
   std::optional<filter::Pose> last = filter_->last_estimate();
   if (last) last = carry_pose(*last, old, moved);
