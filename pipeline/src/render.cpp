@@ -378,9 +378,9 @@ ScaleBar scale_bar_for(int width_px, double metres_per_px) {
 
 std::array<std::uint8_t, 3> error_colour(std::optional<double> error_m) {
   if (!error_m) return {150, 150, 150};
-  if (*error_m <= 1) return {26, 152, 80};
-  if (*error_m <= 3) return {145, 207, 96};
-  if (*error_m <= 5) return {253, 174, 97};
+  if (*error_m < 1) return {26, 152, 80};
+  if (*error_m < 3) return {145, 207, 96};
+  if (*error_m < 5) return {253, 174, 97};
   return {215, 48, 39};
 }
 
@@ -704,20 +704,15 @@ MapFigure route_overview(raster::CacheReader& cache, const Route& route, const s
   }
   decorate(m, cache, map.view);
 
-  std::size_t within5 = 0, judged = 0;
-  for (const auto& p : poses) {
-    if (!p.position_error_m) continue;
-    ++judged;
-    if (*p.position_error_m <= 5) ++within5;
-  }
   std::string title = route.name + ": " + mode + " estimates coloured by position error, ground truth in black";
-  if (judged > 0)
-    title += " (" + fmt(100.0 * static_cast<double>(within5) / static_cast<double>(judged), 1) + " % within 5 m)";
+  if (const Metrics metrics = compute_metrics(poses); metrics.frames > 0) {
+    title += " (R@5m " + fmt(metrics.position_recall[2], 1) + " %)";
+  }
   std::vector<LegendItem> legend{{"ground truth", rgb(0, 0, 0), LegendItem::Shape::line},
-                                 {"error <= 1 m", scalar(error_colour(1.0)), LegendItem::Shape::dot},
-                                 {"<= 3 m", scalar(error_colour(3.0)), LegendItem::Shape::dot},
-                                 {"<= 5 m", scalar(error_colour(5.0)), LegendItem::Shape::dot},
-                                 {"> 5 m", scalar(error_colour(5.1)), LegendItem::Shape::dot}};
+                                 {"error < 1 m", scalar(error_colour(0.0)), LegendItem::Shape::dot},
+                                 {"< 3 m", scalar(error_colour(1.0)), LegendItem::Shape::dot},
+                                 {"< 5 m", scalar(error_colour(3.0)), LegendItem::Shape::dot},
+                                 {">= 5 m", scalar(error_colour(5.0)), LegendItem::Shape::dot}};
   legend.insert(legend.end(), map.layer.legend.begin(), map.layer.legend.end());
   MapFigure figure;
   figure.picture = from_mat(titled(title, m, legend));

@@ -142,6 +142,9 @@ TEST(Render, OverviewDrawsTheMapAndEachEstimateInItsErrorsColourWhereTheyAre) {
   }
   EXPECT_NE(error_colour(0.5), error_colour(2.0));
   EXPECT_NE(error_colour(4.0), error_colour(8.0));
+  // Classes as recall counts them (error < t): an error of exactly 1 or 5 m is in the class above.
+  EXPECT_EQ(error_colour(1.0), error_colour(2.0));
+  EXPECT_EQ(error_colour(5.0), error_colour(8.0));
   const auto forest = osm::find_group("forest"), building = osm::find_group("building");
   ASSERT_TRUE(forest && building);
   const auto f = at(-80, 28), b = at(80, -25);

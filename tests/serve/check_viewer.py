@@ -90,7 +90,7 @@ def check_page(chromium_binary, url, d, label):
     if truth < 20:
         failures.append(f"no ground-truth (blue) pixels on the map ({truth})")
     # The frames coloured by position error (the default with ground truth), in render's classes.
-    classes = {"<= 1 m": (26, 152, 80), "<= 3 m": (145, 207, 96), "<= 5 m": (253, 174, 97), "> 5 m": (215, 48, 39)}
+    classes = {"< 1 m": (26, 152, 80), "< 3 m": (145, 207, 96), "< 5 m": (253, 174, 97), ">= 5 m": (215, 48, 39)}
     by_error = {name: int(((abs(r - c[0]) <= 6) & (abs(g - c[1]) <= 6) & (abs(b - c[2]) <= 6)).sum())
                 for name, c in classes.items()}
     if sum(by_error.values()) < 30:

@@ -58,11 +58,12 @@ function viridis(t) {
 const lineStyle = new Style({ stroke: new Stroke({ color: 'rgba(0,0,0,0.7)', width: 2 }) });
 // The ground truth (track.geojson's "track": "ground_truth" line), dashed blue beside the estimate.
 const truthStyle = new Style({ stroke: new Stroke({ color: 'rgb(30,90,220)', width: 2, lineDash: [6, 4] }) });
-// Position error classes: up to 1 m, 3 m, 5 m, beyond (render.cpp's error_colour).
+// Position error classes: under 1 m, 3 m, 5 m, and 5 m or more, as recall counts them (error < t;
+// render.cpp's error_colour).
 const ERROR_CLASSES = [[1, 'rgb(26,152,80)'], [3, 'rgb(145,207,96)'], [5, 'rgb(253,174,97)'],
                        [Infinity, 'rgb(215,48,39)']];
 function errorColour(e) {
-  return ERROR_CLASSES.find(([limit]) => e <= limit)[1];
+  return ERROR_CLASSES.find(([limit]) => e < limit)[1];
 }
 let colourBy = 'error';  // or 'entropy'
 const pointStyles = new globalThis.Map();

@@ -61,8 +61,9 @@ struct ScaleBar {
 };
 [[nodiscard]] ScaleBar scale_bar_for(int width_px, double metres_per_px);
 
-/// The colour (RGB) of a position error in the route overview, by the recall thresholds: up to
-/// 1 m, 3 m, 5 m, and beyond (and no ground truth: grey).
+/// The colour (RGB) of a position error in the route overview, by the recall thresholds as
+/// compute_metrics counts them (error < t): under 1 m, 3 m, 5 m, and 5 m or more (no ground
+/// truth: grey).
 [[nodiscard]] std::array<std::uint8_t, 3> error_colour(std::optional<double> error_m);
 
 /// One route's overview: the map around it, the ground truth as a black line, and the estimates
