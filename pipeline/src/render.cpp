@@ -317,7 +317,6 @@ cv::Mat titled(const std::string& title, const cv::Mat& body, const std::vector<
 struct RouteMap {
   MapLayer layer;
   MapView view;
-  int width = 0, height = 0;  // region pixels
 };
 RouteMap route_map(raster::CacheReader& cache, const std::vector<cv::Point2d>& points) {
   double u0 = 1e18, v0 = 1e18, u1 = -1e18, v1 = -1e18;
@@ -327,10 +326,10 @@ RouteMap route_map(raster::CacheReader& cache, const std::vector<cv::Point2d>& p
   RouteMap map;
   map.view.u0 = static_cast<std::int64_t>(std::floor(u0 - margin));
   map.view.v0 = static_cast<std::int64_t>(std::floor(v0 - margin));
-  map.width = static_cast<int>(std::ceil(u1 + margin)) - static_cast<int>(map.view.u0);
-  map.height = static_cast<int>(std::ceil(v1 + margin)) - static_cast<int>(map.view.v0);
-  map.view.scale = std::min(2.0, 1400.0 / std::max(map.width, map.height));
-  map.layer = map_layer(cache, map.view.u0, map.view.v0, map.width, map.height, map.view.scale);
+  const int width = static_cast<int>(std::ceil(u1 + margin)) - static_cast<int>(map.view.u0);  // region pixels
+  const int height = static_cast<int>(std::ceil(v1 + margin)) - static_cast<int>(map.view.v0);
+  map.view.scale = std::min(2.0, 1400.0 / std::max(width, height));
+  map.layer = map_layer(cache, map.view.u0, map.view.v0, width, height, map.view.scale);
   return map;
 }
 
@@ -586,11 +585,11 @@ Picture likelihood_figure(raster::CacheReader& cache, const Route& route, const 
     cv::Mat m = map.clone();
     overlay_mass(m, mass);
     m = upscale(m, factor);
+    const MapView view{at_u, at_v, static_cast<double>(factor), 0, 0};
     if (const auto& truth = route.frames[index].truth) {
-      const cv::Point2d p = region_pixel(grid, projection, truth->where);
-      star(m, {(p.x - static_cast<double>(at_u) + 0.5) * factor, (p.y - static_cast<double>(at_v) + 0.5) * factor}, 11);
+      star(m, picture_point(view, region_pixel(grid, projection, truth->where)), 11);
     }
-    decorate(m, cache, MapView{at_u, at_v, static_cast<double>(factor), 0, 0});
+    decorate(m, cache, view);
     cv::Mat framed(m.rows + 30, m.cols, CV_8UC3, rgb(255, 255, 255));
     m.copyTo(framed(cv::Rect(0, 30, m.cols, m.rows)));
     text(framed, title, cv::Point(6, 20), 0.5);
@@ -740,10 +739,11 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
   write_picture(written.back(), likelihood_figure(cache, route, scene, options.frame));
 
   // 2. The route coloured by the normalized entropy of each frame (SeqLoc's run, else any).
-  const std::vector<FramePose>* poses = nullptr;
-  for (const auto& [mode, p] : poses_by_mode) {
-    if (mode == "seqloc" || !poses) poses = &p;
+  const std::pair<std::string, std::vector<FramePose>>* chosen = nullptr;
+  for (const auto& mode_poses : poses_by_mode) {
+    if (mode_poses.first == "seqloc" || !chosen) chosen = &mode_poses;
   }
+  const std::vector<FramePose>* poses = chosen ? &chosen->second : nullptr;
   const auto projection = cache.metadata().projection();
   std::vector<cv::Point2d> truth;  // region pixels
   for (const auto& f : route.frames) {
@@ -756,12 +756,8 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
 
   // 3. The whole route: SeqLoc's estimates (else any mode's) over the map, coloured by error.
   if (poses && poses->size() == route.frames.size()) {
-    std::string mode = "seqloc";
-    for (const auto& [name, p] : poses_by_mode) {
-      if (&p == poses) mode = name;
-    }
     written.push_back(out_dir / "overview.png");
-    write_picture(written.back(), route_overview(cache, route, mode, *poses).picture);
+    write_picture(written.back(), route_overview(cache, route, chosen->first, *poses).picture);
   }
 
   // 4. Position error over time, one line per mode.
