@@ -21,7 +21,6 @@ using raster::RegionGrid;
 
 enum Kind : std::uint8_t { kNode, kLine, kArea };
 
-
 class Writer {
  public:
   template <class T>
