@@ -21,9 +21,6 @@ constexpr int kTilesPerTransaction = 32;
 constexpr const char* kGriddedCoverageSpec = "http://docs.opengeospatial.org/is/17-066r1/17-066r1.html";
 constexpr std::uint16_t kDistanceNull = 65535;
 
-/// A tile's key in sets of (col, row).
-inline std::int64_t tile_key(std::int64_t col, std::int64_t row) { return (col << 32) ^ row; }
-
 /// A double as text that reads back exactly (%.17g).
 std::string format_double(double value);
 /// The time now as an ISO 8601 UTC timestamp.

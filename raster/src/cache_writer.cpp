@@ -47,10 +47,8 @@ CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata 
   db_->exec("PRAGMA journal_mode = WAL");
   db_->exec("PRAGMA synchronous = NORMAL");
   if (resumed_) {
-    detail::Statement s(*db_, "SELECT tile_column, tile_row FROM road_distance");
-    while (s.step()) resumed_tiles_.push_back(detail::tile_key(s.column_int(0), s.column_int(1)));
-    std::sort(resumed_tiles_.begin(), resumed_tiles_.end());
-    stored_ = static_cast<std::int64_t>(resumed_tiles_.size());
+    detail::Statement s(*db_, "SELECT COUNT(*) FROM road_distance");
+    if (s.step()) stored_ = s.column_int(0);
   } else {
     create_schema(metadata_.projection());
   }
@@ -65,8 +63,34 @@ CacheWriter::~CacheWriter() {
   }
 }
 
-bool CacheWriter::has_tile(std::int64_t col, std::int64_t row) const {
-  return std::binary_search(resumed_tiles_.begin(), resumed_tiles_.end(), detail::tile_key(col, row));
+bool CacheWriter::has_tile(std::int64_t col, std::int64_t row) {
+  if (!resumed_) return false;  // a new build has stored only what it rendered, once
+  // One look-up in the tile index, not a list of the stored tiles: a resumed country would hold
+  // one entry per tile for the whole region.
+  if (!find_tile_) {
+    find_tile_ = std::make_unique<detail::Statement>(
+        *db_, "SELECT 1 FROM road_distance WHERE zoom_level = 0 AND tile_column = ? AND tile_row = ?");
+  }
+  find_tile_->bind(1, col).bind(2, row);
+  const bool found = find_tile_->step();
+  find_tile_->reset();
+  return found;
+}
+
+void CacheWriter::discard() {
+  find_tile_.reset();
+  insert_classes_.reset();
+  insert_distance_.reset();
+  insert_ancillary_.reset();
+  if (in_transaction_) {
+    try {
+      db_->exec("ROLLBACK");
+    } catch (const CacheError&) {
+    }
+    in_transaction_ = false;
+  }
+  db_.reset();
+  if (!resumed_) detail::remove_sqlite_files(partial_);
 }
 
 std::int64_t CacheWriter::tiles_owned() const { return metadata_.shard_tile_count(); }
@@ -242,6 +266,9 @@ void CacheWriter::write_roads(const std::vector<RoadLine>& roads) {
   }
   db_->exec("INSERT OR REPLACE INTO seqloc_metadata (key, value) VALUES ('roads_written', 'yes')");
   commit();
+  // Tiles never read the roads back: the page cache they filled is handed back now, rather than
+  // staying allocated (and keeping the heap beneath it resident) while every tile is written.
+  sqlite3_db_release_memory(db_->get());
 }
 
 void CacheWriter::write_tile(const EncodedTile& tile) {
@@ -289,6 +316,7 @@ void CacheWriter::finish() {
     throw CacheError(partial_.string() + ": " + std::to_string(rows) + " tiles stored, but the shard has " +
                      std::to_string(tiles_owned()) + "; the cache is not complete");
   }
+  find_tile_.reset();
   insert_classes_.reset();
   insert_distance_.reset();
   insert_ancillary_.reset();

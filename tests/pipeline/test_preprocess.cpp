@@ -252,7 +252,8 @@ TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
   auto other = options;
   other.overwrite = true;
   other.bbox = osm::GeoBox{20.0, 10.0, 20.01, 10.01};
-  expect_usage_error(other, "does not overlap the data");
+  expect_usage_error(other, "does not overlap the data");  // found after reading: the cache was open
+  EXPECT_FALSE(std::filesystem::exists(options.output.string() + ".partial"));
   other.bbox = osm::GeoBox{0.0, 40.0, 30.0, 55.0};
   expect_usage_error(other, "beyond the 0.1 % that keeps the map metric");
   other.bbox = osm::GeoBox{11.0, 50.0, 10.0, 51.0};
@@ -280,6 +281,15 @@ TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
   EXPECT_THROW(preprocess_region(corrupt), osm::OsmInputError);
   EXPECT_EQ(test::read_file(options.output), before);
   EXPECT_FALSE(std::filesystem::exists(dir / "no"));
+
+  // Cut short after its header: the box is declared, so the cache opens before the data fails;
+  // the error leaves no partial cache behind.
+  const std::string whole = test::read_file(options.input);
+  std::ofstream(dir / "cut.osm.pbf", std::ios::binary) << whole.substr(0, whole.size() * 2 / 3);
+  corrupt.input = dir / "cut.osm.pbf";
+  EXPECT_THROW(preprocess_region(corrupt), osm::OsmInputError);
+  EXPECT_EQ(test::read_file(options.output), before);
+  EXPECT_FALSE(std::filesystem::exists(options.output.string() + ".partial"));
 }
 
 TEST(Preprocess, ReadersKeepReadingWhileACacheIsRebuilt) {

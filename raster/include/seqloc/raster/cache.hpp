@@ -110,8 +110,10 @@ class CacheWriter {
   CacheWriter& operator=(const CacheWriter&) = delete;
 
   [[nodiscard]] bool resumed() const { return resumed_; }
+  /// What the cache records (the grid, the shard), as given; `complete` is false until finish().
+  [[nodiscard]] const CacheMetadata& metadata() const { return metadata_; }
   /// Whether the interrupted build being resumed stored this tile (false for a new build).
-  [[nodiscard]] bool has_tile(std::int64_t col, std::int64_t row) const;
+  [[nodiscard]] bool has_tile(std::int64_t col, std::int64_t row);
   /// Tiles stored so far, the resumed ones included.
   [[nodiscard]] std::int64_t tiles_stored() const { return stored_; }
   /// Tiles this cache's shard covers (all the grid's for an unsharded build).
@@ -124,6 +126,10 @@ class CacheWriter {
   /// Checks that every tile of the shard was stored (CacheError if not), commits,
   /// marks the cache complete and renames it to its final path (replacing an older one).
   void finish();
+  /// Gives the build up (the input failed before any tile was written): closes the cache and
+  /// removes the partial file, unless it is an interrupted build being resumed, which stays as it
+  /// was. The writer must not be used afterwards.
+  void discard();
 
   [[nodiscard]] const std::filesystem::path& partial_path() const { return partial_; }
 
@@ -138,8 +144,7 @@ class CacheWriter {
   CacheMetadata metadata_;
   std::unique_ptr<detail::Database> db_;
   // Prepared once, used for every tile (declared after db_: finalized before it closes).
-  std::unique_ptr<detail::Statement> insert_classes_, insert_distance_, insert_ancillary_;
-  std::vector<std::int64_t> resumed_tiles_;  ///< sorted keys (col << 32 ^ row); empty unless resumed
+  std::unique_ptr<detail::Statement> insert_classes_, insert_distance_, insert_ancillary_, find_tile_;
   std::int64_t stored_ = 0;
   bool resumed_ = false;
   bool in_transaction_ = false;
