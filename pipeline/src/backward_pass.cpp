@@ -23,7 +23,10 @@ void move_window(Filter& filter, RegionWindow& window, const std::array<std::int
 BackwardPass::BackwardPass(raster::CacheReader& cache, const filter::FilterConfig& config)
     : config_(config), window_(cache, config.width, config.height), filter_(config) {}
 
-void BackwardPass::start(const StepRecord& last) {
+void BackwardPass::start(const StepRecord& last) { start(last, window_.cache()); }
+
+void BackwardPass::start(const StepRecord& last, raster::CacheReader& region) {
+  if (&region != &window_.cache()) window_ = RegionWindow(region, window_.width(), window_.height());
   window_.move_to(last.origin_after[0], last.origin_after[1]);
   filter_.reset();
 }

@@ -18,7 +18,6 @@
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/observation.hpp"
 #include "seqloc/pipeline/region_catalog.hpp"
-#include "seqloc/pipeline/sequential_localizer.hpp"
 #include "stopwatch.hpp"
 
 namespace seqloc::pipeline {
@@ -315,8 +314,8 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
 namespace {
 
 // localize_route once the options and the route's crops are checked.
-// `catalog` and `regions` (each frame's region) for a route that crosses regions in a mode that
-// follows it by itself (offline, smooth); null for a route in `cache` alone.
+// `catalog` and `regions` (each frame's region) for a route over a catalog's regions (every mode
+// follows a route that crosses from one into the next); null for a route in `cache` alone.
 RouteResult run_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
                       const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect,
                       const RegionCatalog* catalog = nullptr, const std::vector<std::size_t>* regions = nullptr) {
@@ -359,76 +358,6 @@ namespace {
 // A route stays in a region while its crops are half a belief window inside it.
 double region_margin_m(const LocalizeOptions& options) {
   return std::max(options.filter.width, options.filter.height) * raster::kCellM / 2;
-}
-
-// A route that crosses regions in single, online or seqloc mode (offline and smooth follow one
-// by themselves, through run_route): each frame's crop, estimate and pose in its own region's
-// grid; the sequential filter's belief is handed over at each crossing
-// (SequentialLocalizer::hand_over).
-RouteResult run_crossing(const Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
-                         const LocalizeOptions& options, Mode mode, const std::function<void()>& on_frame,
-                         FrameSource source) {
-  const std::size_t n = route.frames.size();
-  RouteResult result;
-  result.route = route.name;
-  result.mode = mode;
-  FramePrefetcher frames(std::move(source), n, mode == Mode::single);
-  std::vector<FramePose> poses(n);
-  auto pose_in = [&](std::size_t i, const FrameEstimate& e, std::size_t r) {
-    poses[i] = frame_pose(route.frames[i], e, catalog.projection(r));
-    poses[i].region = catalog.name(r);
-  };
-  auto crop_of = [&](std::size_t i) {
-    const std::size_t r = regions[i];
-    return frame_crop(route.frames[i], catalog.cache(r).grid(), catalog.projection(r));
-  };
-  if (mode == Mode::single) {
-    std::vector<std::unique_ptr<LocalizationMode>> per_region(catalog.size());
-    const FrameInspector none;
-    for (std::size_t i = 0; i < n; ++i) {
-      auto& estimator = per_region[regions[i]];
-      if (!estimator) estimator = make_mode(mode, {route, catalog.cache(regions[i]), options, none});
-      pose_in(i, estimator->estimate(i, crop_of(i), frames), regions[i]);
-      if (on_frame) on_frame();
-    }
-  } else {
-    result.lag = options.lag;
-    std::size_t current = regions[0];
-    SequentialLocalizer localizer(catalog.cache(current), options.filter, mode == Mode::online, options.recentre_margin,
-                                  options.lag);
-    auto collect = [&] {
-      for (const auto& [index, e] : localizer.take_final()) pose_in(index, e, current);
-    };
-    for (std::size_t i = 0; i < n; ++i) {
-      if (regions[i] != current) {
-        localizer.finish();
-        collect();
-        localizer.hand_over(catalog.cache(regions[i]));
-        current = regions[i];
-        ++result.region_crossings;
-      }
-      const RouteFrame& f = route.frames[i];
-      std::optional<GridFix> gps;
-      if (f.gps) {
-        const auto g = catalog.projection(current).forward(f.gps->where);
-        gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
-      }
-      const auto frame = frames.get_shared(i);
-      const auto t0 = detail::Clock::now();
-      (void)localizer.step(frame, crop_of(i), f.odometry, gps);
-      result.filter_seconds += detail::seconds_since(t0);
-      frames.release(i);
-      collect();
-      if (on_frame) on_frame();
-    }
-    localizer.finish();
-    collect();
-    result.recentres = localizer.recentres();
-  }
-  result.poses = std::move(poses);
-  result.prepare_seconds = frames.prepare_seconds();
-  result.wait_seconds = frames.wait_seconds();
-  return result;
 }
 
 // The route's legs (runs of frames in one region) as routes of their own, for check_crops.
@@ -474,9 +403,6 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
     regions.push_back(route_regions(route, catalog, region_margin_m(options)));
     check_legs(route, catalog, regions.back(), options);
   }
-  auto crosses = [&](std::size_t r) {
-    return std::any_of(regions[r].begin(), regions[r].end(), [&](std::size_t x) { return x != regions[r].front(); });
-  };
   struct Job {
     std::size_t route;
     Mode mode;
@@ -533,12 +459,8 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
     const auto store = store_for(jobs[j].route);
     const std::size_t r = jobs[j].route;
     const Mode mode = jobs[j].mode;
-    if (crosses(r) && mode != Mode::offline && mode != Mode::smooth) {
-      batch.results[j] = run_crossing(routes[r], catalog, regions[r], job_options, mode, on_frame, store->source());
-    } else {
-      batch.results[j] = run_route(routes[r], catalog.cache(regions[r].front()), job_options, mode, on_frame,
-                                   store->source(), {}, &catalog, &regions[r]);
-    }
+    batch.results[j] = run_route(routes[r], catalog.cache(regions[r].front()), job_options, mode, on_frame,
+                                 store->source(), {}, &catalog, &regions[r]);
     done_with(jobs[j].route);
   });
   return batch;

@@ -80,9 +80,9 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
     Waiting reused = std::move(waiting_.front());
     waiting_.pop_front();
     reused.alpha = filter_->belief();
-    waiting_.push_back({index, last_, std::move(frame), std::move(reused.alpha)});
+    waiting_.push_back({index, &window_.cache(), last_, std::move(frame), std::move(reused.alpha)});
   } else {
-    waiting_.push_back({index, last_, std::move(frame), filter_->belief()});
+    waiting_.push_back({index, &window_.cache(), last_, std::move(frame), filter_->belief()});
   }
   if (waiting_.size() == static_cast<std::size_t>(lag_) + 1) smooth_waiting(0, 1);
   return e;
@@ -91,11 +91,13 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
 // One backward pass from the last waiting frame down to waiting_[from]; the first `to_emit` frames
 // from `from` on get their smoothed estimates.
 void SequentialLocalizer::smooth_waiting(std::size_t from, std::size_t to_emit) {
-  backward_->start(waiting_.back().record);
+  backward_->start(waiting_.back().record, *waiting_.back().region);
   std::vector<std::pair<std::size_t, FrameEstimate>> done;
   for (std::size_t j = waiting_.size(); j-- > from;) {
     if (j < from + to_emit) done.emplace_back(waiting_[j].index, backward_->estimate(waiting_[j].alpha, waiting_[j].record));
-    if (j > from) backward_->step_back(waiting_[j].record, *waiting_[j].frame, waiting_[j - 1].record);
+    if (j > from) {
+      backward_->step_back(waiting_[j].record, *waiting_[j].frame, waiting_[j - 1].record, *waiting_[j - 1].region);
+    }
   }
   final_.insert(final_.end(), done.rbegin(), done.rend());
 }
@@ -109,11 +111,9 @@ void SequentialLocalizer::finish() {
 }
 
 void SequentialLocalizer::hand_over(raster::CacheReader& next) {
-  finish();
   RegionWindow moved(next, config_.width, config_.height);
   if (!filter_) {  // nothing stepped yet: the first step places the window
     window_ = moved;
-    if (lag_ > 0) backward_.emplace(next, config_);
     return;
   }
   // The new window centred where the old one was.
@@ -125,7 +125,6 @@ void SequentialLocalizer::hand_over(raster::CacheReader& next) {
   if (last) last = carry_pose(*last, old, moved);
   filter_->rebase(carry_belief(filter_->belief(), old, moved), last);
   window_ = moved;
-  if (lag_ > 0) backward_.emplace(next, config_);
 }
 
 std::vector<std::pair<std::size_t, FrameEstimate>> SequentialLocalizer::take_final() {

@@ -2,7 +2,8 @@
 // vehicle, driven along a route. online is the same filter with ETU, MGR and PAS off (naive
 // fusion). The filter and its window are SequentialLocalizer (sequential_localizer.cpp), which
 // also smooths with a lag (LocalizeOptions::lag): frame i's pose is then final once frame i + lag
-// has been stepped, or the route has ended.
+// has been stepped, or the route has ended. A route that crosses into another region has its
+// belief handed over at the seam (SequentialLocalizer::hand_over).
 #include <map>
 #include <optional>
 
@@ -47,8 +48,9 @@ class SequentialMode final : public LocalizationMode {
   // The filter's step on frame j (and, with a lag, the backward pass it completes).
   void step(std::size_t j, FramePrefetcher& frames) {
     const RouteFrame& f = context_.route.frames[j];
-    const auto& projection = context_.cache.metadata().projection();
-    const GridCrop crop = frame_crop(f, context_.cache.grid(), projection);
+    if (j > 0 && region_of(j) != region_of(j - 1)) localizer_.hand_over(cache_of(j));
+    const auto& projection = projection_of(j);
+    const GridCrop crop = frame_crop(f, cache_of(j).grid(), projection);
     const auto frame = frames.get_shared(j);
     std::optional<GridFix> gps;
     if (f.gps) {

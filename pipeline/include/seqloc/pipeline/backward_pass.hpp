@@ -35,6 +35,8 @@ class BackwardPass {
 
   /// At frame `last`, with no frames after it: beta uniform, the window where the forward one was.
   void start(const StepRecord& last);
+  /// start() at a frame of `region` (the pass is in the region it was made for, or last carried to).
+  void start(const StepRecord& last, raster::CacheReader& region);
   /// The smoothed estimate of the frame beta stands at, from its forward belief `alpha` (after the
   /// frame's step, in the window of record.origin_after): position and heading of alpha * beta, and the forward
   /// filter's entropy, weights and flag.

@@ -42,8 +42,8 @@ struct RouteContext {
   raster::CacheReader& cache;  ///< the first frame's region
   const LocalizeOptions& options;
   const FrameInspector& inspect;  ///< may be empty
-  /// For a crossing route (the modes that take one: offline, smooth): the catalog and each frame's
-  /// region in it. Null when every frame is in `cache`.
+  /// For a route over a catalog's regions: the catalog and each frame's region in it (every mode
+  /// follows a route from one region into the next). Null when every frame is in `cache`.
   const RegionCatalog* catalog = nullptr;
   const std::vector<std::size_t>* regions = nullptr;
 };

@@ -49,16 +49,16 @@ class SequentialLocalizer {
   /// The estimates that became final and were not taken yet, in frame order, with their frame's
   /// index (0: the first frame stepped). Without a lag, each frame's filtered estimate as soon as
   /// it is stepped; with a lag L, after frame t, frame t - L's smoothed estimate given the frames
-  /// up to t.
+  /// up to t. Each estimate is in the grid of the region its frame was stepped in.
   [[nodiscard]] std::vector<std::pair<std::size_t, FrameEstimate>> take_final();
   /// The route ends: the frames still waiting for their lag get their smoothed estimates given
   /// every frame (take_final hands them out).
   void finish();
-  /// The route crosses into another region: the frames waiting for their lag are finished (the
-  /// lag's smoothing does not cross the seam), and the belief is resampled onto a window of the
-  /// same size in `next`'s grid centred where the old one was (nearest cell; headings turned by
-  /// the difference of the two CRSs' meridian convergence, interpolated between bins). The next
-  /// step's crop and estimate are in `next`'s grid.
+  /// The route crosses into another region: the belief is resampled onto a window of the same
+  /// size in `next`'s grid centred where the old one was (nearest cell; headings turned by the
+  /// difference of the two CRSs' meridian convergence, interpolated between bins). The next step's
+  /// crop and estimate are in `next`'s grid. Frames waiting for their lag keep waiting: the
+  /// backward filter carries its belief back across the seam into their region.
   void hand_over(raster::CacheReader& next);
 
   [[nodiscard]] const filter::FilterConfig& config() const { return config_; }
@@ -74,6 +74,7 @@ class SequentialLocalizer {
  private:
   struct Waiting {
     std::size_t index;
+    raster::CacheReader* region;  ///< the region the frame was stepped in
     StepRecord record;
     std::shared_ptr<const filter::PreparedFrame> frame;
     filter::BeliefVolume alpha;
