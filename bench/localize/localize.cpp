@@ -25,6 +25,7 @@
 #include "seqloc/pipeline/npy.hpp"
 #include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/pipeline/route.hpp"
+#include "seqloc/pipeline/sequential_localizer.hpp"
 #include "seqloc/pipeline/simulate.hpp"
 
 namespace fs = std::filesystem;
@@ -95,6 +96,42 @@ std::string observation_routes(const fs::path& work) {
   std::snprintf(field, sizeof field, R"(, "obs_all_s": %.1f, "obs_alone_sum_s": %.1f, "obs_all_over_alone": %.3f, )"
                 R"("obs_all_peak_mb": %.0f)", all.first, sum, all.first / sum, all.second);
   return json + field;
+}
+
+// What a route pays once at each seam between two regions: SequentialLocalizer::hand_over of the
+// default window (256 x 256 x 256) between the west and the east half of `pre`'s region, after one
+// step near the seam; the mean of 10 hand-overs, back and forth, in ms.
+double hand_over_ms(const seqloc::pipeline::PreprocessOptions& pre, const seqloc::pipeline::LocalizeOptions& options,
+                    const fs::path& work) {
+  const seqloc::osm::GeoBox box = *pre.bbox;
+  const double seam_lon = (box.min_lon + box.max_lon) / 2;
+  auto half = [&](const char* name, double lon0, double lon1) {
+    seqloc::pipeline::PreprocessOptions o = pre;
+    o.output = work / name;
+    o.bbox = seqloc::osm::GeoBox{lon0, box.min_lat, lon1, box.max_lat};
+    seqloc::pipeline::preprocess_region(o);
+    return o.output;
+  };
+  seqloc::raster::CacheReader west(half("west.gpkg", box.min_lon, seam_lon), 256);
+  seqloc::raster::CacheReader east(half("east.gpkg", seam_lon, box.max_lon), 256);
+  const int h = 128, w = 128, n = 256;
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0, 2);
+  std::vector<float> values(static_cast<std::size_t>(h) * w * n);
+  for (auto& v : values) v = noise(rng);
+  seqloc::filter::FrameVolume volume;
+  volume.data = values.data();
+  volume.height = h;
+  volume.width = w;
+  volume.bins = n;
+  const auto frame = seqloc::filter::prepare_frame(volume, options.filter.headings, options.filter.threads);
+  seqloc::pipeline::SequentialLocalizer localizer(west, options.filter, /*online=*/false, options.recentre_margin);
+  const seqloc::osm::GridPoint near_seam = west.metadata().projection().forward({47.5, seam_lon - 0.0005});
+  (void)localizer.step(frame, {near_seam.x_m, near_seam.y_m, 0}, {0, 0, 0}, std::nullopt);
+  constexpr int kTimes = 10;
+  const auto t0 = Clock::now();
+  for (int i = 0; i < kTimes; ++i) localizer.hand_over(i % 2 == 0 ? east : west);
+  return 1000.0 * std::chrono::duration<double>(Clock::now() - t0).count() / kTimes;
 }
 
 }  // namespace
@@ -176,14 +213,18 @@ int main() {
               "read+prepare %.1f s (every volume read twice); peak memory %.0f MB (target < 2048)\n",
               smooth_s, frames / smooth_s, smooth_s / run_s, smooth.filter_seconds, smooth.prepare_seconds,
               smooth_peak_mb);
+  const double hand_over = hand_over_ms(pre, options, work);
+  std::printf("hand-over at a seam between two regions: %.0f ms once per crossing (%.1f frames' filter time)\n",
+              hand_over, hand_over / (1000.0 * result.filter_seconds / frames));
   const std::string observations = observation_routes(work);
   std::printf("{\"benchmark\": \"localize\", \"frames\": %d, \"frames_per_s\": %.2f, \"total_s\": %.2f, "
               "\"prepare_s\": %.2f, \"filter_s\": %.2f, \"wait_s\": %.2f, \"write_s\": %.3f, \"peak_mb\": %.0f, "
               "\"no_self_calibration_frames_per_s\": %.2f, \"no_self_calibration_filter_s\": %.2f, "
-              "\"smooth_frames_per_s\": %.2f, \"smooth_time_ratio_to_seqloc\": %.2f, \"smooth_peak_mb\": %.0f%s}\n",
+              "\"smooth_frames_per_s\": %.2f, \"smooth_time_ratio_to_seqloc\": %.2f, \"smooth_peak_mb\": %.0f, "
+              "\"hand_over_ms\": %.1f%s}\n",
               frames, frames / total, total, result.prepare_seconds, result.filter_seconds, result.wait_seconds,
               write_s, peak_mb, frames / plain_s, without.filter_seconds, frames / smooth_s, smooth_s / run_s,
-              smooth_peak_mb, observations.c_str());
+              smooth_peak_mb, hand_over, observations.c_str());
   fs::remove_all(work);
   return 0;
 }
