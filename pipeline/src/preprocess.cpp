@@ -390,12 +390,21 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   // of them, where they would pin the heap reading leaves (hundreds of MB long for a large region,
   // nearly all of it free): glibc cannot shorten a heap below a live block, and rendering's
   // allocations would spread over it (at 10x andorra rendering's peak was 72 MB this way against
-  // 58 MB at 1x; 59 MB with the cache opened first).
+  // 58 MB at 1x; 59 MB with the cache opened first). Not over the partial file of another build:
+  // opening removes it, and it must outlive an input that then fails to read.
   const osm::OsmHeaderInfo header = osm::read_osm_header(options.input);
   const std::optional<osm::GeoBox> declared = declared_box(options, header);
   if (declared) (void)checked_scale_error(*declared);  // before reading anything
+  std::optional<raster::CacheMetadata> declared_metadata;
   std::optional<raster::CacheWriter> writer;
-  if (declared) writer.emplace(options.output, metadata_for(options, *declared, header.replication_timestamp));
+  if (declared) {
+    declared_metadata = metadata_for(options, *declared, header.replication_timestamp);
+    std::error_code none;
+    if (!std::filesystem::exists(options.output.string() + ".partial", none) ||
+        raster::CacheWriter::would_resume(options.output, *declared_metadata)) {
+      writer.emplace(options.output, *declared_metadata);
+    }
+  }
   std::pair<osm::GeoBox, osm::FeatureSet> region;
   try {
     region = read_region(options, declared);
@@ -420,7 +429,10 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   report.areas = features.areas.size();
   report.ways_missing_nodes = features.ways_missing_nodes;
   report.multipolygon_open_chains = features.multipolygon_open_chains;
-  if (!writer) writer.emplace(options.output, metadata_for(options, bbox, header.replication_timestamp));
+  if (!writer) {
+    writer.emplace(options.output,
+                   declared_metadata ? *declared_metadata : metadata_for(options, bbox, header.replication_timestamp));
+  }
   const raster::CacheMetadata& metadata = writer->metadata();
 
   const auto blocks = spill_features(std::move(features), projection, grid, options, *writer, report);

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <optional>
 #include <utility>
 
 #include "seqloc/raster/png_codec.hpp"
@@ -15,6 +16,31 @@
 
 namespace seqloc::raster {
 
+namespace {
+
+// The metadata of the partial cache at `partial` when it is an interrupted build of `metadata`
+// (the same build and shard, not complete); nothing when it is missing, unreadable or foreign.
+std::optional<CacheMetadata> interrupted_build(const std::filesystem::path& partial, const CacheMetadata& metadata) {
+  std::error_code ec;
+  if (!std::filesystem::exists(partial, ec)) return std::nullopt;
+  try {
+    const detail::Database db(partial.string(), SQLITE_OPEN_READWRITE);
+    CacheMetadata previous = detail::metadata_from_db(db);
+    if (previous.same_build(metadata) && previous.shard_index == metadata.shard_index &&
+        previous.shard_count == metadata.shard_count && !previous.complete) {
+      return previous;
+    }
+  } catch (const CacheError&) {
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+bool CacheWriter::would_resume(const std::filesystem::path& final_path, const CacheMetadata& metadata) {
+  return interrupted_build(final_path.string() + ".partial", metadata).has_value();
+}
+
 CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata)
     : final_(final_path), partial_(final_path.string() + ".partial"), metadata_(std::move(metadata)) {
   const auto dir = final_.has_parent_path() ? final_.parent_path() : std::filesystem::path(".");
@@ -26,20 +52,12 @@ CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata 
   if (metadata_.software_version.empty()) metadata_.software_version = SEQLOC_VERSION;
   if (metadata_.created_utc.empty()) metadata_.created_utc = detail::now_utc();
 
-  if (std::filesystem::exists(partial_, ec)) {
-    try {
-      auto db = std::make_unique<detail::Database>(partial_.string(), SQLITE_OPEN_READWRITE);
-      const CacheMetadata previous = detail::metadata_from_db(*db);
-      if (previous.same_build(metadata_) && previous.shard_index == metadata_.shard_index &&
-          previous.shard_count == metadata_.shard_count && !previous.complete) {
-        db_ = std::move(db);
-        resumed_ = true;
-        metadata_.created_utc = previous.created_utc;
-      }
-    } catch (const CacheError&) {
-      // An unreadable or foreign partial file is simply rebuilt.
-    }
-    if (!resumed_) detail::remove_sqlite_files(partial_);
+  if (const auto previous = interrupted_build(partial_, metadata_)) {
+    db_ = std::make_unique<detail::Database>(partial_.string(), SQLITE_OPEN_READWRITE);
+    resumed_ = true;
+    metadata_.created_utc = previous->created_utc;
+  } else if (std::filesystem::exists(partial_, ec)) {
+    detail::remove_sqlite_files(partial_);  // an unreadable or foreign partial file is simply rebuilt
   }
   if (!db_) {
     db_ = std::make_unique<detail::Database>(partial_.string(), SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
@@ -82,14 +100,8 @@ void CacheWriter::discard() {
   insert_classes_.reset();
   insert_distance_.reset();
   insert_ancillary_.reset();
-  if (in_transaction_) {
-    try {
-      db_->exec("ROLLBACK");
-    } catch (const CacheError&) {
-    }
-    in_transaction_ = false;
-  }
-  db_.reset();
+  in_transaction_ = false;
+  db_.reset();  // closing rolls back what was not committed
   if (!resumed_) detail::remove_sqlite_files(partial_);
 }
 
@@ -266,8 +278,9 @@ void CacheWriter::write_roads(const std::vector<RoadLine>& roads) {
   }
   db_->exec("INSERT OR REPLACE INTO seqloc_metadata (key, value) VALUES ('roads_written', 'yes')");
   commit();
-  // Tiles never read the roads back: the page cache they filled is handed back now, rather than
-  // staying allocated (and keeping the heap beneath it resident) while every tile is written.
+  // Tiles never read the roads back: the page cache they filled is handed back now rather than
+  // staying allocated while every tile is written (allocated on top of what reading left, it would
+  // keep glibc from shortening the heap beneath it).
   sqlite3_db_release_memory(db_->get());
 }
 

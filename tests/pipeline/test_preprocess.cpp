@@ -290,6 +290,12 @@ TEST(Preprocess, BadRequestsFailBeforeTouchingAnything) {
   EXPECT_THROW(preprocess_region(corrupt), osm::OsmInputError);
   EXPECT_EQ(test::read_file(options.output), before);
   EXPECT_FALSE(std::filesystem::exists(options.output.string() + ".partial"));
+  // A partial file another build left (here one nothing can read) outlives the failed run: a
+  // successful one would have replaced it, a failed one must not have cost it.
+  const std::string partial = options.output.string() + ".partial";
+  std::ofstream(partial, std::ios::binary) << "an interrupted build of another input";
+  EXPECT_THROW(preprocess_region(corrupt), osm::OsmInputError);
+  EXPECT_EQ(test::read_file(partial), "an interrupted build of another input");
 }
 
 TEST(Preprocess, ReadersKeepReadingWhileACacheIsRebuilt) {

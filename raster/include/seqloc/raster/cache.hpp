@@ -102,9 +102,13 @@ struct EncodedTile {
 
 class CacheWriter {
  public:
-  /// Opens `final_path`.partial, resuming it when it holds the same build, else starting anew.
-  /// Throws CacheIoError when the output directory is missing or not writable.
+  /// Opens `final_path`.partial, resuming it when it holds the same build, else starting anew
+  /// (removing a partial file of another build). Throws CacheIoError when the output directory is
+  /// missing or not writable.
   CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata);
+  /// Whether a writer of `metadata` would resume the partial file there (false when there is none
+  /// or it holds another build, which the writer would remove).
+  [[nodiscard]] static bool would_resume(const std::filesystem::path& final_path, const CacheMetadata& metadata);
   ~CacheWriter();
   CacheWriter(const CacheWriter&) = delete;
   CacheWriter& operator=(const CacheWriter&) = delete;
