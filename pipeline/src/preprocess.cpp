@@ -399,9 +399,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   std::optional<raster::CacheWriter> writer;
   if (declared) {
     declared_metadata = metadata_for(options, *declared, header.replication_timestamp);
-    std::error_code none;
-    if (!std::filesystem::exists(options.output.string() + ".partial", none) ||
-        raster::CacheWriter::would_resume(options.output, *declared_metadata)) {
+    if (!raster::CacheWriter::would_remove_partial(options.output, *declared_metadata)) {
       writer.emplace(options.output, *declared_metadata);
     }
   }

@@ -37,8 +37,10 @@ std::optional<CacheMetadata> interrupted_build(const std::filesystem::path& part
 
 }  // namespace
 
-bool CacheWriter::would_resume(const std::filesystem::path& final_path, const CacheMetadata& metadata) {
-  return interrupted_build(final_path.string() + ".partial", metadata).has_value();
+bool CacheWriter::would_remove_partial(const std::filesystem::path& final_path, const CacheMetadata& metadata) {
+  const std::filesystem::path partial = final_path.string() + ".partial";
+  std::error_code ec;
+  return std::filesystem::exists(partial, ec) && !interrupted_build(partial, metadata);
 }
 
 CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata)

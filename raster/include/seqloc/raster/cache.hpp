@@ -106,9 +106,10 @@ class CacheWriter {
   /// (removing a partial file of another build). Throws CacheIoError when the output directory is
   /// missing or not writable.
   CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata);
-  /// Whether a writer of `metadata` would resume the partial file there (false when there is none
-  /// or it holds another build, which the writer would remove).
-  [[nodiscard]] static bool would_resume(const std::filesystem::path& final_path, const CacheMetadata& metadata);
+  /// Whether a writer of `metadata` would remove the partial file there: one of another build, or
+  /// one nothing can read (false when there is none, or it holds this build, which is resumed).
+  [[nodiscard]] static bool would_remove_partial(const std::filesystem::path& final_path,
+                                                 const CacheMetadata& metadata);
   ~CacheWriter();
   CacheWriter(const CacheWriter&) = delete;
   CacheWriter& operator=(const CacheWriter&) = delete;
