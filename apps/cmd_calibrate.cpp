@@ -4,9 +4,11 @@
 #include <vector>
 
 #include "command.hpp"
+#include "seqloc/core/error.hpp"
+#include "seqloc/core/files.hpp"
+#include "seqloc/io/route.hpp"
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
-#include "seqloc/pipeline/errors.hpp"
-#include "seqloc/pipeline/outputs.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -21,6 +23,7 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
         ->required();
     app.add_option("-o,--output", out_, "The calibration file to write (JSON)")->required();
     add_matcher_options(app, options_.matcher);
+    add_route_limit_options(app, limits_);
     app.add_option("--threads", options_.matcher.threads, "Threads")->default_val(default_threads());
     add_overwrite_option(app, "calibration file");
     add_progress_option(app);
@@ -32,14 +35,17 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
 
   void check() override {
     options_.filter.threads = options_.matcher.threads;
-    validate_options([&] { options_.validate(); });
+    validate_options([&] {
+      options_.validate();
+      limits_.validate();
+    });
     check_overwrite(out_);
   }
 
   int run() override {
     raster::CacheReader cache(cache_path_, 256);
-    const auto routes = read_checked_routes(route_dirs_, cache, options_);
-    const std::size_t frames = frame_count(routes);
+    const auto routes = read_checked_routes(route_dirs_, limits_, cache, options_);
+    const std::size_t frames = io::frame_count(routes);
     ProgressBar bar(show_progress(), "frames");
     std::size_t done = 0;
     const auto fit = pipeline::fit_backbone_calibration(
@@ -51,7 +57,7 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
                 b.calibration.blur_bins, b.calibration.floor);
     std::printf("mean NLL of the true cell (nats): fit %.3f, as given %.3f, uniform %.3f\n", b.nll, fit.as_given_nll,
                 b.uniform_nll);
-    pipeline::write_file(out_, pipeline::calibration_json(fit));
+    core::write_file(out_, pipeline::calibration_json(fit));
     std::printf("wrote %s\n", out_.c_str());
     return kExitOk;
   }
@@ -60,6 +66,7 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
   fs::path cache_path_, out_;
   std::vector<fs::path> route_dirs_;
   pipeline::LocalizeOptions options_;
+  io::RouteLimits limits_;
 };
 
 }  // namespace

@@ -4,7 +4,7 @@
 #include <string>
 
 #include "command.hpp"
-#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/core/error.hpp"
 #include "seqloc/serve/geotiff.hpp"
 
 namespace seqloc::app {
@@ -30,18 +30,19 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
     const std::string ext = out_.extension().string();
     vrt_ = ext == ".vrt";
     if (vrt_) {
-      if (!bbox_.empty()) throw pipeline::UsageError("--bbox: a VRT covers the whole cache; export a .tif for a box");
+      if (!bbox_.empty()) throw seqloc::UsageError("--bbox: a VRT covers the whole cache; export a .tif for a box");
       return;
     }
-    if (ext != ".tif" && ext != ".tiff") throw pipeline::UsageError(out_.string() + ": the output must end in .tif or .vrt");
+    if (ext != ".tif" && ext != ".tiff")
+      throw seqloc::UsageError(out_.string() + ": the output must end in .tif or .vrt");
     const auto layer = serve::parse_layer(layer_);
-    if (!layer) throw pipeline::UsageError("--layer '" + layer_ + "': classes, road_distance or road_prior");
+    if (!layer) throw seqloc::UsageError("--layer '" + layer_ + "': classes, road_distance or road_prior");
     options_.layer = *layer;
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
     try {
       options_.validate();  // --prior-sigma, --bbox
     } catch (const serve::ExportError& e) {
-      throw pipeline::UsageError(e.what());
+      throw seqloc::UsageError(e.what());
     }
   }
 

@@ -12,11 +12,12 @@
 #include <vector>
 
 #include "command.hpp"
+#include "seqloc/core/error.hpp"
+#include "seqloc/core/files.hpp"
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/region_catalog.hpp"
-#include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -54,9 +55,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
         ->default_val(default_threads());
     app.add_option("--odometry-noise", noise_, "SIGMA_T_PCT,SIGMA_R_DEG_PER_M: perturb the odometry (KITTI style)");
     app.add_option("--seed", seed_, "Seed of the odometry noise")->default_val(1);
-    app.add_option("--max-step", limits_.max_step_m, "Largest plausible odometry step, m")->capture_default_str();
-    app.add_option("--max-speed", limits_.max_speed_mps, "Largest plausible speed, m/s")->capture_default_str();
-    app.add_option("--max-yaw", limits_.max_yaw_deg, "Largest plausible yaw per step, degrees")->capture_default_str();
+    add_route_limit_options(app, limits_);
     app.add_option("--max-crop-jump", options_.max_crop_jump_m,
                    "Largest distance between consecutive crop centres, m (0: the window's size)")
         ->capture_default_str();
@@ -71,7 +70,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
                    "A calibration file from seqloc calibrate: its temperature, blur and floor applied to every volume "
                    "(instead of --volume-temperature)");
     add_matcher_options(app, options_.matcher);
-    app.add_option("--shard", shard_,
+    app.add_option("--shard", shard_text_,
                    "Localize only shard I of N (I/N, 0-based: every N-th route in sorted order from the I-th), e.g. "
                    "--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT; merge the outputs with `seqloc evaluate`");
     app.add_option("--frame-memory", options_.frame_memory_mb,
@@ -98,41 +97,38 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     std::error_code ec;
     const auto parent = out_.has_parent_path() ? out_.parent_path() : fs::path(".");
     if (!fs::is_directory(parent, ec)) {
-      throw pipeline::UsageError(out_.string() + ": output directory '" + parent.string() + "' does not exist");
+      throw seqloc::UsageError(out_.string() + ": output directory '" + parent.string() + "' does not exist");
     }
     if (!noise_.empty()) {
       const auto v = parse_numbers<double>(noise_, ',', 2);
       if (v) noise_t_ = (*v)[0], noise_r_ = (*v)[1];
       if (!v || noise_t_ < 0 || noise_r_ < 0) {
-        throw pipeline::UsageError("--odometry-noise '" + noise_ + "': expected SIGMA_T_PCT,SIGMA_R_DEG_PER_M >= 0");
+        throw seqloc::UsageError("--odometry-noise '" + noise_ + "': expected SIGMA_T_PCT,SIGMA_R_DEG_PER_M >= 0");
       }
     }
     if (mode_ == "all") {
-      modes_ = {pipeline::Mode::single, pipeline::Mode::offline, pipeline::Mode::online, pipeline::Mode::seqloc,
-                pipeline::Mode::smooth};
+      modes_ = {io::Mode::single, io::Mode::offline, io::Mode::online, io::Mode::seqloc, io::Mode::smooth};
     } else if (mode_ == "smooth") {
-      modes_ = {pipeline::Mode::smooth};
+      modes_ = {io::Mode::smooth};
     } else if (mode_ == "single") {
-      modes_ = {pipeline::Mode::single};
+      modes_ = {io::Mode::single};
     } else if (mode_ == "offline") {
-      modes_ = {pipeline::Mode::offline};
+      modes_ = {io::Mode::offline};
     } else if (mode_ == "online") {
-      modes_ = {pipeline::Mode::online};
+      modes_ = {io::Mode::online};
     } else {
-      modes_ = {pipeline::Mode::seqloc};
+      modes_ = {io::Mode::seqloc};
     }
-    if (!shard_.empty()) {
-      const auto v = parse_numbers<int>(shard_, '/', 2);
+    if (!shard_text_.empty()) {
+      const auto v = parse_numbers<int>(shard_text_, '/', 2);
       if (!v || (*v)[1] < 1 || (*v)[0] < 0 || (*v)[0] >= (*v)[1]) {
-        throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N with 0 <= I < N, e.g. 0/4");
+        throw seqloc::UsageError("--shard '" + shard_text_ + "': expected I/N with 0 <= I < N, e.g. 0/4");
       }
-      shard_index_ = (*v)[0];
-      shard_count_ = (*v)[1];
+      shard_ = {(*v)[0], (*v)[1]};
     }
   }
 
   int run() override {
-    std::error_code ec;
     // Everything is read and checked before any work, the other shards' routes too (a shard's
     // route names and errors do not depend on which shard runs); localize_routes checks the
     // crops of this shard's routes before its first job.
@@ -141,69 +137,39 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     region_paths.insert(region_paths.end(), extra_regions_.begin(), extra_regions_.end());
     const pipeline::RegionCatalog catalog(region_paths, 256);
     if (catalog.size() > 1) log("%zu regions", catalog.size());
-    std::vector<fs::path> dirs = route_dirs_;
-    std::sort(dirs.begin(), dirs.end());
-    std::vector<pipeline::Route> routes;
-    std::set<std::string> names;
-    long long total_frames = 0, route_frames = 0;  // frames times modes, and frames
-    for (std::size_t k = 0; k < dirs.size(); ++k) {
-      auto route = pipeline::read_route(dirs[k], limits_);
-      if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
-      names.insert(route.name);
-      if (static_cast<int>(k % static_cast<std::size_t>(shard_count_)) != shard_index_) {
-        pipeline::check_route(route, catalog, options_);
-        continue;
-      }
-      if (noise_t_ > 0 || noise_r_ > 0) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);
-      total_frames += static_cast<long long>(route.frames.size() * modes_.size());
-      route_frames += static_cast<long long>(route.frames.size());
-      routes.push_back(std::move(route));
+    auto routes = io::read_routes(route_dirs_, limits_, shard_,
+                                  [&](const io::Route& other) { pipeline::check_route(other, catalog, options_); });
+    if (noise_t_ > 0 || noise_r_ > 0) {
+      for (auto& route : routes) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);
     }
-    if (shard_count_ > 1) {
-      log("shard %d/%d: %zu of %zu routes", shard_index_, shard_count_, routes.size(), dirs.size());
+    const auto route_frames = static_cast<long long>(io::frame_count(routes));
+    const long long total_frames = route_frames * static_cast<long long>(modes_.size());  // frames times modes
+    if (shard_.count > 1) {
+      log("shard %d/%d: %zu of %zu routes", shard_.index, shard_.count, routes.size(), route_dirs_.size());
     }
     log("localize %zu routes, %lld frames in all", routes.size(), total_frames);
 
-    const fs::path temp = pipeline::staging_directory(out_);
-    fs::create_directories(temp);
-    try {
-      ProgressBar bar(show_progress(), "frames");
-      std::atomic<long long> done{0};
-      std::mutex progress_mutex;
-      const auto batch = pipeline::localize_routes(routes, catalog, options_, modes_, [&] {
-        const long long d = ++done;
-        std::lock_guard lock(progress_mutex);
-        bar.update(d, total_frames);
-      });
-      bar.done();
-      log("%zu volumes scored or read for %lld frames and %zu modes; %zu spilled to a temporary file; at most %.0f MB "
-          "per route",
-          batch.frames_made, route_frames, modes_.size(), batch.frames_spilled,
-          static_cast<double>(batch.peak_frame_memory_bytes) / (1 << 20));
-      std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
-      std::vector<std::string> route_names;
-      route_names.reserve(routes.size());
-      for (const auto& route : routes) route_names.push_back(route.name);
-      for (const auto& result : batch.results) {
-        const fs::path dir = temp / result.route / pipeline::mode_name(result.mode);
-        fs::create_directories(dir);
-        pipeline::write_route_outputs(dir, result);
-        auto& all = by_mode[pipeline::mode_name(result.mode)];
-        all.insert(all.end(), result.poses.begin(), result.poses.end());
-      }
-      pipeline::MetricsByMode metrics;
-      for (const auto& [mode, poses] : by_mode) {
-        metrics[mode] = pipeline::compute_metrics(poses);
-      }
-      pipeline::write_summary(temp / "summary.json", metrics, route_names);
-      // Into place: the old folder (if any) is replaced only once the new one is complete.
-      pipeline::commit_directory(temp, out_);
-      std::fputs(pipeline::format_table(metrics).c_str(), stdout);
-      std::printf("wrote %s (%zu routes)\n", out_.c_str(), routes.size());
-    } catch (...) {
-      fs::remove_all(temp, ec);
-      throw;
-    }
+    io::RunFolderWriter out(out_);  // staged beside out_, in place only when complete
+    ProgressBar bar(show_progress(), "frames");
+    std::atomic<long long> done{0};
+    std::mutex progress_mutex;
+    const auto batch = pipeline::localize_routes(routes, catalog, options_, modes_, [&] {
+      const long long d = ++done;
+      std::lock_guard lock(progress_mutex);
+      bar.update(d, total_frames);
+    });
+    bar.done();
+    log("%zu volumes scored or read for %lld frames and %zu modes; %zu spilled to a temporary file; at most %.0f MB "
+        "per route",
+        batch.frames_made, route_frames, modes_.size(), batch.frames_spilled,
+        static_cast<double>(batch.peak_frame_memory_bytes) / (1 << 20));
+    for (const auto& result : batch.results) out.add(result);
+    std::vector<std::string> route_names;
+    route_names.reserve(routes.size());
+    for (const auto& route : routes) route_names.push_back(route.name);
+    const io::MetricsByMode metrics = out.commit(route_names);
+    std::fputs(io::format_table(metrics).c_str(), stdout);
+    std::printf("wrote %s (%zu routes)\n", out_.c_str(), routes.size());
     return kExitOk;
   }
 
@@ -217,66 +183,17 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
   pipeline::LocalizeOptions options_;
   int window_ = filter::FilterConfig{}.width;
   std::string noise_;
-  std::string shard_;
+  std::string shard_text_;
   std::uint64_t seed_ = 1;
-  pipeline::RouteLimits limits_;
+  io::RouteLimits limits_;
   // What check() made of the options.
-  std::vector<pipeline::Mode> modes_;
-  int shard_index_ = 0, shard_count_ = 1;
+  std::vector<io::Mode> modes_;
+  io::Shard shard_;
   double noise_t_ = 0, noise_r_ = 0;
-};
-
-class EvaluateCommand : public Command {
- public:
-  void setup(CLI::App& app) override {
-    app.add_option("outputs", outs_,
-                   "Folders of seqloc localize output: a whole output folder, a route's folder or a mode's folder "
-                   "(any mix; a file reached twice counts once)")
-        ->required();
-  }
-
-  int run() override {
-    // OUT/<route>/<mode>/poses.csv: a poses.csv at most two levels under each folder given; its
-    // mode is the name of the folder holding it.
-    std::map<fs::path, std::string> files;  // canonical path -> mode
-    for (const auto& out : outs_) {
-      std::error_code ec;
-      if (!fs::is_directory(out, ec)) throw pipeline::DataError(out.string() + ": not an output folder");
-      const auto add = [&files](const fs::path& poses) {
-        std::error_code e;
-        if (fs::is_regular_file(poses, e)) files.emplace(fs::canonical(poses), poses.parent_path().filename().string());
-      };
-      add(out / "poses.csv");
-      for (const auto& child : fs::directory_iterator(out)) {
-        if (!child.is_directory()) continue;
-        add(child.path() / "poses.csv");
-        for (const auto& grandchild : fs::directory_iterator(child.path())) {
-          if (grandchild.is_directory()) add(grandchild.path() / "poses.csv");
-        }
-      }
-    }
-    if (files.empty()) throw pipeline::DataError("no poses.csv found in or under the given folders");
-    std::map<std::string, std::vector<pipeline::FramePose>> by_mode;
-    for (const auto& [path, mode] : files) {
-      auto read = pipeline::read_poses_csv(path);
-      auto& all = by_mode[mode];
-      all.insert(all.end(), read.begin(), read.end());
-    }
-    pipeline::MetricsByMode metrics;
-    for (const auto& [mode, poses] : by_mode) {
-      metrics[mode] = pipeline::compute_metrics(poses);
-    }
-    std::fputs(pipeline::format_table(metrics).c_str(), stdout);
-    return kExitOk;
-  }
-
- private:
-  std::vector<fs::path> outs_;
 };
 
 }  // namespace
 
 std::unique_ptr<Command> make_localize_command() { return std::make_unique<LocalizeCommand>(); }
-std::unique_ptr<Command> make_evaluate_command() { return std::make_unique<EvaluateCommand>(); }
 
 }  // namespace seqloc::app

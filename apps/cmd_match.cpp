@@ -4,9 +4,11 @@
 #include <vector>
 
 #include "command.hpp"
-#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/core/error.hpp"
+#include "seqloc/core/files.hpp"
+#include "seqloc/io/route.hpp"
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/match_routes.hpp"
-#include "seqloc/pipeline/outputs.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -21,6 +23,7 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
         ->required();
     app.add_option("-o,--output", out_, "Output folder of volume routes (written whole, or not at all)")->required();
     add_matcher_options(app, options_.matcher);
+    add_route_limit_options(app, limits_);
     app.add_option("--threads", options_.matcher.threads, "Matcher threads")->default_val(default_threads());
     add_overwrite_option(app, "output folder");
     add_progress_option(app);
@@ -31,15 +34,18 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
   }
 
   void check() override {
-    validate_options([&] { options_.validate(); });
+    validate_options([&] {
+      options_.validate();
+      limits_.validate();
+    });
     check_overwrite(out_);
   }
 
   int run() override {
     raster::CacheReader cache(cache_path_, 256);
-    const auto routes = read_checked_routes(route_dirs_, cache, options_);
-    const std::size_t frames = frame_count(routes);
-    const fs::path staged = pipeline::staging_directory(out_);
+    const auto routes = read_checked_routes(route_dirs_, limits_, cache, options_);
+    const std::size_t frames = io::frame_count(routes);
+    const fs::path staged = core::staging_directory(out_);
     ProgressBar bar(show_progress(), "frames");
     std::size_t done = 0;
     for (const auto& route : routes) {
@@ -47,7 +53,7 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
                                    [&] { bar.update(static_cast<long long>(++done), static_cast<long long>(frames)); });
     }
     bar.done();
-    pipeline::commit_directory(staged, out_);
+    core::commit_directory(staged, out_);
     std::printf("wrote %s (%zu routes, %zu frames)\n", out_.c_str(), routes.size(), frames);
     return kExitOk;
   }
@@ -56,6 +62,7 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
   fs::path cache_path_, out_;
   std::vector<fs::path> route_dirs_;
   pipeline::LocalizeOptions options_;
+  io::RouteLimits limits_;
 };
 
 }  // namespace

@@ -11,14 +11,15 @@
 #include <nlohmann/json.hpp>
 
 #include "command.hpp"
-#include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/core/files.hpp"
+#include "seqloc/ingest/preprocess.hpp"
+#include "seqloc/io/run_folder.hpp"
 
 namespace seqloc::app {
 
 osm::GeoBox parse_bbox(const std::string& text) {
   const auto v = parse_numbers<double>(text, ',', 4);
-  if (!v) throw pipeline::UsageError("--bbox '" + text + "': expected lon0,lat0,lon1,lat1 (decimal degrees)");
+  if (!v) throw seqloc::UsageError("--bbox '" + text + "': expected lon0,lat0,lon1,lat1 (decimal degrees)");
   return {(*v)[0], (*v)[1], (*v)[2], (*v)[3]};
 }
 
@@ -33,12 +34,12 @@ class PreprocessCommand : public Command, public WithProgress {
     app.add_option("--bbox", bbox_, "Region lon0,lat0,lon1,lat1 (default: the file header's bbox, else the data's)");
     app.add_option("--max-distance", options_.max_distance_m, "Road-distance clamp in metres")
         ->capture_default_str()
-        ->check(CLI::Range(0.01, pipeline::kMaxClampM));
+        ->check(CLI::Range(0.01, ingest::kMaxClampM));
     app.add_option("--corridor", options_.corridor_m,
                    "Store only tiles with a cell nearer than this many metres to a road (0: every tile; at most "
                    "--max-distance); readers take a left-out tile as background and the clamp")
         ->capture_default_str()
-        ->check(CLI::Range(0.0, pipeline::kMaxClampM));
+        ->check(CLI::Range(0.0, ingest::kMaxClampM));
     app.add_option("--threads", options_.threads, "Worker threads (0: all cores)")->capture_default_str()->check(
         CLI::NonNegativeNumber);
     app.add_option("--shard", shard_,
@@ -56,7 +57,7 @@ class PreprocessCommand : public Command, public WithProgress {
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
     if (!shard_.empty()) {
       const auto v = parse_numbers<int>(shard_, '/', 2);
-      if (!v) throw pipeline::UsageError("--shard '" + shard_ + "': expected I/N, e.g. 0/4");
+      if (!v) throw seqloc::UsageError("--shard '" + shard_ + "': expected I/N, e.g. 0/4");
       options_.shard_index = (*v)[0];
       options_.shard_count = (*v)[1];
     }
@@ -76,8 +77,8 @@ class PreprocessCommand : public Command, public WithProgress {
     ::mallopt(M_ARENA_MAX, 1);
     log("preprocess %s -> %s", options_.input.c_str(), options_.output.c_str());
     ProgressBar bar(show_progress(), "tiles");
-    const auto report = pipeline::preprocess_region(
-        options_, [&bar](const pipeline::PreprocessProgress& p) { bar.update(p.tiles_done, p.tiles_total); });
+    const auto report = ingest::preprocess_region(
+        options_, [&bar](const ingest::PreprocessProgress& p) { bar.update(p.tiles_done, p.tiles_total); });
     bar.done();
     std::ostringstream out;
     out.precision(3);
@@ -104,7 +105,7 @@ class PreprocessCommand : public Command, public WithProgress {
     return kExitOk;
   }
 
-  void write_report(const pipeline::PreprocessReport& r) const {
+  void write_report(const ingest::PreprocessReport& r) const {
     nlohmann::ordered_json j;
     j["output"] = options_.output.string();
     j["tiles_wide"] = r.tiles_wide;
@@ -132,11 +133,11 @@ class PreprocessCommand : public Command, public WithProgress {
     j["features"] = {{"nodes", r.nodes}, {"lines", r.lines}, {"areas", r.areas}, {"roads", r.roads}};
     j["ways_missing_nodes"] = r.ways_missing_nodes;
     j["multipolygon_open_chains"] = r.multipolygon_open_chains;
-    pipeline::write_file(report_path_, j.dump(2) + "\n");
+    core::write_file(report_path_, j.dump(2) + "\n");
   }
 
  private:
-  pipeline::PreprocessOptions options_;
+  ingest::PreprocessOptions options_;
   std::string bbox_;
   std::string shard_;
   std::string report_path_;

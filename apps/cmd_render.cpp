@@ -2,9 +2,9 @@
 #include <filesystem>
 
 #include "command.hpp"
-#include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/errors.hpp"
-#include "seqloc/pipeline/render.hpp"
+#include "seqloc/core/error.hpp"
+#include "seqloc/io/run_folder.hpp"
+#include "seqloc/render/render.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -40,55 +40,57 @@ class RenderCommand : public Command {
     options_.localize.matcher.threads = options_.localize.filter.threads;
     validate_options([&] { options_.localize.validate(); });
     if (frame_ == "collapse" && localized_.empty()) {
-      throw pipeline::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
+      throw seqloc::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
     }
     if (frame_ != "collapse" && frame_ != "sharpest") options_.frame = parse_frame(frame_);
   }
 
   int run() override {
     raster::CacheReader cache(cache_path_, 256);
-    const pipeline::Route route = pipeline::read_route(route_dir_);
-    std::vector<std::pair<std::string, std::vector<pipeline::FramePose>>> poses;
+    const io::Route route = io::read_route(route_dir_);
+    std::vector<std::pair<std::string, std::vector<io::FramePose>>> poses;
     if (!localized_.empty()) {
-      const fs::path dir = localized_ / route.name;
-      std::error_code ec;
-      if (!fs::is_directory(dir, ec)) {
-        throw pipeline::UsageError(dir.string() + ": no localize results for route '" + route.name + "' there");
+      const io::RunFolder run(localized_);
+      if (!run.has_route(route.name)) {
+        throw seqloc::UsageError((localized_ / route.name).string() + ": no localize results for route '" + route.name +
+                                 "' there");
       }
-      for (const char* mode : {"single", "offline", "online", "seqloc"}) {
-        if (fs::exists(dir / mode / "poses.csv")) poses.emplace_back(mode, pipeline::read_poses_csv(dir / mode / "poses.csv"));
-      }
-      options_.beliefs_dir = dir / "seqloc";  // used when localize kept the beliefs (--beliefs)
+      // Every mode the run has (smooth's too), in the recall table's order.
+      for (auto& [mode, mode_poses] : run.route_poses(route.name))
+        poses.emplace_back(io::mode_name(mode), std::move(mode_poses));
+      options_.beliefs_dir =
+          run.mode_dir(route.name, io::Mode::seqloc);  // used when localize kept the beliefs (--beliefs)
     } else {
       // Both modes side by side on the route's shared frames, as seqloc localize runs them.
-      auto batch = pipeline::localize_routes({route}, cache, options_.localize, {pipeline::Mode::single, pipeline::Mode::seqloc});
-      for (auto& result : batch.results) poses.emplace_back(pipeline::mode_name(result.mode), std::move(result.poses));
+      auto batch = pipeline::localize_routes({route}, cache, options_.localize, {io::Mode::single, io::Mode::seqloc});
+      for (auto& result : batch.results) poses.emplace_back(io::mode_name(result.mode), std::move(result.poses));
     }
     if (frame_ == "collapse") {
-      if (!fs::exists(options_.beliefs_dir / "beliefs.npy")) {
-        throw pipeline::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
+      if (!io::RunFolder(localized_).has_beliefs(route.name, io::Mode::seqloc)) {
+        throw seqloc::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
       }
-      std::span<const pipeline::FramePose> seqloc;
+      std::span<const io::FramePose> seqloc;
       for (const auto& [mode, p] : poses) {
         if (mode == "seqloc") seqloc = p;
       }
-      options_.frame = pipeline::collapse_frame(options_.beliefs_dir, route.frames.size(), seqloc);
+      options_.frame = render::collapse_frame(options_.beliefs_dir, route.frames.size(), seqloc);
     } else if (frame_ == "sharpest") {
       options_.frame = sharpest_frame(poses);
     }
-    for (const auto& file : pipeline::render_route(cache, route, poses, options_, out_)) std::printf("wrote %s\n", file.c_str());
+    for (const auto& file : render::render_route(cache, route, poses, options_, out_))
+      std::printf("wrote %s\n", file.c_str());
     return kExitOk;
   }
 
  private:
   static std::size_t parse_frame(const std::string& text) {
     const auto v = parse_numbers<std::size_t>(text, ',', 1);
-    if (!v) throw pipeline::UsageError("--frame '" + text + "': expected a frame index, 'collapse' or 'sharpest'");
+    if (!v) throw seqloc::UsageError("--frame '" + text + "': expected a frame index, 'collapse' or 'sharpest'");
     return (*v)[0];
   }
 
   // The frame (after the first) whose own likelihood is sharpest, from any mode's poses.
-  static std::size_t sharpest_frame(const std::vector<std::pair<std::string, std::vector<pipeline::FramePose>>>& poses) {
+  static std::size_t sharpest_frame(const std::vector<std::pair<std::string, std::vector<io::FramePose>>>& poses) {
     if (poses.empty() || poses.front().second.size() < 2) return 0;
     const auto& p = poses.front().second;
     std::size_t best = 1;
@@ -100,7 +102,7 @@ class RenderCommand : public Command {
 
   fs::path cache_path_, route_dir_, out_, localized_;
   std::string frame_;
-  pipeline::RenderOptions options_;
+  render::RenderOptions options_;
   int window_ = filter::FilterConfig{}.width;
 };
 

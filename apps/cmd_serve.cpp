@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "command.hpp"
-#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/core/error.hpp"
 #include "seqloc/pipeline/region_catalog.hpp"
 #include "seqloc/serve/server.hpp"
 #include "seqloc/serve/service.hpp"
@@ -53,7 +53,7 @@ class ServeCommand : public Command {
       service_.validate();  // --max-crop-m, --prior-sigma, ...
       server_.validate();
     } catch (const serve::ServiceError& e) {
-      throw pipeline::UsageError(e.what());
+      throw seqloc::UsageError(e.what());
     }
   }
 

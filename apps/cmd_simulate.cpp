@@ -2,8 +2,8 @@
 #include <filesystem>
 
 #include "command.hpp"
-#include "seqloc/pipeline/errors.hpp"
-#include "seqloc/pipeline/simulate.hpp"
+#include "seqloc/core/error.hpp"
+#include "seqloc/sim/simulate.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -54,7 +54,7 @@ class SimulateCommand : public Command, public WithOverwrite, public WithProgres
   int run() override {
     raster::CacheReader cache(cache_path_, 256);
     ProgressBar bar(show_progress(), "routes");
-    pipeline::simulate_routes(cache, options_, out_, [&](int done, int total) { bar.update(done, total); });
+    sim::simulate_routes(cache, options_, out_, [&](int done, int total) { bar.update(done, total); });
     bar.done();
     std::printf("wrote %s (%d routes of %d frames)\n", out_.c_str(), options_.routes, options_.frames);
     return kExitOk;
@@ -62,7 +62,7 @@ class SimulateCommand : public Command, public WithOverwrite, public WithProgres
 
  private:
   fs::path cache_path_, out_;
-  pipeline::SimulateOptions options_;
+  sim::SimulateOptions options_;
   bool clean_ = false;
 };
 

@@ -20,17 +20,22 @@
 
 #include <CLI/CLI.hpp>
 
+#include "seqloc/core/error.hpp"
 #include "seqloc/filter/config.hpp"
 #include "seqloc/osm/features.hpp"
-#include "seqloc/pipeline/errors.hpp"
 
 namespace seqloc::raster {
 class CacheReader;
 }  // namespace seqloc::raster
-namespace seqloc::pipeline {
-struct MatcherConfig;
-struct LocalizeOptions;
+namespace seqloc::io {
 struct Route;
+struct RouteLimits;
+}  // namespace seqloc::io
+namespace seqloc::matcher {
+struct MatcherConfig;
+}  // namespace seqloc::matcher
+namespace seqloc::pipeline {
+struct LocalizeOptions;
 }  // namespace seqloc::pipeline
 
 namespace seqloc::app {
@@ -85,7 +90,7 @@ class Command {
   /// Declares the subcommand's options on `app`.
   virtual void setup(CLI::App& app) = 0;
   /// Validates the parsed options (their values, and whether the output may be written); throws
-  /// pipeline::UsageError naming the option. Reads no input, writes nothing.
+  /// seqloc::UsageError naming the option. Reads no input, writes nothing.
   virtual void check() {}
 
   const GlobalOptions* global_ = nullptr;
@@ -98,15 +103,17 @@ class Command {
 void add_filter_options(CLI::App& app, filter::FilterConfig& config, std::initializer_list<std::string_view> skip);
 
 /// The built-in matcher's options (--matcher-*), for the commands that score observations.
-void add_matcher_options(CLI::App& app, pipeline::MatcherConfig& matcher);
+void add_matcher_options(CLI::App& app, matcher::MatcherConfig& matcher);
 
-/// The routes of `dirs`, read and checked (their crops against the region) before any work, in
-/// sorted order; a name that two folders share gets "-K" (K its 1-based place) on the second.
-/// Throws DataError naming the file and line.
-[[nodiscard]] std::vector<pipeline::Route> read_checked_routes(std::vector<std::filesystem::path> dirs,
-                                                               raster::CacheReader& cache,
-                                                               const pipeline::LocalizeOptions& options);
-[[nodiscard]] std::size_t frame_count(const std::vector<pipeline::Route>& routes);
+/// --max-step, --max-speed and --max-yaw: the odometry's plausibility limits (io::RouteLimits),
+/// the same for every command that reads routes.
+void add_route_limit_options(CLI::App& app, io::RouteLimits& limits);
+
+/// The routes of `dirs`, read with `limits` (io::read_routes) and checked (their crops against the
+/// region) before any work. Throws DataError naming the file and line.
+[[nodiscard]] std::vector<io::Route> read_checked_routes(const std::vector<std::filesystem::path>& dirs,
+                                                         const io::RouteLimits& limits, raster::CacheReader& cache,
+                                                         const pipeline::LocalizeOptions& options);
 
 /// Runs `validate` (the checks of option values): whatever it throws is a usage error (exit 2),
 /// the options being wrong, not the data.
@@ -115,7 +122,7 @@ void validate_options(Validate&& validate) {
   try {
     std::forward<Validate>(validate)();
   } catch (const std::exception& e) {
-    throw pipeline::UsageError(e.what());
+    throw seqloc::UsageError(e.what());
   }
 }
 

@@ -6,7 +6,7 @@
 #include <variant>
 
 #include "command.hpp"
-#include "seqloc/pipeline/matcher.hpp"
+#include "seqloc/matcher/matcher.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -62,7 +62,7 @@ void add_filter_options(CLI::App& app, filter::FilterConfig& config, std::initia
       "--no-self-calibrate, whatever those options say");
 }
 
-void add_matcher_options(CLI::App& app, pipeline::MatcherConfig& m) {
+void add_matcher_options(CLI::App& app, matcher::MatcherConfig& m) {
   app.add_option("--matcher-size", m.size, "Built-in matcher (observation routes): volume side in cells")
       ->capture_default_str();
   app.add_option("--matcher-temperature", m.temperature, "Built-in matcher: the log-likelihood is divided by this")

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "command.hpp"
-#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/core/error.hpp"
 
 namespace seqloc::app {
 
@@ -21,7 +21,7 @@ bool WithProgress::show_progress() const {
 void WithOverwrite::check_overwrite(const std::filesystem::path& out) const {
   std::error_code ec;
   if (std::filesystem::exists(out, ec) && !overwrite_) {
-    throw pipeline::UsageError(out.string() + ": already exists; pass --overwrite to replace it");
+    throw seqloc::UsageError(out.string() + ": already exists; pass --overwrite to replace it");
   }
 }
 
@@ -51,7 +51,6 @@ void ProgressBar::done() {
 
 int main(int argc, char** argv) {
   namespace app = seqloc::app;
-  namespace pipeline = seqloc::pipeline;
   CLI::App cli{"seqloc: localize vehicles against OpenStreetMap with sequences of pose likelihoods.\n"
                "Map data (c) OpenStreetMap contributors, ODbL 1.0."};
   cli.name("seqloc");
@@ -96,11 +95,10 @@ int main(int argc, char** argv) {
       if (sub->parsed()) return command->run();
     }
     return app::kExitUsage;
-  } catch (const pipeline::UsageError& e) {
-    std::fprintf(stderr, "seqloc: error: %s\n", e.what());
-    return app::kExitUsage;
   } catch (const std::exception& e) {
+    // One line naming what is wrong; the exit code from the error's category: 2 for a usage
+    // error, 1 for bad data, I/O and anything else.
     std::fprintf(stderr, "seqloc: error: %s\n", e.what());
-    return app::kExitFailure;
+    return seqloc::category_of(e) == seqloc::ErrorCategory::usage ? app::kExitUsage : app::kExitFailure;
   }
 }

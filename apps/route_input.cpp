@@ -1,32 +1,21 @@
-#include <algorithm>
-#include <set>
-#include <string>
-
 #include "command.hpp"
+#include "seqloc/io/route.hpp"
 #include "seqloc/pipeline/localize.hpp"
 
 namespace seqloc::app {
 
-std::vector<pipeline::Route> read_checked_routes(std::vector<std::filesystem::path> dirs, raster::CacheReader& cache,
-                                                 const pipeline::LocalizeOptions& options) {
-  std::sort(dirs.begin(), dirs.end());
-  std::vector<pipeline::Route> routes;
-  std::set<std::string> names;
-  for (std::size_t k = 0; k < dirs.size(); ++k) {
-    auto route = pipeline::read_route(dirs[k]);
-    // Two folders of one name (from different parents) keep apart in the output.
-    if (!names.insert(route.name).second) route.name += "-" + std::to_string(k + 1);
-    names.insert(route.name);
-    pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options);
-    routes.push_back(std::move(route));
-  }
-  return routes;
+void add_route_limit_options(CLI::App& app, io::RouteLimits& limits) {
+  app.add_option("--max-step", limits.max_step_m, "Largest plausible odometry step, m")->capture_default_str();
+  app.add_option("--max-speed", limits.max_speed_mps, "Largest plausible speed, m/s")->capture_default_str();
+  app.add_option("--max-yaw", limits.max_yaw_deg, "Largest plausible yaw per step, degrees")->capture_default_str();
 }
 
-std::size_t frame_count(const std::vector<pipeline::Route>& routes) {
-  std::size_t n = 0;
-  for (const auto& r : routes) n += r.frames.size();
-  return n;
+std::vector<io::Route> read_checked_routes(const std::vector<std::filesystem::path>& dirs,
+                                           const io::RouteLimits& limits, raster::CacheReader& cache,
+                                           const pipeline::LocalizeOptions& options) {
+  auto routes = io::read_routes(dirs, limits);
+  for (const auto& route : routes) pipeline::check_crops(route, cache.grid(), cache.metadata().projection(), options);
+  return routes;
 }
 
 }  // namespace seqloc::app

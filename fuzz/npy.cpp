@@ -4,12 +4,12 @@
 #include <cstring>
 
 #include "fuzz_support.hpp"
-#include "seqloc/pipeline/npy.hpp"
+#include "seqloc/io/npy.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const seqloc::fuzz::MemoryFile file(data, size);
   try {
-    const seqloc::pipeline::NpyVolume volume(file.path());
+    const seqloc::io::NpyVolume volume(file.path());
     const std::size_t cells = static_cast<std::size_t>(volume.height()) * static_cast<std::size_t>(volume.width()) *
                               static_cast<std::size_t>(volume.bins());
     const std::size_t bytes = cells * (volume.type() == seqloc::filter::VolumeType::float32 ? 4 : 2);
@@ -18,7 +18,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (std::size_t i = 0; i < bytes; ++i) sum += p[i];
     volatile unsigned sink = sum;
     (void)sink;
-  } catch (const seqloc::pipeline::DataError&) {
+  } catch (const seqloc::DataError&) {
   }
   return 0;
 }

@@ -3,18 +3,18 @@
 #include <cstdint>
 
 #include "fuzz_support.hpp"
-#include "seqloc/pipeline/npy.hpp"
-#include "seqloc/pipeline/observation.hpp"
+#include "seqloc/io/npy.hpp"
+#include "seqloc/io/observation.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const seqloc::fuzz::MemoryFile file(data, size);
   try {
-    const auto observation = seqloc::pipeline::read_observation(file.path());
-    if (observation.size % 2 != 1 || observation.size > seqloc::pipeline::kMaxObservationSize ||
+    const auto observation = seqloc::io::read_observation(file.path());
+    if (observation.size % 2 != 1 || observation.size > seqloc::io::kMaxObservationSize ||
         observation.classes.size() != observation.cells() * 3 || observation.visible.size() != observation.cells()) {
       std::abort();  // an accepted observation keeps its documented invariants
     }
-  } catch (const seqloc::pipeline::DataError&) {
+  } catch (const seqloc::DataError&) {
   }
   return 0;
 }

@@ -8,7 +8,7 @@
 #include <string>
 
 #include "fuzz_support.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/serve/service.hpp"
 
 namespace {
@@ -21,11 +21,11 @@ std::unique_ptr<seqloc::serve::Service> service;
 
 extern "C" int LLVMFuzzerInitialize(int* /*argc*/, char*** /*argv*/) {
   scratch = std::make_unique<seqloc::fuzz::ScratchDir>("serve");
-  seqloc::pipeline::PreprocessOptions options;
+  seqloc::ingest::PreprocessOptions options;
   options.input = SEQLOC_SAMPLE_PBF;
   options.output = scratch->path() / "valley.gpkg";
   options.threads = 1;
-  (void)seqloc::pipeline::preprocess_region(options);
+  (void)seqloc::ingest::preprocess_region(options);
   seqloc::serve::ServiceOptions service_options;
   service_options.response_cache_bytes = 4u << 20;  // evictions happen during a run too
   service = std::make_unique<seqloc::serve::Service>(std::vector{options.output}, service_options);

@@ -6,7 +6,7 @@
 #include <string>
 
 #include "fuzz_support.hpp"
-#include "seqloc/pipeline/route.hpp"
+#include "seqloc/io/route.hpp"
 
 namespace {
 
@@ -35,9 +35,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   write(dir / "route.json", json);
   write(dir / "frames.csv", csv);
   try {
-    const auto route = seqloc::pipeline::read_route(dir);
+    const auto route = seqloc::io::read_route(dir);
     if (route.frames.empty()) std::abort();  // read_route promises at least one frame
-  } catch (const seqloc::pipeline::DataError&) {
+  } catch (const seqloc::DataError&) {
   }
   return 0;
 }

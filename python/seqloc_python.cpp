@@ -18,6 +18,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "seqloc/core/error.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
@@ -29,6 +30,7 @@
 
 namespace py = pybind11;
 namespace filter = seqloc::filter;
+namespace io = seqloc::io;
 namespace pipeline = seqloc::pipeline;
 namespace raster = seqloc::raster;
 
@@ -323,13 +325,7 @@ class PyLocalizer {
     options_.filter = config_from(config);
     options_.volume_temperature = volume_temperature;
     options_.recentre_margin = recentre_margin;
-    if (calibration) {
-      try {
-        pipeline::apply_calibration_file(*calibration, options_);
-      } catch (const pipeline::DataError& e) {
-        throw py::value_error(e.what());
-      }
-    }
+    if (calibration) pipeline::apply_calibration_file(*calibration, options_);
     options_.validate();
     localizer_ = std::make_unique<pipeline::SequentialLocalizer>(*cache_, options_.filter, mode == "online",
                                                                  recentre_margin, lag);
@@ -342,7 +338,7 @@ class PyLocalizer {
     const filter::FrameVolume view = volume_view(volume_in, probabilities, cell_m, holder);
     const auto odometry = three_numbers(odometry_in, "odometry", "(forward_m, left_m, yaw_deg)");
     // The frame as a route row would hold it: its crop, lat/lon or region metres.
-    pipeline::RouteFrame f;
+    io::RouteFrame f;
     f.frame = std::to_string(frames_);
     f.timestamp_s = static_cast<double>(frames_);
     const PointArgument centre =
@@ -405,9 +401,9 @@ class PyLocalizer {
   }
 
   py::dict pose_dict(long index, const pipeline::FrameEstimate& e) const {
-    pipeline::RouteFrame f;
+    io::RouteFrame f;
     f.frame = std::to_string(index);
-    const pipeline::FramePose pose = pipeline::frame_pose(f, e, cache_->metadata().projection());
+    const io::FramePose pose = pipeline::frame_pose(f, e, cache_->metadata().projection());
     py::dict d;
     d["frame"] = index;
     d["lat"] = pose.lat_deg;
@@ -429,14 +425,73 @@ class PyLocalizer {
   long frames_ = 0;
 };
 
+// seqloc's errors as Python exceptions, by category, in this one place: seqloc.Error is the base;
+// seqloc.UsageError and seqloc.DataError are ValueErrors, seqloc.IOError an OSError,
+// seqloc.InternalError a RuntimeError. The classes of the earlier module stay, under them:
+// seqloc.CacheError (an OSError), seqloc.FilterError (a DataError) and seqloc.RequestError (a
+// UsageError, for a crop that cannot be placed).
+void register_errors(py::module_& m) {
+  // Each class lives as long as the module (released: never decremented after the interpreter ends).
+  const auto make = [&m](const char* name, py::handle bases, const char* doc) {
+    py::object type = py::reinterpret_steal<py::object>(
+        PyErr_NewExceptionWithDoc((std::string("seqloc.") + name).c_str(), doc, bases.ptr(), nullptr));
+    if (!type) throw py::error_already_set();
+    m.attr(name) = type;
+    return type;
+  };
+  static const py::handle error = make("Error", PyExc_Exception, "Base of every error seqloc raises.").release();
+  static const py::handle usage = make("UsageError", py::make_tuple(error, py::handle(PyExc_ValueError)),
+                                       "A request that cannot be carried out as given.")
+                                      .release();
+  static const py::handle data =
+      make("DataError", py::make_tuple(error, py::handle(PyExc_ValueError)), "Input data that cannot be used.")
+          .release();
+  static const py::handle io = make("IOError", py::make_tuple(error, py::handle(PyExc_OSError)),
+                                    "A file that cannot be opened, read or written.")
+                                   .release();
+  static const py::handle internal = make("InternalError", py::make_tuple(error, py::handle(PyExc_RuntimeError)),
+                                          "A broken invariant of seqloc itself.")
+                                         .release();
+  static const py::handle cache =
+      make("CacheError", py::make_tuple(error, py::handle(PyExc_OSError)), "A region cache that cannot be read.")
+          .release();
+  static const py::handle filter_error = make("FilterError", data, "A frame volume the filter cannot use.").release();
+  static const py::handle request = make("RequestError", usage, "A crop that cannot be placed as asked.").release();
+  py::register_exception_translator([](std::exception_ptr p) {
+    if (!p) return;
+    try {
+      std::rethrow_exception(p);
+    } catch (const raster::CacheError& e) {
+      PyErr_SetString(cache.ptr(), e.what());
+    } catch (const raster::CropError& e) {
+      PyErr_SetString(request.ptr(), e.what());
+    } catch (const filter::FilterError& e) {
+      PyErr_SetString(e.category() == seqloc::ErrorCategory::usage ? usage.ptr() : filter_error.ptr(), e.what());
+    } catch (const seqloc::Error& e) {
+      switch (e.category()) {
+        case seqloc::ErrorCategory::usage:
+          PyErr_SetString(usage.ptr(), e.what());
+          break;
+        case seqloc::ErrorCategory::data:
+          PyErr_SetString(data.ptr(), e.what());
+          break;
+        case seqloc::ErrorCategory::io:
+          PyErr_SetString(io.ptr(), e.what());
+          break;
+        case seqloc::ErrorCategory::internal:
+          PyErr_SetString(internal.ptr(), e.what());
+          break;
+      }
+    }
+  });
+}
+
 }  // namespace
 
 PYBIND11_MODULE(seqloc, m) {
   m.doc() = "seqloc: region caches (map crops, road distance and road prior) and the SeqLoc filter";
   m.attr("__version__") = SEQLOC_VERSION;
-  py::register_exception<raster::CacheError>(m, "CacheError", PyExc_OSError);
-  py::register_exception<filter::FilterError>(m, "FilterError", PyExc_ValueError);
-  py::register_exception<raster::CropError>(m, "RequestError", PyExc_ValueError);
+  register_errors(m);
 
   py::class_<PyCache>(m, "Cache", "A region cache (GeoPackage) opened read-only")
       .def(py::init<const std::string&, std::size_t>(), py::arg("path"), py::arg("lru_tiles") = 64)

@@ -15,8 +15,8 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/matcher/calibration.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
-#include "seqloc/pipeline/calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 
 namespace pl = seqloc::pipeline;
@@ -42,11 +42,11 @@ double log_tempered_at(const seqloc::filter::PreparedFrame& frame, std::size_t t
 }
 
 // truth: the true cell's index in the filter's [bin][v][u] layout.
-TemperedFrame temper(std::vector<float> scores, double temperature, const pl::VolumeCalibration& calibration,
-                     int size, int bins, std::size_t truth) {
+TemperedFrame temper(std::vector<float> scores, double temperature,
+                     const seqloc::matcher::VolumeCalibration& calibration, int size, int bins, std::size_t truth) {
   namespace sf = seqloc::filter;
   for (float& s : scores) s = static_cast<float>(s / temperature);
-  pl::calibrate_volume(scores, size, size, bins, calibration, 2);
+  seqloc::matcher::calibrate_volume(scores, size, size, bins, calibration, 2);
   // The frame as the filter's intake prepares it: its entropy is what ETU reads.
   const sf::PreparedFrame frame = sf::prepare_frame(
       sf::FrameVolume{scores.data(), sf::VolumeType::float32, sf::VolumeValues::log_prob, size, size, bins, 0.5}, bins, 2);
@@ -133,18 +133,18 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  const pl::MatcherConfig defaults;
-  pl::MatcherConfig raw = defaults;
+  const seqloc::matcher::MatcherConfig defaults;
+  seqloc::matcher::MatcherConfig raw = defaults;
   raw.temperature = 1;  // the fit scales the raw scores itself
   raw.calibration = {};
   raw.threads = 2;
-  const pl::BevMatcher matcher(raw);
-  pl::CalibrationFit fit;
+  const seqloc::matcher::BevMatcher matcher(raw);
+  seqloc::matcher::CalibrationFit fit;
   auto grid = fit.grid();
   // The current defaults must be on the grid to be compared.
   if (std::find(grid.temperatures.begin(), grid.temperatures.end(), defaults.temperature) == grid.temperatures.end()) {
     grid.temperatures.push_back(defaults.temperature);
-    fit = pl::CalibrationFit(grid);
+    fit = seqloc::matcher::CalibrationFit(grid);
   }
   const int size = raw.size, bins = raw.headings;
   std::size_t frames = 0;
@@ -153,7 +153,7 @@ int main(int argc, char** argv) {
     seqloc::raster::CacheReader cache(cache_path);
     const auto projection = cache.metadata().projection();
     for (const auto& dir : routes) {
-      const auto route = pl::read_route(dir);
+      const auto route = seqloc::io::read_route(dir);
       for (const auto& f : route.frames) {
         if (!f.truth || !f.truth->heading_deg || f.observation.empty()) continue;
         const auto scores = pl::match_frame(f, cache, matcher);

@@ -19,14 +19,14 @@
 #include <thread>
 #include <vector>
 
+#include "seqloc/ingest/preprocess.hpp"
+#include "seqloc/io/npy.hpp"
+#include "seqloc/io/route.hpp"
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
-#include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/npy.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
-#include "seqloc/pipeline/route.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
-#include "seqloc/pipeline/simulate.hpp"
+#include "seqloc/sim/simulate.hpp"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -48,23 +48,23 @@ void reset_peak() { std::ofstream("/proc/self/clear_refs") << "5"; }
 // Each mode alone and all four together on observation routes: frames/s and peak memory.
 std::string observation_routes(const fs::path& work) {
   namespace pl = seqloc::pipeline;
-  pl::PreprocessOptions pre;
+  seqloc::ingest::PreprocessOptions pre;
   pre.input = fs::path(SEQLOC_SOURCE_DIR) / "samples/rural-valley.osm.pbf";
   pre.output = work / "sample.gpkg";
-  pl::preprocess_region(pre);
+  seqloc::ingest::preprocess_region(pre);
   seqloc::raster::CacheReader cache(pre.output, 256);
-  pl::SimulateOptions sim;
+  seqloc::sim::SimulateOptions sim;
   sim.routes = 2;
   sim.frames = 20;
   sim.seed = 11;
-  pl::simulate_routes(cache, sim, work / "routes");
-  std::vector<pl::Route> routes;
-  for (const char* name : {"route_000", "route_001"}) routes.push_back(pl::read_route(work / "routes" / name));
+  seqloc::sim::simulate_routes(cache, sim, work / "routes");
+  std::vector<seqloc::io::Route> routes;
+  for (const char* name : {"route_000", "route_001"}) routes.push_back(seqloc::io::read_route(work / "routes" / name));
   pl::LocalizeOptions options;
   options.filter.width = options.filter.height = 192;
   options.filter.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const double frames = 2 * 20;
-  auto run = [&](const std::vector<pl::Mode>& modes, const char* name) {
+  auto run = [&](const std::vector<seqloc::io::Mode>& modes, const char* name) {
     reset_peak();
     const auto t0 = Clock::now();
     const auto batch = pl::localize_routes(routes, cache, options, modes);
@@ -79,11 +79,13 @@ std::string observation_routes(const fs::path& work) {
               options.filter.threads);
   std::map<std::string, std::pair<double, double>> alone;
   double sum = 0;
-  for (const auto mode : {pl::Mode::single, pl::Mode::offline, pl::Mode::online, pl::Mode::seqloc}) {
-    alone[pl::mode_name(mode)] = run({mode}, pl::mode_name(mode));
-    sum += alone[pl::mode_name(mode)].first;
+  for (const auto mode :
+       {seqloc::io::Mode::single, seqloc::io::Mode::offline, seqloc::io::Mode::online, seqloc::io::Mode::seqloc}) {
+    alone[seqloc::io::mode_name(mode)] = run({mode}, seqloc::io::mode_name(mode));
+    sum += alone[seqloc::io::mode_name(mode)].first;
   }
-  const auto all = run({pl::Mode::single, pl::Mode::offline, pl::Mode::online, pl::Mode::seqloc}, "all");
+  const auto all = run(
+      {seqloc::io::Mode::single, seqloc::io::Mode::offline, seqloc::io::Mode::online, seqloc::io::Mode::seqloc}, "all");
   std::printf("  all four together: %.1f s = %.2f of the four runs alone added up (%.1f s; target <= 0.6)\n", all.first,
               all.first / sum, sum);
   std::string json;
@@ -101,15 +103,15 @@ std::string observation_routes(const fs::path& work) {
 // What a route pays once at each seam between two regions: SequentialLocalizer::hand_over of the
 // default window (256 x 256 x 256) between the west and the east half of `pre`'s region, after one
 // step near the seam; the mean of 10 hand-overs, back and forth, in ms.
-double hand_over_ms(const seqloc::pipeline::PreprocessOptions& pre, const seqloc::pipeline::LocalizeOptions& options,
+double hand_over_ms(const seqloc::ingest::PreprocessOptions& pre, const seqloc::pipeline::LocalizeOptions& options,
                     const fs::path& work) {
   const seqloc::osm::GeoBox box = *pre.bbox;
   const double seam_lon = (box.min_lon + box.max_lon) / 2;
   auto half = [&](const char* name, double lon0, double lon1) {
-    seqloc::pipeline::PreprocessOptions o = pre;
+    seqloc::ingest::PreprocessOptions o = pre;
     o.output = work / name;
     o.bbox = seqloc::osm::GeoBox{lon0, box.min_lat, lon1, box.max_lat};
-    seqloc::pipeline::preprocess_region(o);
+    seqloc::ingest::preprocess_region(o);
     return o.output;
   };
   seqloc::raster::CacheReader west(half("west.gpkg", box.min_lon, seam_lon), 256);
@@ -144,11 +146,11 @@ int main() {
   seqloc::osm::SyntheticMap map(47.5, 10.5);
   map.way({{-3000, 0.25}, {3000, 0.25}}, {{"highway", "secondary"}});
   map.write(work / "map.osm.pbf");
-  seqloc::pipeline::PreprocessOptions pre;
+  seqloc::ingest::PreprocessOptions pre;
   pre.input = work / "map.osm.pbf";
   pre.output = work / "region.gpkg";
   pre.bbox = seqloc::osm::GeoBox{10.5 - 0.042, 47.5 - 0.002, 10.5 + 0.042, 47.5 + 0.002};
-  seqloc::pipeline::preprocess_region(pre);
+  seqloc::ingest::preprocess_region(pre);
 
   const int h = 128, w = 128, n = 256, distinct = 16, frames = 1000;
   std::mt19937 rng(3);
@@ -157,13 +159,13 @@ int main() {
     std::vector<std::uint16_t> values(static_cast<std::size_t>(h) * w * n);
     for (auto& v : values) v = seqloc::filter::float_to_half(std::max(-8.0f, std::min(8.0f, noise(rng))));
     std::ofstream(work / "route" / ("v" + std::to_string(k) + ".npy"), std::ios::binary)
-        << seqloc::pipeline::encode_npy_float16(h, w, n, values.data());
+        << seqloc::io::encode_npy_float16(h, w, n, values.data());
   }
   {
-    seqloc::pipeline::Route written;
+    seqloc::io::Route written;
     written.name = "bench";
     for (int t = 0; t < frames; ++t) {
-      seqloc::pipeline::RouteFrame f;
+      seqloc::io::RouteFrame f;
       f.frame = std::to_string(t);
       f.timestamp_s = t * 0.5;
       f.volume = work / "route" / ("v" + std::to_string(t % distinct) + ".npy");
@@ -171,18 +173,18 @@ int main() {
       f.odometry = {t ? 5.0 : 0.0, 0, 0};
       written.frames.push_back(std::move(f));
     }
-    seqloc::pipeline::write_route(written, work / "route");
+    seqloc::io::write_route(written, work / "route");
   }
-  const auto route = seqloc::pipeline::read_route(work / "route");
+  const auto route = seqloc::io::read_route(work / "route");
   seqloc::raster::CacheReader cache(pre.output, 256);
   seqloc::pipeline::LocalizeOptions options;
   options.filter.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const auto t0 = Clock::now();
-  const auto result = seqloc::pipeline::localize_route(route, cache, options, seqloc::pipeline::Mode::seqloc);
+  const auto result = seqloc::pipeline::localize_route(route, cache, options, seqloc::io::Mode::seqloc);
   const double run_s = std::chrono::duration<double>(Clock::now() - t0).count();
   const auto t1 = Clock::now();
   fs::create_directories(work / "out");
-  seqloc::pipeline::write_route_outputs(work / "out", result);
+  seqloc::io::write_route_outputs(work / "out", result);
   const double write_s = std::chrono::duration<double>(Clock::now() - t1).count();
   const double total = run_s + write_s;
   std::printf("1000 frames, 128x128x256 float16 volumes, 256x256x256 window, %d threads\n", options.filter.threads);
@@ -196,7 +198,7 @@ int main() {
   auto plain = options;
   plain.filter.self_calibrate = false;
   const auto t2 = Clock::now();
-  const auto without = seqloc::pipeline::localize_route(route, cache, plain, seqloc::pipeline::Mode::seqloc);
+  const auto without = seqloc::pipeline::localize_route(route, cache, plain, seqloc::io::Mode::seqloc);
   const double plain_s = std::chrono::duration<double>(Clock::now() - t2).count();
   std::printf("without self-calibration: %.1f s = %.1f frames/s, filter %.1f s (self-calibration adds %.1f ms a frame "
               "to the filter)\n",
@@ -206,7 +208,7 @@ int main() {
   // its own peak memory (target: under 2 GB).
   reset_peak();
   const auto t3 = Clock::now();
-  const auto smooth = seqloc::pipeline::localize_route(route, cache, options, seqloc::pipeline::Mode::smooth);
+  const auto smooth = seqloc::pipeline::localize_route(route, cache, options, seqloc::io::Mode::smooth);
   const double smooth_s = std::chrono::duration<double>(Clock::now() - t3).count();
   const double smooth_peak_mb = static_cast<double>(peak_kb()) / 1024.0;
   std::printf("smooth: %.1f s = %.1f frames/s, %.2fx seqloc's time per frame (target <= 3); filter %.1f s, "

@@ -12,10 +12,12 @@
 
 #include <opencv2/core.hpp>
 
-#include "seqloc/pipeline/matcher.hpp"
-#include "seqloc/pipeline/simulate.hpp"
+#include "seqloc/matcher/matcher.hpp"
+#include "seqloc/sim/simulate.hpp"
 
-namespace pipeline = seqloc::pipeline;
+namespace io = seqloc::io;
+namespace matcher = seqloc::matcher;
+namespace sim = seqloc::sim;
 namespace raster = seqloc::raster;
 using Clock = std::chrono::steady_clock;
 
@@ -27,21 +29,21 @@ int main(int argc, char** argv) {
   raster::CacheReader cache(argv[1], 256);
   const auto roads = cache.roads();
   // Observations at 16 points of the road network, headings along the road.
-  pipeline::ObservationModel camera;
-  std::vector<pipeline::Observation> observations;
+  sim::ObservationModel camera;
+  std::vector<io::Observation> observations;
   std::vector<std::vector<std::uint8_t>> maps;
-  pipeline::MatcherConfig config;
+  matcher::MatcherConfig config;
   std::size_t codes = 0, templates = 0;
   for (std::size_t r = 0; r < roads.size() && observations.size() < 16; r += std::max<std::size_t>(1, roads.size() / 16)) {
     const auto& pts = roads[r].points;
     if (pts.size() < 2) continue;
     const auto& a = pts[0];
     const auto& b = pts[1];
-    const pipeline::GridPose pose{a.x_m, a.y_m, std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * 180 / M_PI};
-    observations.push_back(pipeline::render_observation(cache, pose, camera));
+    const sim::GridPose pose{a.x_m, a.y_m, std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * 180 / M_PI};
+    observations.push_back(sim::render_observation(cache, pose, camera));
     // The matcher transforms one template for the visible disc and one per code beyond the first
     // of each channel (matcher.cpp), per heading in a quarter turn.
-    const auto observed = pipeline::BevMatcher::observed_codes(observations.back());
+    const auto observed = matcher::BevMatcher::observed_codes(observations.back());
     codes += observed.size();
     for (std::size_t o = 0; o < observed.size(); ++o) templates += o == 0 || observed[o - 1][0] == observed[o][0];
     const int side = config.size + observations.back().size - 1;
@@ -57,7 +59,7 @@ int main(int argc, char** argv) {
   double fps[2] = {};
   for (int threads : {1, 2}) {
     config.threads = threads;
-    const pipeline::BevMatcher matcher(config);
+    const matcher::BevMatcher matcher(config);
     (void)matcher.match(observations[0], maps[0]);  // warm-up
     const auto t0 = Clock::now();
     for (std::size_t i = 0; i < observations.size(); ++i) (void)matcher.match(observations[i], maps[i]);
@@ -70,7 +72,7 @@ int main(int argc, char** argv) {
   config.threads = 1;
   std::vector<std::vector<float>> volumes;
   {
-    const pipeline::BevMatcher matcher(config);
+    const matcher::BevMatcher matcher(config);
     for (std::size_t i = 0; i < observations.size(); ++i) volumes.push_back(matcher.match(observations[i], maps[i]));
   }
   double calibration_ms[2] = {};
@@ -78,7 +80,7 @@ int main(int argc, char** argv) {
     auto copies = volumes;
     const auto c0 = Clock::now();
     for (auto& volume : copies) {
-      pipeline::calibrate_volume(volume, config.size, config.size, config.headings, config.calibration, threads);
+      matcher::calibrate_volume(volume, config.size, config.size, config.headings, config.calibration, threads);
     }
     calibration_ms[threads - 1] =
         std::chrono::duration<double, std::milli>(Clock::now() - c0).count() / static_cast<double>(copies.size());

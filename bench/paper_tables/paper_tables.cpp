@@ -22,12 +22,16 @@
 
 #include <nlohmann/json.hpp>
 
-#include "seqloc/pipeline/job_pool.hpp"
+#include "seqloc/core/thread_pool.hpp"
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/localize.hpp"
-#include "seqloc/pipeline/outputs.hpp"
-#include "seqloc/pipeline/render.hpp"
 #include "seqloc/pipeline/volume_shape.hpp"
+#include "seqloc/render/render.hpp"
 
+namespace io = seqloc::io;
+namespace core = seqloc::core;
+namespace matcher = seqloc::matcher;
+namespace render = seqloc::render;
 namespace filter = seqloc::filter;
 namespace pipeline = seqloc::pipeline;
 namespace raster = seqloc::raster;
@@ -38,7 +42,7 @@ namespace {
 
 struct Config {
   std::string table, name;
-  pipeline::Mode mode = pipeline::Mode::seqloc;
+  io::Mode mode = io::Mode::seqloc;
   std::function<void(filter::FilterConfig&)> tweak;
   double noise_t = 0, noise_r = 0;  // odometry noise (% of step, deg per m)
   double sharpen = 1;               // the volumes raised to this power k (k log p: k > 1 overconfident)
@@ -72,7 +76,7 @@ std::string tempered_name(const char* what, double k) {
 }
 
 std::vector<Config> configs() {
-  using M = pipeline::Mode;
+  using M = io::Mode;
   auto none = [](filter::FilterConfig&) {};
   std::vector<Config> c;
   c.push_back({"overall", "single frame", M::single, none});
@@ -115,7 +119,7 @@ std::vector<Config> configs() {
   return c;
 }
 
-std::string row(const std::string& name, const pipeline::Metrics& m) {
+std::string row(const std::string& name, const io::Metrics& m) {
   char b[512];
   std::snprintf(b, sizeof b, "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.2f | %.2f |\n", name.c_str(), m.frames,
                 m.position_recall[0], m.position_recall[1], m.position_recall[2], m.heading_recall[0], m.heading_recall[1],
@@ -164,8 +168,8 @@ int main(int argc, char** argv) {
   fs::path work, out;
   int window = 160, threads = 2;
   std::string only;  // ",table,table," or empty for all
-  double temperature = pipeline::MatcherConfig{}.temperature;
-  double miss_rate = pipeline::MatcherConfig{}.miss_rate;
+  double temperature = matcher::MatcherConfig{}.temperature;
+  double miss_rate = matcher::MatcherConfig{}.miss_rate;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     if (a == "--work") work = argv[i + 1];
@@ -188,8 +192,8 @@ int main(int argc, char** argv) {
     if (only.empty() || c.table == "overall" || only.find("," + c.table + ",") != std::string::npos) all.push_back(c);
   }
   // poses[config][group] and per region for the entropy analysis.
-  std::map<std::string, std::map<std::string, std::vector<pipeline::FramePose>>> poses;
-  std::map<std::string, std::vector<pipeline::FramePose>> single_by_region;
+  std::map<std::string, std::map<std::string, std::vector<io::FramePose>>> poses;
+  std::map<std::string, std::vector<io::FramePose>> single_by_region;
   std::map<std::string, std::map<std::string, std::vector<double>>> last_power;  // [config][group or region]
   std::map<std::string, std::vector<pipeline::VolumeShape>> shapes;
   const auto start = Clock::now();
@@ -204,7 +208,7 @@ int main(int argc, char** argv) {
     }
     std::sort(dirs.begin(), dirs.end());
     for (const auto& dir : dirs) {
-      const pipeline::Route route = pipeline::read_route(dir);
+      const io::Route route = io::read_route(dir);
       pipeline::LocalizeOptions options;
       options.filter.width = options.filter.height = window;
       options.filter.threads = threads;
@@ -235,14 +239,14 @@ int main(int argc, char** argv) {
         shapes[region].push_back(pipeline::volume_shape(*frames[i], *truth->heading_deg - gamma));
       }
       // Every configuration, side by side, one filter thread each.
-      std::vector<pipeline::RouteResult> results(all.size());
-      pipeline::run_jobs(all.size(), threads, [&](std::size_t c) {
+      std::vector<io::RouteResult> results(all.size());
+      core::run_jobs(all.size(), threads, [&](std::size_t c) {
         pipeline::LocalizeOptions o = options;
         o.filter.threads = 1;
         o.offline_half_window = all[c].offline_half_window;
         o.lag = all[c].lag;
         all[c].tweak(o.filter);
-        pipeline::Route r = route;
+        io::Route r = route;
         // The noise's seed follows the configuration's name (FNV-1a), so that adding or leaving out
         // configurations does not redraw it.
         std::uint64_t seed = 1469598103934665603ull;
@@ -270,7 +274,7 @@ int main(int argc, char** argv) {
   }
 
   auto metrics = [&](const std::string& config, const std::string& group) {
-    return pipeline::compute_metrics(poses[config][group]);
+    return io::compute_metrics(poses[config][group]);
   };
   std::ostringstream md;
   nlohmann::ordered_json results;
@@ -386,15 +390,14 @@ int main(int argc, char** argv) {
         {"median", points[n / 2].first},
         {"r5m_by_tercile_sharpest_first", {recall(0, n / 3), recall(n / 3, 2 * n / 3), recall(2 * n / 3, n)}},
         {"spearman_entropy_error", rho}};
-    pipeline::Series series{region, {}, {}, true};
+    render::Series series{region, {}, {}, true};
     for (const auto& [h, e] : points) {
       series.x.push_back(h);
       series.y.push_back(e);
     }
     const std::string picture = "entropy_scatter_" + region + ".png";
-    pipeline::write_picture(out / picture,
-                            pipeline::plot({series}, region + ": single-frame error against entropy",
-                                           "normalized entropy of the frame's likelihood", "error (m)", 60));
+    render::write_picture(out / picture, render::plot({series}, region + ": single-frame error against entropy",
+                                                      "normalized entropy of the frame's likelihood", "error (m)", 60));
     pictures << "![" << region << "](" << picture << ")\n";
   }
   md << "\n" << pictures.str();

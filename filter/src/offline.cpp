@@ -11,7 +11,8 @@
 #include <Eigen/Core>
 
 #include "internal.hpp"
-#include "parallel.hpp"
+#include "seqloc/core/thread_pool.hpp"
+#include "seqloc/core/units.hpp"
 
 namespace seqloc::filter {
 
@@ -38,7 +39,7 @@ namespace {
 using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 
-constexpr double kCellM = 0.5;
+using core::kCellM;
 
 // Frames are placed and warped as probabilities relative to their peak, and only then turned
 // into log-likelihoods to add up. Bilinear interpolation of probabilities moves mass between
@@ -175,7 +176,7 @@ Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::si
     };
     const double ou = bu0 - origin[0], ov = bv0 - origin[1];  // box cell -> canvas cell
     if (s == t) {
-      detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
+      core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
         for (int k = k0; k < k1; ++k) {
           float* dst = own_box.data() + static_cast<std::size_t>(k) * box;
           detail::translate(values.slice(k), values.width(), values.height(), dst, bw, bh, ou, ov, nan);
@@ -199,7 +200,7 @@ Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::si
       detail::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
       detail::translate(values.slice(j), values.width(), values.height(), dst, bw, bh, ou - du, ov - dv, nan);
     };
-    detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
+    core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
       std::vector<float> buffer_a(box), buffer_b(box), mixed(box);
       float* current = buffer_a.data();
       float* next = buffer_b.data();

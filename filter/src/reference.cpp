@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "seqloc/core/angles.hpp"
+
 namespace seqloc::filter {
 namespace {
 
@@ -18,11 +20,6 @@ double weighted_log_sum_exp(const std::vector<std::pair<double, double>>& terms)
   for (const auto& [l, w] : terms)
     if (w > 0) sum += w * std::exp(l - m);
   return m + std::log(sum);
-}
-
-double wrap360(double d) {
-  d = std::fmod(d, 360.0);
-  return d < 0 ? d + 360.0 : d;
 }
 
 }  // namespace
@@ -159,7 +156,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
   const double rot = crop.rotation_deg * kPi / 180.0;
   std::vector<double> val(b_.size());
   for (int k = 0; k < R; ++k) {
-    const double p = wrap360(k * 360.0 / R - crop.rotation_deg) * vn / 360.0;
+    const double p = core::wrap360(k * 360.0 / R - crop.rotation_deg) * vn / 360.0;
     const int j0 = static_cast<int>(std::floor(p)) % vn, j1 = (j0 + 1) % vn;
     const double a = p - std::floor(p);
     for (int v = 0; v < H; ++v)

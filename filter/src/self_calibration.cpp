@@ -107,11 +107,13 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
 PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share)
     : prior_sigma_log2_(prior_sigma_log2), outlier_share_(outlier_share) {
   if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
-    throw FilterError("self-calibration: the prior's sigma must be finite and > 0, not " +
-                      std::to_string(prior_sigma_log2));
+    throw FilterError(
+        "self-calibration: the prior's sigma must be finite and > 0, not " + std::to_string(prior_sigma_log2),
+        ErrorCategory::usage);
   }
   if (!(outlier_share >= 0 && outlier_share < 1)) {
-    throw FilterError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share));
+    throw FilterError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share),
+                      ErrorCategory::usage);
   }
   const auto steps = static_cast<int>(std::lround((kLog2MaxPower - kLog2MinPower) / kLog2Step));
   for (int k = 0; k <= steps; ++k) {

@@ -8,21 +8,18 @@
 #include <Eigen/Core>
 
 #include "internal.hpp"
-#include "parallel.hpp"
+#include "seqloc/core/angles.hpp"
+#include "seqloc/core/thread_pool.hpp"
+#include "seqloc/core/units.hpp"
 
 namespace seqloc::filter {
 namespace {
 
-constexpr double kCellM = 0.5;
-constexpr double kDegToRad = M_PI / 180.0;
+using core::kCellM;
+using core::kDegToRad;
 
 using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
-
-double wrap_degrees(double d) {
-  d = std::fmod(d, 360.0);
-  return d < 0 ? d + 360.0 : d;
-}
 
 /// Log-softmax of f.log_prob in place (max: its largest value), with the normalized entropy and
 /// the argmax; `chunks` workers. With `shift` false the values stay as they are and only the
@@ -37,7 +34,7 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
   constexpr Eigen::Index kBlock = 4096;
   std::vector<double> chunk_sum(static_cast<std::size_t>(chunks)), chunk_ex(static_cast<std::size_t>(chunks));
   const auto blocks = static_cast<int>((static_cast<Eigen::Index>(cells) + kBlock - 1) / kBlock);
-  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int t) {
+  core::parallel_chunks(blocks, chunks, [&](int b0, int b1, int t) {
     Eigen::ArrayXf e(kBlock);
     double s_sum = 0, s_ex = 0;
     for (int block = b0; block < b1; ++block) {
@@ -67,7 +64,7 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
     f.argmax_u = static_cast<int>(best % static_cast<std::size_t>(W));
     return;
   }
-  detail::parallel_chunks(blocks, chunks, [&](int b0, int b1, int) {
+  core::parallel_chunks(blocks, chunks, [&](int b0, int b1, int) {
     const Eigen::Index start = b0 * kBlock;
     const Eigen::Index stop = std::min<Eigen::Index>(static_cast<Eigen::Index>(b1) * kBlock, static_cast<Eigen::Index>(cells));
     ArrayMap x(f.log_prob.data() + start, stop - start);
@@ -134,7 +131,7 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   const int chunks = std::max(1, std::min(threads, N));
   std::vector<float> chunk_max(static_cast<std::size_t>(chunks), -kInf);
   std::vector<char> chunk_bad(static_cast<std::size_t>(chunks), 0);
-  detail::parallel_chunks(N, chunks, [&](int j0, int j1, int t) {
+  core::parallel_chunks(N, chunks, [&](int j0, int j1, int t) {
     for (int v = 0; v < H; ++v) {
       const std::size_t row = static_cast<std::size_t>(v) * W * N;
       for (int j = j0; j < j1; ++j) {
@@ -186,7 +183,8 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
 
 void temper_frame_in_place(PreparedFrame& frame, double power, int threads) {
   if (!(power > 0) || !std::isfinite(power)) {
-    throw FilterError("temper_frame: the power must be finite and > 0, not " + std::to_string(power));
+    throw FilterError("temper_frame: the power must be finite and > 0, not " + std::to_string(power),
+                      ErrorCategory::usage);
   }
   if (power == 1.0) return;
   ArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
@@ -222,7 +220,8 @@ Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, i
   // Crop axes are the window's rotated by a clockwise.
   const double dx = east * std::cos(a) + north * std::sin(a);
   const double dy = -east * std::sin(a) + north * std::cos(a);
-  return {crop.centre_u + dx / kCellM, crop.centre_v - dy / kCellM, wrap_degrees(bin * 360.0 / frame.bins + crop.rotation_deg)};
+  return {crop.centre_u + dx / kCellM, crop.centre_v - dy / kCellM,
+          core::wrap360(bin * 360.0 / frame.bins + crop.rotation_deg)};
 }
 
 Pose single_frame_pose(const PreparedFrame& frame, const CropPose& crop) {
@@ -293,7 +292,7 @@ void detail::sample_slice(const float* values, int bins, int vh, int vw, double 
                           double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer,
                           float* out) {
   // Heading: the crop's own heading of window heading h is h - rotation.
-  const double p = wrap_degrees(heading_deg - crop.rotation_deg) * bins / 360.0;
+  const double p = core::wrap360(heading_deg - crop.rotation_deg) * bins / 360.0;
   const int j0 = static_cast<int>(std::floor(p)) % bins;
   const int j1 = (j0 + 1) % bins;
   const auto a = static_cast<float>(p - std::floor(p));
@@ -350,7 +349,7 @@ void detail::warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odomet
     displacement_cells(odometry, in.bin_heading_deg(j), du, dv);
     translate(in.slice(j), W, H, dst, W, H, -du, -dv, fill);
   };
-  detail::parallel_chunks(R, threads, [&](int k0, int k1, int) {
+  core::parallel_chunks(R, threads, [&](int k0, int k1, int) {
     std::vector<float> buffer_a(n), buffer_b(n);
     float* current = buffer_a.data();
     float* next = buffer_b.data();
@@ -432,7 +431,7 @@ struct SeqLocFilter::Impl {
     std::vector<double> bin_z(static_cast<std::size_t>(f.bins)), bin_zr(static_cast<std::size_t>(f.bins));
     const bool raised = power != 1.0;
     const auto k = static_cast<float>(power);
-    detail::parallel_chunks(f.bins, threads, [&](int j0, int j1, int t) {
+    core::parallel_chunks(f.bins, threads, [&](int j0, int j1, int t) {
       constexpr std::size_t kBlock = 4096;
       Eigen::ArrayXf r(kBlock), one(kBlock), e(kBlock);  // aligned: sums that do not depend on the heap
       auto& cells = workers[static_cast<std::size_t>(t)].frame_cells;
@@ -638,7 +637,8 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
 
 FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop, const float* road_distance_m,
                                  const GpsFix* gps, const FrameWeighting* weighting) {
-  if (config_.mgr && road_distance_m == nullptr) throw FilterError("MGR is on but no road-distance window was given");
+  if (config_.mgr && road_distance_m == nullptr)
+    throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);
@@ -683,7 +683,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   const float log_p_max = used.max_log_prob;
   impl_->tempered.resize(frame.log_prob.size());
   const auto exponent_f = static_cast<float>(w * result.volume_power);
-  detail::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
+  core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
     const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
     for (int j = j0; j < j1; ++j) {  // bin by bin: the same cuts for any number of threads
       const std::size_t begin = static_cast<std::size_t>(j) * slice;
@@ -711,7 +711,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   const double exponent = static_cast<double>(w) * result.volume_power;  // s = exp(exponent * r)
   auto update_slices = [&](bool with_prior) {
     const bool collect = calibrating && with_prior;
-    detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
+    core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
       auto& worker = impl_->workers[static_cast<std::size_t>(t)];
       for (int k = k0; k < k1; ++k) {
         detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
@@ -766,7 +766,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   }
   const auto keep = static_cast<float>((config_.mgr ? 1.0 - config_.mgr_epsilon : 1.0) / total);
   std::vector<float> best_value(static_cast<std::size_t>(R), -1.0f), least_value(static_cast<std::size_t>(R));
-  detail::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
+  core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
     for (int k = k0; k < k1; ++k) {
       ArrayMap b(belief_.slice(k), N);
       if (config_.mgr) {
@@ -807,7 +807,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
       sx += weight * std::sin(h);
       sy += weight * std::cos(h);
     }
-    result.pose.heading_deg = wrap_degrees(std::atan2(sx, sy) / kDegToRad);
+    result.pose.heading_deg = core::wrap360(std::atan2(sx, sy) / kDegToRad);
   }
   return result;
 }

@@ -6,7 +6,7 @@
 
 #include <Eigen/Core>
 
-#include "parallel.hpp"
+#include "seqloc/core/thread_pool.hpp"
 #include "seqloc/filter/offline.hpp"
 
 namespace seqloc::filter {
@@ -38,14 +38,15 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
                             BeliefVolume* posterior) {
   if (forward.width() != backward.width() || forward.height() != backward.height() ||
       forward.headings() != backward.headings()) {
-    throw FilterError("smoothed_result: the forward and backward beliefs cover different windows");
+    throw FilterError("smoothed_result: the forward and backward beliefs cover different windows",
+                      ErrorCategory::internal);
   }
   const int W = forward.width(), R = forward.headings();
   const std::size_t n = forward.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);
   if (posterior != nullptr && (posterior->width() != W || posterior->height() != forward.height() ||
                                posterior->headings() != R)) {
-    throw FilterError("smoothed_result: the posterior's shape differs from the beliefs'");
+    throw FilterError("smoothed_result: the posterior's shape differs from the beliefs'", ErrorCategory::internal);
   }
   // Per heading slice: the product's largest value and its sum, kept per slice and added in slice
   // order (the same for any number of threads).
@@ -53,7 +54,7 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
   std::vector<double> sum(static_cast<std::size_t>(R));
   // With `both` false the forward belief alone (beta taken as uniform).
   auto reduce = [&](bool both) {
-    detail::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
+    core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
       Eigen::ArrayXf product(N);
       for (int k = k0; k < k1; ++k) {
         if (both) {

@@ -122,7 +122,7 @@ void FilterConfig::validate() const {
   auto fail = [](const std::string& field, double value, const std::string& constraint) {
     std::ostringstream s;
     s << "filter config: " << field << " = " << value << ": " << constraint;
-    throw FilterError(s.str());
+    throw FilterError(s.str(), ErrorCategory::usage);
   };
   if (width < 8 || width > 4096) fail("width", width, "must be in [8, 4096] cells");
   if (height < 8 || height > 4096) fail("height", height, "must be in [8, 4096] cells");

@@ -8,7 +8,7 @@
 
 namespace seqloc::pipeline {
 
-std::optional<std::array<int, 3>> true_volume_cell(const RouteFrame& frame, const GridCrop& crop,
+std::optional<std::array<int, 3>> true_volume_cell(const io::RouteFrame& frame, const GridCrop& crop,
                                                    const osm::RegionProjection& projection, int height, int width,
                                                    int bins, double cell_m) {
   if (!frame.truth || !frame.truth->heading_deg) return std::nullopt;
@@ -27,8 +27,8 @@ std::optional<std::array<int, 3>> true_volume_cell(const RouteFrame& frame, cons
   return std::array<int, 3>{v, u, bin};
 }
 
-CalibrationFit::Grid backbone_calibration_grid() {
-  CalibrationFit::Grid grid;
+matcher::CalibrationFit::Grid backbone_calibration_grid() {
+  matcher::CalibrationFit::Grid grid;
   grid.temperatures.clear();
   for (int half_octave = -6; half_octave <= 6; ++half_octave) grid.temperatures.push_back(std::exp2(half_octave / 2.0));
   grid.blur_cells = {0, 1, 2, 3, 4};
@@ -36,17 +36,17 @@ CalibrationFit::Grid backbone_calibration_grid() {
   return grid;
 }
 
-BackboneFit fit_backbone_calibration(const std::vector<Route>& routes, raster::CacheReader& cache,
+BackboneFit fit_backbone_calibration(const std::vector<io::Route>& routes, raster::CacheReader& cache,
                                      const LocalizeOptions& options, const std::function<void()>& on_frame) {
   LocalizeOptions as_given = options;
   as_given.volume_temperature = 1;
   as_given.volume_calibration = {};
-  CalibrationFit fit(backbone_calibration_grid());
+  matcher::CalibrationFit fit(backbone_calibration_grid());
   const auto& projection = cache.metadata().projection();
   for (const auto& route : routes) {
     const FrameSource source = route_frames(route, cache, as_given);
     for (std::size_t i = 0; i < route.frames.size(); ++i) {
-      const RouteFrame& f = route.frames[i];
+      const io::RouteFrame& f = route.frames[i];
       if (f.truth && f.truth->heading_deg) {
         const auto frame = source(i);
         const int H = frame->height, W = frame->width, N = frame->bins;
@@ -61,7 +61,7 @@ BackboneFit fit_backbone_calibration(const std::vector<Route>& routes, raster::C
   if (result.best.frames == 0) {
     throw DataError("no frame has a true pose (gt_lat, gt_lon, gt_heading_deg) inside its volume: nothing to fit");
   }
-  result.as_given_nll = fit.mean_nll(1.0, VolumeCalibration{});  // 1 and 0s are on the grid
+  result.as_given_nll = fit.mean_nll(1.0, matcher::VolumeCalibration{});  // 1 and 0s are on the grid
   return result;
 }
 

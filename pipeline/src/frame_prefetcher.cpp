@@ -1,11 +1,11 @@
 #include "seqloc/pipeline/frame_prefetcher.hpp"
 
-#include "stopwatch.hpp"
+#include "seqloc/core/stopwatch.hpp"
 
 namespace seqloc::pipeline {
 
-using detail::Clock;
-using detail::seconds_since;
+using core::Clock;
+using core::seconds_since;
 
 FramePrefetcher::FramePrefetcher(FrameSource source, std::size_t frames, bool lookahead)
     : source_(std::move(source)), frames_(frames), lookahead_(lookahead) {}

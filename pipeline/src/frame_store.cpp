@@ -12,7 +12,7 @@
 #include <string>
 #include <system_error>
 
-#include "unlinked_file.hpp"
+#include "seqloc/core/files.hpp"
 
 namespace seqloc::pipeline {
 namespace {
@@ -32,7 +32,7 @@ std::size_t values_of(const filter::PreparedFrame& f) {
 class FrameStore::SpillFile {
  public:
   explicit SpillFile(const std::filesystem::path& dir) : dir_(dir) {
-    fd_ = detail::open_unlinked_file(dir, "seqloc-frames");  // the space is freed when fd_ closes
+    fd_ = core::open_unlinked_file(dir, "seqloc-frames");  // the space is freed when fd_ closes
     if (fd_ < 0) fail("cannot create a temporary file");
   }
   ~SpillFile() { ::close(fd_); }

@@ -10,37 +10,34 @@
 
 #include <GeographicLib/Geodesic.hpp>
 
+#include "seqloc/core/angles.hpp"
+#include "seqloc/core/stopwatch.hpp"
+#include "seqloc/core/thread_pool.hpp"
+#include "seqloc/core/units.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
-#include "seqloc/pipeline/calibration.hpp"
+#include "seqloc/io/npy.hpp"
+#include "seqloc/io/observation.hpp"
+#include "seqloc/matcher/calibration.hpp"
 #include "seqloc/pipeline/frame_store.hpp"
-#include "seqloc/pipeline/job_pool.hpp"
 #include "seqloc/pipeline/modes.hpp"
-#include "seqloc/pipeline/npy.hpp"
-#include "seqloc/pipeline/observation.hpp"
 #include "seqloc/pipeline/region_catalog.hpp"
-#include "stopwatch.hpp"
 
 namespace seqloc::pipeline {
 namespace {
 
-constexpr double kCellM = raster::kCellM;
-
-double wrap360(double d) {
-  d = std::fmod(d, 360.0);
-  return d < 0 ? d + 360.0 : d;
-}
+using core::kCellM;
 
 // A frame's .npy volume as the filter takes it, (H, W, N). An NHW volume is transposed into
 // `buffer`; an undeclared layout whose shape reads better as (N, H, W) is refused, since reading
 // it as (H, W, N) would run to the end and give nonsense.
-filter::FrameVolume volume_view(const Route& route, const RouteFrame& f, const NpyVolume& npy,
+filter::FrameVolume volume_view(const io::Route& route, const io::RouteFrame& f, const io::NpyVolume& npy,
                                 std::vector<unsigned char>& buffer) {
   auto where = [&] { return f.volume.string() + " (frames.csv line " + std::to_string(f.line) + ")"; };
   auto shape = [&] {
     return "(" + std::to_string(npy.height()) + ", " + std::to_string(npy.width()) + ", " + std::to_string(npy.bins()) +
            ")";
   };
-  if (route.layout == VolumeLayout::hwn) {
+  if (route.layout == io::VolumeLayout::hwn) {
     if (!route.layout_declared && npy.width() == npy.bins() && npy.height() != npy.width()) {
       throw DataError(where() + ": shape " + shape() + " looks like (N, H, W), headings first and a square crop " +
                       R"(last, but volumes are read as (H, W, N); set "layout": "NHW" in route.json (or )" +
@@ -64,7 +61,7 @@ filter::FrameVolume volume_view(const Route& route, const RouteFrame& f, const N
 
 }  // namespace
 
-GridCrop frame_crop(const RouteFrame& f, const raster::RegionGrid& grid, const osm::RegionProjection& projection) {
+GridCrop frame_crop(const io::RouteFrame& f, const raster::RegionGrid& grid, const osm::RegionProjection& projection) {
   GridCrop crop;
   if (f.crop_grid) {
     crop = {f.crop_grid->x_m, f.crop_grid->y_m, 0.0};
@@ -81,8 +78,9 @@ GridCrop frame_crop(const RouteFrame& f, const raster::RegionGrid& grid, const o
   return crop;
 }
 
-std::vector<float> match_frame(const RouteFrame& f, raster::CacheReader& cache, const BevMatcher& matcher) {
-  const Observation obs = read_observation(f.observation);
+std::vector<float> match_frame(const io::RouteFrame& f, raster::CacheReader& cache,
+                               const matcher::BevMatcher& matcher) {
+  const io::Observation obs = io::read_observation(f.observation);
   const GridCrop crop = frame_crop(f, cache.grid(), cache.metadata().projection());
   // The crop centre is a cell corner: region pixel edges at integers.
   const int side = matcher.map_side(obs.size);
@@ -112,7 +110,7 @@ filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const Lo
   // back, calibrated, and prepared again.
   const int H = frame.height, W = frame.width, N = frame.bins;
   std::vector<float> hwn = hwn_values(frame);
-  calibrate_volume(hwn, H, W, N, options.volume_calibration, threads);
+  matcher::calibrate_volume(hwn, H, W, N, options.volume_calibration, threads);
   return filter::prepare_frame({hwn.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob, H, W, N,
                                 frame.cell_m},
                                options.filter.headings, threads);
@@ -122,16 +120,16 @@ namespace {
 
 // route_frames with each frame's region cache given by `cache_of(i)` (the matcher scores a frame
 // against its own region's classes).
-FrameSource frames_from(const Route& route, std::function<raster::CacheReader&(std::size_t)> cache_of,
+FrameSource frames_from(const io::Route& route, std::function<raster::CacheReader&(std::size_t)> cache_of,
                         const LocalizeOptions& options) {
-  auto matcher = std::make_shared<const BevMatcher>(options.matcher);
+  auto matcher = std::make_shared<const matcher::BevMatcher>(options.matcher);
   auto prepared = [options](const filter::FrameVolume& volume) {  // a copy: the source may outlive the call
     return std::make_shared<const filter::PreparedFrame>(prepare_volume(volume, options));
   };
   return [&route, cache_of = std::move(cache_of), matcher, prepared](std::size_t i) {
-    const RouteFrame& f = route.frames[i];
+    const io::RouteFrame& f = route.frames[i];
     if (f.observation.empty()) {
-      const NpyVolume npy(f.volume);
+      const io::NpyVolume npy(f.volume);
       std::vector<unsigned char> transposed;
       const filter::FrameVolume volume = volume_view(route, f, npy, transposed);
       try {
@@ -146,7 +144,7 @@ FrameSource frames_from(const Route& route, std::function<raster::CacheReader&(s
     const int size = matcher->config().size;
     const auto& calibration = matcher->config().calibration;
     if (!calibration.identity()) {
-      calibrate_volume(values, size, size, matcher->config().headings, calibration, matcher->config().threads);
+      matcher::calibrate_volume(values, size, size, matcher->config().headings, calibration, matcher->config().threads);
     }
     const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
                                      size, size, matcher->config().headings, kCellM};
@@ -156,37 +154,22 @@ FrameSource frames_from(const Route& route, std::function<raster::CacheReader&(s
 
 }  // namespace
 
-FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
+FrameSource route_frames(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
   return frames_from(route, [&cache](std::size_t) -> raster::CacheReader& { return cache; }, options);
 }
 
-FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+FrameSource stored_route_frames(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                                 int readers) {
   auto store = std::make_shared<FrameStore>(route_frames(route, cache, options), route.frames.size(), readers,
                                             options.frame_memory_mb << 20, options.spill_dir);
   return [store](std::size_t i) { return store->take(i); };
 }
 
-int frame_reads(Mode mode, const Route& route) {
-  if (mode != Mode::smooth) return 1;
-  const bool scored = std::any_of(route.frames.begin(), route.frames.end(), [](const RouteFrame& f) { return f.volume.empty(); });
+int frame_reads(io::Mode mode, const io::Route& route) {
+  if (mode != io::Mode::smooth) return 1;
+  const bool scored =
+      std::any_of(route.frames.begin(), route.frames.end(), [](const io::RouteFrame& f) { return f.volume.empty(); });
   return scored ? 2 : 1;
-}
-
-const char* mode_name(Mode mode) {
-  switch (mode) {
-    case Mode::seqloc:
-      return "seqloc";
-    case Mode::online:
-      return "online";
-    case Mode::offline:
-      return "offline";
-    case Mode::smooth:
-      return "smooth";
-    case Mode::single:
-      break;
-  }
-  return "single";
 }
 
 void LocalizeOptions::validate() const {
@@ -220,18 +203,18 @@ void LocalizeOptions::validate() const {
   }
 }
 
-void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::RegionProjection& projection,
+void check_crops(const io::Route& route, const raster::RegionGrid& grid, const osm::RegionProjection& projection,
                  const LocalizeOptions& options) {
   const double max_jump_m = options.crop_jump_limit_m(), margin = options.max_crop_outside_m;
   const auto csv = (route.dir / "frames.csv").string();
-  auto fail = [&](const RouteFrame& f, const std::string& what) {
+  auto fail = [&](const io::RouteFrame& f, const std::string& what) {
     throw DataError(csv + ":" + std::to_string(f.line) + ": " + what);
   };
   auto inside = [&](double x, double y) {
     return std::isfinite(x) && std::isfinite(y) && x >= grid.min_x() - margin && x <= grid.max_x() + margin &&
            y >= grid.min_y() - margin && y <= grid.max_y() + margin;
   };
-  const RouteFrame* previous = nullptr;
+  const io::RouteFrame* previous = nullptr;
   GridCrop previous_crop;
   for (const auto& f : route.frames) {
     const GridCrop crop = frame_crop(f, grid, projection);
@@ -273,13 +256,8 @@ void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::
   }
 }
 
-double heading_difference_deg(double a, double b) {
-  const double d = std::fmod(std::abs(a - b), 360.0);
-  return std::min(d, 360.0 - d);
-}
-
-FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::RegionProjection& projection) {
-  FramePose pose;
+io::FramePose frame_pose(const io::RouteFrame& f, const FrameEstimate& e, const osm::RegionProjection& projection) {
+  io::FramePose pose;
   pose.entropy = e.entropy;
   pose.etu_weight = e.etu_weight;
   pose.volume_power = e.volume_power;
@@ -292,17 +270,17 @@ FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e, const osm::Reg
   pose.y_m = e.y_m;
   pose.lat_deg = geo.lat_deg;
   pose.lon_deg = geo.lon_deg;
-  pose.compass_heading_deg = wrap360(e.grid_heading_deg + gamma);  // compass = grid + gamma
-  pose.grid_heading_deg = wrap360(e.grid_heading_deg);
+  pose.compass_heading_deg = core::wrap360(e.grid_heading_deg + gamma);  // compass = grid + gamma
+  pose.grid_heading_deg = core::wrap360(e.grid_heading_deg);
   if (f.truth) {
     double gamma_true = 0;
     const auto t = projection.forward(f.truth->where, gamma_true);
     const double ex = e.x_m - t.x_m, ey = e.y_m - t.y_m;
     pose.position_error_m = std::hypot(ex, ey);
-    pose.truth = FramePose::Truth{t.x_m, t.y_m, f.truth->where.lat_deg, f.truth->where.lon_deg, std::nullopt};
+    pose.truth = io::FramePose::Truth{t.x_m, t.y_m, f.truth->where.lat_deg, f.truth->where.lon_deg, std::nullopt};
     if (f.truth->heading_deg) {
-      pose.truth->grid_heading_deg = wrap360(*f.truth->heading_deg - gamma_true);
-      pose.heading_error_deg = heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
+      pose.truth->grid_heading_deg = core::wrap360(*f.truth->heading_deg - gamma_true);
+      pose.heading_error_deg = core::heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
       const double h = *pose.truth->grid_heading_deg * M_PI / 180.0;
       pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);
       pose.lateral_error_m = -ex * std::cos(h) + ey * std::sin(h);
@@ -316,16 +294,17 @@ namespace {
 // localize_route once the options and the route's crops are checked.
 // `catalog` and `regions` (each frame's region) for a route over a catalog's regions (every mode
 // follows a route that crosses from one into the next); null for a route in `cache` alone.
-RouteResult run_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
-                      const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect,
-                      const RegionCatalog* catalog = nullptr, const std::vector<std::size_t>* regions = nullptr) {
+io::RouteResult run_route(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+                          io::Mode mode, const std::function<void()>& on_frame, FrameSource source,
+                          const FrameInspector& inspect, const RegionCatalog* catalog = nullptr,
+                          const std::vector<std::size_t>* regions = nullptr) {
   if (!source) source = stored_route_frames(route, cache, options, frame_reads(mode, route));
   const auto estimator = make_mode(mode, {route, cache, options, inspect, catalog, regions});
   FramePrefetcher frames(std::move(source), route.frames.size(), estimator->lookahead());
-  RouteResult result;
+  io::RouteResult result;
   result.route = route.name;
   result.mode = mode;
-  if (mode == Mode::online || mode == Mode::seqloc) result.lag = options.lag;
+  if (mode == io::Mode::online || mode == io::Mode::seqloc) result.lag = options.lag;
   const auto& projection = cache.metadata().projection();
   const std::string name = cache.path().stem().string();
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
@@ -346,8 +325,9 @@ RouteResult run_route(const Route& route, raster::CacheReader& cache, const Loca
 
 }  // namespace
 
-RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options, Mode mode,
-                           const std::function<void()>& on_frame, FrameSource source, const FrameInspector& inspect) {
+io::RouteResult localize_route(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+                               io::Mode mode, const std::function<void()>& on_frame, FrameSource source,
+                               const FrameInspector& inspect) {
   options.validate();
   check_crops(route, cache.grid(), cache.metadata().projection(), options);
   return run_route(route, cache, options, mode, on_frame, std::move(source), inspect);
@@ -361,7 +341,7 @@ double region_margin_m(const LocalizeOptions& options) {
 }
 
 // The route's legs (runs of frames in one region) as routes of their own, for check_crops.
-void check_legs(const Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
+void check_legs(const io::Route& route, const RegionCatalog& catalog, const std::vector<std::size_t>& regions,
                 const LocalizeOptions& options) {
   std::size_t begin = 0;
   for (std::size_t i = 1; i <= regions.size(); ++i) {
@@ -370,7 +350,7 @@ void check_legs(const Route& route, const RegionCatalog& catalog, const std::vec
     if (begin == 0 && i == regions.size()) {
       check_crops(route, grid, catalog.projection(regions[begin]), options);  // one leg: the route itself
     } else {
-      Route leg;
+      io::Route leg;
       leg.dir = route.dir;
       leg.name = route.name;
       leg.frames.assign(route.frames.begin() + static_cast<std::ptrdiff_t>(begin),
@@ -383,19 +363,19 @@ void check_legs(const Route& route, const RegionCatalog& catalog, const std::vec
 
 }  // namespace
 
-void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options) {
+void check_route(const io::Route& route, const RegionCatalog& catalog, const LocalizeOptions& options) {
   check_legs(route, catalog, route_regions(route, catalog, region_margin_m(options)), options);
 }
 
-BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
-                            const LocalizeOptions& options, const std::vector<Mode>& modes,
+BatchResult localize_routes(const std::vector<io::Route>& routes, raster::CacheReader& cache,
+                            const LocalizeOptions& options, const std::vector<io::Mode>& modes,
                             const std::function<void()>& on_frame) {
   RegionCatalog catalog(cache);
   return localize_routes(routes, catalog, options, modes, on_frame);
 }
 
-BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalog& catalog,
-                            const LocalizeOptions& options, const std::vector<Mode>& modes,
+BatchResult localize_routes(const std::vector<io::Route>& routes, const RegionCatalog& catalog,
+                            const LocalizeOptions& options, const std::vector<io::Mode>& modes,
                             const std::function<void()>& on_frame) {
   options.validate();
   std::vector<std::vector<std::size_t>> regions;
@@ -405,7 +385,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
   }
   struct Job {
     std::size_t route;
-    Mode mode;
+    io::Mode mode;
   };
   std::vector<Job> jobs;
   for (std::size_t r = 0; r < routes.size(); ++r) {
@@ -429,7 +409,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
   BatchResult batch;
   batch.results.resize(jobs.size());
   std::mutex mutex;  // guards shared and batch's counters
-  auto readers = [&](const Route& route) {
+  auto readers = [&](const io::Route& route) {
     int sum = 0;
     for (const auto mode : modes) sum += frame_reads(mode, route);
     return sum;
@@ -455,10 +435,10 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
     batch.peak_frame_memory_bytes = std::max(batch.peak_frame_memory_bytes, stats.peak_memory_bytes);
     shared[r].store.reset();
   };
-  run_jobs(jobs.size(), workers, [&](std::size_t j) {
+  core::run_jobs(jobs.size(), workers, [&](std::size_t j) {
     const auto store = store_for(jobs[j].route);
     const std::size_t r = jobs[j].route;
-    const Mode mode = jobs[j].mode;
+    const io::Mode mode = jobs[j].mode;
     batch.results[j] = run_route(routes[r], catalog.cache(regions[r].front()), job_options, mode, on_frame,
                                  store->source(), {}, &catalog, &regions[r]);
     done_with(jobs[j].route);
@@ -466,7 +446,7 @@ BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalo
   return batch;
 }
 
-void perturb_odometry(Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed) {
+void perturb_odometry(io::Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> normal(0.0, 1.0);
   for (std::size_t i = 1; i < route.frames.size(); ++i) {
@@ -477,46 +457,6 @@ void perturb_odometry(Route& route, double translation_pct, double rotation_deg_
     o.left_m += sigma_t * normal(rng);
     o.yaw_deg += sigma_r * normal(rng);
   }
-}
-
-Metrics compute_metrics(std::span<const FramePose> poses) {
-  Metrics m;
-  std::vector<double> position, heading;
-  double lateral = 0, longitudinal = 0;
-  std::size_t body = 0;
-  for (const FramePose& p : poses) {
-    if (!p.position_error_m) continue;
-    position.push_back(*p.position_error_m);
-    if (p.heading_error_deg) heading.push_back(*p.heading_error_deg);
-    if (p.lateral_error_m) {
-      lateral += std::abs(*p.lateral_error_m);
-      longitudinal += std::abs(*p.longitudinal_error_m);
-      ++body;
-    }
-  }
-  m.frames = position.size();
-  auto fill = [](std::vector<double>& errors, double* recall, double& mean, double& median,
-                 std::initializer_list<double> thresholds) {
-    if (errors.empty()) return;
-    int i = 0;
-    for (double t : thresholds) {
-      recall[i++] = 100.0 * static_cast<double>(std::count_if(errors.begin(), errors.end(), [t](double e) { return e < t; })) /
-                    static_cast<double>(errors.size());
-    }
-    double sum = 0;
-    for (double e : errors) sum += e;
-    mean = sum / static_cast<double>(errors.size());
-    std::sort(errors.begin(), errors.end());
-    const std::size_t n = errors.size();
-    median = n % 2 ? errors[n / 2] : (errors[n / 2 - 1] + errors[n / 2]) / 2;
-  };
-  fill(position, m.position_recall, m.mean_position_error_m, m.median_position_error_m, {1.0, 3.0, 5.0});
-  fill(heading, m.heading_recall, m.mean_heading_error_deg, m.median_heading_error_deg, {1.0, 3.0, 5.0});
-  if (body > 0) {
-    m.mean_abs_lateral_m = lateral / static_cast<double>(body);
-    m.mean_abs_longitudinal_m = longitudinal / static_cast<double>(body);
-  }
-  return m;
 }
 
 }  // namespace seqloc::pipeline

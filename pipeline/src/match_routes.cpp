@@ -5,20 +5,21 @@
 #include <cstdio>
 #include <vector>
 
-#include "seqloc/pipeline/npy.hpp"
-#include "seqloc/pipeline/outputs.hpp"
+#include "seqloc/core/files.hpp"
+#include "seqloc/io/npy.hpp"
+#include "seqloc/io/run_folder.hpp"
 
 namespace seqloc::pipeline {
 
-void write_volume_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+void write_volume_route(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                         const std::filesystem::path& dir, const std::function<void()>& on_frame) {
   const FrameSource source = stored_route_frames(route, cache, options);
   const auto& projection = cache.metadata().projection();
   std::filesystem::create_directories(dir / "volumes");
-  Route out = route;
+  io::Route out = route;
   out.dir = dir;
   out.volume_kind = filter::VolumeValues::log_prob;
-  out.layout = VolumeLayout::hwn;
+  out.layout = io::VolumeLayout::hwn;
   out.layout_declared = true;
   std::vector<std::uint16_t> halves;
   for (std::size_t i = 0; i < route.frames.size(); ++i) {
@@ -31,13 +32,13 @@ void write_volume_route(const Route& route, raster::CacheReader& cache, const Lo
     char name[32];
     std::snprintf(name, sizeof name, "%06zu.npy", i);
     const std::filesystem::path path = dir / "volumes" / name;
-    write_file(path, encode_npy_float16(H, W, N, halves.data()));
+    core::write_file(path, io::encode_npy_float16(H, W, N, halves.data()));
     if (i == 0) out.cell_m = frame->cell_m;
     if (frame->cell_m != out.cell_m) {
       throw DataError(route.dir.string() + "/frames.csv:" + std::to_string(route.frames[i].line) +
                       ": the frame's cells differ in size from the first frame's; a route has one cell size");
     }
-    RouteFrame& f = out.frames[i];
+    io::RouteFrame& f = out.frames[i];
     if (!f.observation.empty()) {
       // The crop the matcher's volume lies on: the observation's, snapped to the grid as localize
       // places it, north-up in the grid.
@@ -49,7 +50,7 @@ void write_volume_route(const Route& route, raster::CacheReader& cache, const Lo
     f.observation.clear();
     if (on_frame) on_frame();
   }
-  write_route(out, dir);
+  io::write_route(out, dir);
 }
 
 }  // namespace seqloc::pipeline

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <sstream>
 
-#include "seqloc/pipeline/errors.hpp"
+#include "seqloc/core/error.hpp"
 
 namespace seqloc::pipeline {
 std::vector<std::filesystem::path> region_cache_files(const std::vector<std::filesystem::path>& paths) {
@@ -63,11 +63,11 @@ std::optional<std::size_t> RegionCatalog::locate(osm::GeoPoint p, std::optional<
   return best;
 }
 
-std::vector<std::size_t> route_regions(const Route& route, const RegionCatalog& catalog, double margin_m) {
+std::vector<std::size_t> route_regions(const io::Route& route, const RegionCatalog& catalog, double margin_m) {
   std::vector<std::size_t> regions;
   regions.reserve(route.frames.size());
   std::optional<std::size_t> current;
-  for (const RouteFrame& f : route.frames) {
+  for (const io::RouteFrame& f : route.frames) {
     auto where = [&] { return (route.dir / "frames.csv").string() + ":" + std::to_string(f.line) + ": "; };
     if (catalog.size() == 1) {
       regions.push_back(0);  // one region: check_crops judges the crops

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <vector>
 
-#include "flat_index.hpp"
+#include "seqloc/core/flat_index.hpp"
 
 namespace seqloc::pipeline {
 
@@ -29,7 +29,7 @@ VolumeShape volume_shape(const filter::PreparedFrame& frame, double heading_deg)
   double w_sum = 0, e_sum = 0, n_sum = 0, ee = 0, nn = 0, en = 0;
   for (int v = 0; v < frame.height; ++v) {
     for (int u = 0; u < frame.width; ++u) {
-      const double w = marginal[detail::flat(v, u, frame.width)] - base;
+      const double w = marginal[core::flat(v, u, frame.width)] - base;
       if (w <= 0) continue;
       const double e = u * frame.cell_m, n = -v * frame.cell_m;
       w_sum += w;

@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/raster/cache.hpp"
@@ -25,7 +26,7 @@ struct Fixture {
   test::ScratchDir dir;
   std::filesystem::path cache, route;
 
-  explicit Fixture(bool with_nan = false) {
+  explicit Fixture(bool with_nan = false, const std::string& id_prefix = "") {
     osm::SyntheticMap map(47.5, 10.5);
     map.way({{-200, 0.25}, {200, 0.25}}, {{"highway", "track"}});
     map.write(dir / "map.osm.pbf", 60);
@@ -47,8 +48,14 @@ struct Fixture {
       test::write_npy_float32(route / ("v" + std::to_string(t) + ".npy"), 15, 15, 64, v);
       double gamma = 0;
       const auto gt = projection.reverse({x, y}, gamma);
-      csv << t << "," << t << ",v" << t << ".npy," << x << "," << y << "," << (t ? 5 : 0) << ",0,0," << gt.lat_deg
-          << "," << gt.lon_deg << "," << 90 + gamma << "\n";
+      // An id with a comma is quoted, as RFC 4180 has it ("" for a quote inside).
+      if (id_prefix.empty()) {
+        csv << t;
+      } else {
+        csv << '"' << id_prefix << t << '"';
+      }
+      csv << "," << t << ",v" << t << ".npy," << x << "," << y << "," << (t ? 5 : 0) << ",0,0," << gt.lat_deg << ","
+          << gt.lon_deg << "," << 90 + gamma << "\n";
     }
   }
 };
@@ -247,11 +254,37 @@ TEST(CliLocalize, UsageErrorsAndOverwrite) {
   EXPECT_EQ(run_seqloc({"evaluate", "--help"}).exit_code, 0);
 }
 
+// Frame ids with commas (frames.csv quotes them) come back whole in poses.csv, in evaluate's
+// table and in render's pictures; and render draws the overview of an output that holds smooth's
+// poses alone.
+TEST(CliLocalize, QuotedIdsWithCommasAndASmoothOnlyOutputGoThroughEvaluateAndRender) {
+  Fixture f(/*with_nan=*/false, "cam,");
+  const auto out = f.dir / "out";
+  const auto r = run_seqloc(args(f, out, {"--mode", "smooth"}));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto poses = io::read_poses_csv(out / "east" / "smooth" / "poses.csv");
+  ASSERT_EQ(poses.size(), 8u);
+  for (std::size_t t = 0; t < poses.size(); ++t) EXPECT_EQ(poses[t].frame, "cam," + std::to_string(t));
+  EXPECT_NE(test::read_file(out / "east" / "smooth" / "poses.csv").find("\"cam,3\","), std::string::npos)
+      << "written quoted";
+
+  const auto evaluated = run_seqloc({"evaluate", out.string()});
+  ASSERT_EQ(evaluated.exit_code, 0) << evaluated.err;
+  EXPECT_NE(evaluated.out.find("smooth"), std::string::npos) << evaluated.out;
+
+  const auto figures = f.dir / "figures";
+  const auto rendered = run_seqloc({"render", f.cache.string(), f.route.string(), "-o", figures.string(), "--localized",
+                                    out.string(), "--window", "64", "--threads", "1"});
+  ASSERT_EQ(rendered.exit_code, 0) << rendered.err;
+  EXPECT_TRUE(std::filesystem::exists(figures / "overview.png")) << "smooth's overview: " << rendered.out;
+  EXPECT_TRUE(std::filesystem::exists(figures / "error_over_time.png")) << rendered.out;
+}
+
 TEST(OdometryNoise, DeterministicZeroMeanAndScaledWithTheStep) {
-  pipeline::Route route;
+  io::Route route;
   route.frames.resize(20001);
   for (std::size_t i = 1; i < route.frames.size(); ++i) route.frames[i].odometry = {10.0, 0.0, 0.0};
-  pipeline::Route a = route, b = route;
+  io::Route a = route, b = route;
   pipeline::perturb_odometry(a, 2.0, 0.01, 7);
   pipeline::perturb_odometry(b, 2.0, 0.01, 7);
   double sum_f = 0, sum_f2 = 0, sum_y2 = 0;

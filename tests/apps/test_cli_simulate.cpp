@@ -9,7 +9,7 @@
 
 #include <gtest/gtest.h>
 
-#include "seqloc/pipeline/render.hpp"
+#include "seqloc/render/render.hpp"
 
 #include "support/test_support.hpp"
 
@@ -120,7 +120,7 @@ TEST(CliSimulate, SampleRegionToTableAndPictures) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(std::filesystem::exists(sharp_dir / ("likelihood_" + std::to_string(sharpest) + ".png"))) << r.out;
   // 'collapse': where the kept SeqLoc belief shrinks most; without kept beliefs, a usage error.
-  const auto collapse = pipeline::collapse_frame(dir / "spilled/route_000/seqloc", 10);
+  const auto collapse = render::collapse_frame(dir / "spilled/route_000/seqloc", 10);
   r = run_seqloc({"render", cache, routes + "/route_000", "--localized", spilled, "-o", (dir / "collapse").string(),
                   "--frame", "collapse", "--window", "192"});
   ASSERT_EQ(r.exit_code, 0) << r.err;

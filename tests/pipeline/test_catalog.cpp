@@ -9,9 +9,9 @@
 #include <GeographicLib/Geodesic.hpp>
 #include <gtest/gtest.h>
 
+#include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
-#include "seqloc/pipeline/preprocess.hpp"
 #include "seqloc/pipeline/region_catalog.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
 #include "support/test_support.hpp"
@@ -24,11 +24,11 @@ constexpr int kBins = 64, kSide = 41, kCentre = 20, kFrames = 120, kRidgeFrom = 
 
 std::filesystem::path build(const std::filesystem::path& osm, const std::filesystem::path& out, double lon0,
                             double lon1) {
-  PreprocessOptions options;
+  ingest::PreprocessOptions options;
   options.input = osm;
   options.output = out;
   options.bbox = osm::GeoBox{lon0, kLat0 - 0.0025, lon1, kLat0 + 0.0025};
-  preprocess_region(options);
+  ingest::preprocess_region(options);
   return out;
 }
 
@@ -39,7 +39,7 @@ std::filesystem::path build(const std::filesystem::path& osm, const std::filesys
 // the frames before can place.
 // With `reversed`, it is the other way round: the frames from kFrames - kRidgeFrom on say where the
 // vehicle is, the ones before are the ridge, which only the frames after can place.
-Route ridge_route(const std::filesystem::path& dir, bool reversed = false) {
+io::Route ridge_route(const std::filesystem::path& dir, bool reversed = false) {
   const osm::RegionProjection local(kLat0, kLon0);
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "route.json") << R"({"format": "seqloc-route", "version": 1, "name": "across"})";
@@ -72,13 +72,13 @@ Route ridge_route(const std::filesystem::path& dir, bool reversed = false) {
         << ",0,0," << gt.lat_deg << "," << gt.lon_deg << "," << 90 + gamma << "\n";
   }
   csv.close();
-  return read_route(dir);
+  return io::read_route(dir);
 }
 
 struct Seam {
   test::ScratchDir dir;
   std::filesystem::path whole, west, east;
-  Route route, reversed;
+  io::Route route, reversed;
   Seam() {
     osm::SyntheticMap map(kLat0, kLon0);
     map.way({{-1400, 0.25}, {1400, 0.25}}, {{"highway", "track"}});
@@ -99,7 +99,7 @@ LocalizeOptions options() {
   return o;
 }
 
-double apart_m(const FramePose& a, const FramePose& b) {
+double apart_m(const io::FramePose& a, const io::FramePose& b) {
   double s = 0;
   GeographicLib::Geodesic::WGS84().Inverse(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg, s);
   return s;
@@ -112,17 +112,18 @@ TEST(RegionCatalog, ARouteAcrossTwoRegionsGetsThePosesOfOneRegionOverBoth) {
   const RegionCatalog two({seam.dir / "regions"});  // a folder: west.gpkg, east.gpkg
   ASSERT_EQ(two.size(), 2u);
   EXPECT_EQ(two.name(0), "east");
-  const std::vector<Mode> modes{Mode::seqloc, Mode::online, Mode::single, Mode::offline, Mode::smooth};
+  const std::vector<io::Mode> modes{io::Mode::seqloc, io::Mode::online, io::Mode::single, io::Mode::offline,
+                                    io::Mode::smooth};
   const auto a = localize_routes({seam.route}, one, options(), modes);
   const auto b = localize_routes({seam.route}, two, options(), modes);
   ASSERT_EQ(a.results.size(), modes.size());
   ASSERT_EQ(b.results.size(), modes.size());
   for (std::size_t m = 0; m < modes.size(); ++m) {
-    const RouteResult& x = a.results[m];
-    const RouteResult& y = b.results[m];
+    const io::RouteResult& x = a.results[m];
+    const io::RouteResult& y = b.results[m];
     ASSERT_EQ(y.poses.size(), static_cast<std::size_t>(kFrames));
     EXPECT_EQ(x.region_crossings, 0);
-    EXPECT_EQ(y.region_crossings, 1) << mode_name(modes[m]);  // the route's, whatever the mode
+    EXPECT_EQ(y.region_crossings, 1) << io::mode_name(modes[m]);  // the route's, whatever the mode
     EXPECT_EQ(y.poses.front().region, "west");
     EXPECT_EQ(y.poses.back().region, "east");
     EXPECT_EQ(x.poses.back().region, "whole");
@@ -131,7 +132,7 @@ TEST(RegionCatalog, ARouteAcrossTwoRegionsGetsThePosesOfOneRegionOverBoth) {
     // neighbourhood holds a frame that places the vehicle; some of them hold frames of both regions.
     const auto half = static_cast<std::size_t>(options().offline_half_window);
     const std::size_t compared =
-        modes[m] == Mode::offline ? static_cast<std::size_t>(kRidgeFrom) + half : y.poses.size();
+        modes[m] == io::Mode::offline ? static_cast<std::size_t>(kRidgeFrom) + half : y.poses.size();
     std::size_t first_east = 0;
     while (y.poses[first_east].region == "west") ++first_east;
     EXPECT_LT(first_east, compared + half) << "no compared frame sums frames of both regions";
@@ -141,18 +142,19 @@ TEST(RegionCatalog, ARouteAcrossTwoRegionsGetsThePosesOfOneRegionOverBoth) {
       worst = std::max(worst, d);
       sum += d;
       // Each pose's error is measured in its own region's CRS, against the same truth.
-      EXPECT_NEAR(*x.poses[i].position_error_m, *y.poses[i].position_error_m, 0.75) << mode_name(modes[m]) << " " << i;
+      EXPECT_NEAR(*x.poses[i].position_error_m, *y.poses[i].position_error_m, 0.75)
+          << io::mode_name(modes[m]) << " " << i;
     }
     const double mean = sum / static_cast<double>(compared);
     std::printf("%s: one region vs two, poses apart by %.3f m on average, %.3f m at most (%zu frames)\n",
-                mode_name(modes[m]), mean, worst, compared);
+                io::mode_name(modes[m]), mean, worst, compared);
     // The lattices of the three CRSs differ by parts of a cell (0.5 m).
-    EXPECT_LT(mean, 0.25) << mode_name(modes[m]);
-    EXPECT_LT(worst, 0.5) << mode_name(modes[m]);
+    EXPECT_LT(mean, 0.25) << io::mode_name(modes[m]);
+    EXPECT_LT(worst, 0.5) << io::mode_name(modes[m]);
   }
   // The belief crossed the seam: along the ridge only the frames before it say where the vehicle
   // is, and seqloc keeps it to the end of the route, well past the seam; single frames do not.
-  auto mean_error = [](const RouteResult& r, int from, int to) {
+  auto mean_error = [](const io::RouteResult& r, int from, int to) {
     double sum = 0;
     for (int t = from; t < to; ++t) sum += *r.poses[static_cast<std::size_t>(t)].position_error_m;
     return sum / (to - from);
@@ -170,7 +172,7 @@ TEST(RegionCatalog, SmoothCarriesTheLaterFramesBackAcrossTheSeam) {
   raster::CacheReader whole(seam.whole);
   const RegionCatalog one(whole);
   const RegionCatalog two({seam.west, seam.east});
-  const std::vector<Mode> modes{Mode::smooth, Mode::seqloc};
+  const std::vector<io::Mode> modes{io::Mode::smooth, io::Mode::seqloc};
   const auto a = localize_routes({seam.reversed}, one, options(), modes);
   const auto b = localize_routes({seam.reversed}, two, options(), modes);
   const auto& x = a.results[0].poses;
@@ -211,12 +213,12 @@ TEST(RegionCatalog, TheLagCarriesTheLaterFramesBackAcrossTheSeam) {
   const RegionCatalog two({seam.west, seam.east});
   // The reversed ridge from its frame 30 on (every lagged frame costs L backward steps).
   constexpr int kSkip = 30, kLag = 20, kPlacing = kFrames - kRidgeFrom - kSkip;  // the first frame that places
-  Route route = seam.reversed;
+  io::Route route = seam.reversed;
   route.frames.erase(route.frames.begin(), route.frames.begin() + kSkip);
   LocalizeOptions lagged = options();
   lagged.lag = kLag;
-  const auto a = localize_routes({route}, one, lagged, {Mode::seqloc});
-  const auto b = localize_routes({route}, two, lagged, {Mode::seqloc});
+  const auto a = localize_routes({route}, one, lagged, {io::Mode::seqloc});
+  const auto b = localize_routes({route}, two, lagged, {io::Mode::seqloc});
   const auto& x = a.results[0].poses;
   const auto& y = b.results[0].poses;
   ASSERT_EQ(y.size(), route.frames.size());
@@ -331,7 +333,7 @@ TEST(RegionCatalog, CropsOutsideEveryRegionAreNamed) {
   Seam seam;
   const RegionCatalog two({seam.west, seam.east});
   // A crop 11 km north of both regions.
-  Route far = seam.route;
+  io::Route far = seam.route;
   far.frames[5].crop_geo = osm::GeoPoint{kLat0 + 0.1, kLon0};
   try {
     (void)route_regions(far, two, 48);

@@ -13,8 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "seqloc/io/npy.hpp"
 #include "seqloc/pipeline/frame_store.hpp"
-#include "seqloc/pipeline/npy.hpp"
 #include "support/test_support.hpp"
 
 namespace seqloc::pipeline {

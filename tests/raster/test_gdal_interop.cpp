@@ -7,7 +7,7 @@
 #include <ogrsf_frmts.h>
 #include <gtest/gtest.h>
 
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "support/test_support.hpp"
 
@@ -21,11 +21,11 @@ class GdalInterop : public ::testing::Test {
     const auto osm = test::shared_osm("north-bayreuth.osm.pbf");
     if (osm.empty()) return;
     dir_ = new test::ScratchDir();
-    pipeline::PreprocessOptions options;
+    ingest::PreprocessOptions options;
     options.input = osm;
     options.output = *dir_ / "nb.gpkg";
     options.bbox = osm::GeoBox{11.535, 50.005, 11.552, 50.016};  // ~1.2 x 1.2 km around a village
-    pipeline::preprocess_region(options);
+    ingest::preprocess_region(options);
     path_ = options.output;
   }
   static void TearDownTestSuite() { delete dir_; }

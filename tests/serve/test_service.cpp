@@ -23,7 +23,7 @@
 #include <gdal.h>
 #include <httplib.h>
 
-#include "seqloc/pipeline/preprocess.hpp"
+#include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/serve/geotiff.hpp"
 #include "seqloc/serve/server.hpp"
 #include "seqloc/serve/service.hpp"
@@ -36,11 +36,11 @@ std::filesystem::path monaco_cache() {
   static test::ScratchDir dir;
   static std::filesystem::path built;
   if (built.empty()) {
-    pipeline::PreprocessOptions options;
+    ingest::PreprocessOptions options;
     options.input = test::shared_osm("monaco.osm.pbf");
     options.output = dir / "monaco.gpkg";
     options.threads = 2;
-    pipeline::preprocess_region(options);
+    ingest::preprocess_region(options);
     built = options.output;
   }
   return built;
@@ -622,12 +622,12 @@ struct TwoBuilds {
   std::filesystem::path a = dir / "a.gpkg", b = dir / "b.gpkg";
   TwoBuilds() {
     for (const auto& [out, clamp] : {std::pair{a, 40.0}, std::pair{b, 90.0}}) {
-      pipeline::PreprocessOptions options;
+      ingest::PreprocessOptions options;
       options.input = std::filesystem::path(SEQLOC_SOURCE_DIR) / "samples" / "rural-valley.osm.pbf";
       options.output = out;
       options.max_distance_m = clamp;
       options.threads = 2;
-      (void)pipeline::preprocess_region(options);
+      (void)ingest::preprocess_region(options);
     }
   }
   static std::string blob(const std::filesystem::path& cache, std::int64_t col, std::int64_t row) {

@@ -12,7 +12,7 @@
 
 #include <gtest/gtest.h>
 
-#include "seqloc/pipeline/npy.hpp"
+#include "seqloc/io/npy.hpp"
 
 namespace seqloc::test {
 
@@ -88,7 +88,7 @@ std::filesystem::path shared_osm(const std::string& name) {
 }
 
 void write_npy_float32(const std::filesystem::path& path, int h, int w, int n, const std::vector<float>& values) {
-  std::ofstream(path, std::ios::binary) << pipeline::encode_npy_float32(h, w, n, values.data());
+  std::ofstream(path, std::ios::binary) << io::encode_npy_float32(h, w, n, values.data());
 }
 
 std::string read_file(const std::filesystem::path& path) {

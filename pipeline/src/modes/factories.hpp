@@ -3,8 +3,8 @@
 
 #include <memory>
 
+#include "seqloc/core/stopwatch.hpp"
 #include "seqloc/pipeline/modes.hpp"
-#include "stopwatch.hpp"
 
 namespace seqloc::pipeline::modes {
 
@@ -15,7 +15,7 @@ namespace seqloc::pipeline::modes {
 /// smooth: the seqloc filter forward and the backward filter, every frame given every frame.
 [[nodiscard]] std::unique_ptr<LocalizationMode> make_smooth(const RouteContext& context);
 
-using detail::Clock;
-using detail::seconds_since;
+using core::Clock;
+using core::seconds_since;
 
 }  // namespace seqloc::pipeline::modes

@@ -2,7 +2,7 @@
 
 namespace seqloc::pipeline {
 
-void LocalizationMode::finish(RouteResult& result) { result.filter_seconds += filter_seconds_; }
+void LocalizationMode::finish(io::RouteResult& result) { result.filter_seconds += filter_seconds_; }
 
 double LocalizationMode::reported_etu_weight(double entropy) const {
   return filter::etu_weight(entropy, context_.options.filter.etu_reference_entropy);
@@ -24,17 +24,17 @@ GridCrop LocalizationMode::crop_in_region_of(std::size_t s, std::size_t t) const
   return region_of(s) == region_of(t) ? own : carry_crop(own, projection_of(s), projection_of(t));
 }
 
-std::unique_ptr<LocalizationMode> make_mode(Mode mode, const RouteContext& context) {
+std::unique_ptr<LocalizationMode> make_mode(io::Mode mode, const RouteContext& context) {
   switch (mode) {
-    case Mode::single:
+    case io::Mode::single:
       return modes::make_single(context);
-    case Mode::offline:
+    case io::Mode::offline:
       return modes::make_offline(context);
-    case Mode::online:
+    case io::Mode::online:
       return modes::make_sequential(context, /*online=*/true);
-    case Mode::smooth:
+    case io::Mode::smooth:
       return modes::make_smooth(context);
-    case Mode::seqloc:
+    case io::Mode::seqloc:
       break;
   }
   return modes::make_sequential(context, /*online=*/false);

@@ -20,7 +20,7 @@ class OfflineMode final : public LocalizationMode {
   [[nodiscard]] bool lookahead() const override { return false; }
 
   FrameEstimate estimate(std::size_t i, const GridCrop& crop, FramePrefetcher& frames) override {
-    const Route& route = context_.route;
+    const io::Route& route = context_.route;
     const filter::PreparedFrame& frame = frames.get(i);
     const int half = context_.options.offline_half_window;
     const std::size_t k = half < 0 ? route.frames.size() : static_cast<std::size_t>(half);

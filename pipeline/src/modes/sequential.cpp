@@ -33,7 +33,7 @@ class SequentialMode final : public LocalizationMode {
     return e;
   }
 
-  void finish(RouteResult& result) override {
+  void finish(io::RouteResult& result) override {
     LocalizationMode::finish(result);
     result.recentres += localizer_.recentres();
     if (context_.options.keep_beliefs) {
@@ -47,7 +47,7 @@ class SequentialMode final : public LocalizationMode {
  private:
   // The filter's step on frame j (and, with a lag, the backward pass it completes).
   void step(std::size_t j, FramePrefetcher& frames) {
-    const RouteFrame& f = context_.route.frames[j];
+    const io::RouteFrame& f = context_.route.frames[j];
     if (j > 0 && region_of(j) != region_of(j - 1)) localizer_.hand_over(cache_of(j));
     const auto& projection = projection_of(j);
     const GridCrop crop = frame_crop(f, cache_of(j).grid(), projection);

@@ -24,8 +24,8 @@
 #include <optional>
 #include <system_error>
 
-#include "../unlinked_file.hpp"
 #include "factories.hpp"
+#include "seqloc/core/files.hpp"
 #include "seqloc/pipeline/backward_pass.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
 
@@ -40,7 +40,7 @@ class CheckpointFile {
  public:
   CheckpointFile(const std::filesystem::path& dir, std::size_t values)
       : dir_(dir.empty() ? std::filesystem::temp_directory_path() : dir), bytes_(values * sizeof(float)) {
-    fd_ = detail::open_unlinked_file(dir_, "seqloc-smooth");
+    fd_ = core::open_unlinked_file(dir_, "seqloc-smooth");
     if (fd_ < 0) fail("cannot create a temporary file");
   }
   ~CheckpointFile() { ::close(fd_); }
@@ -89,7 +89,7 @@ class SmoothMode final : public LocalizationMode {
     return estimates_.at(i);
   }
 
-  void finish(RouteResult& result) override {
+  void finish(io::RouteResult& result) override {
     LocalizationMode::finish(result);
     result.recentres += recentres_;
   }
@@ -113,7 +113,7 @@ std::vector<std::size_t> SmoothMode::stretch_starts() const {
 }
 
 void SmoothMode::run(FramePrefetcher& frames) {
-  const Route& route = context_.route;
+  const io::Route& route = context_.route;
   const std::size_t n = route.frames.size();
   const LocalizeOptions& options = context_.options;
   std::vector<StepRecord> records(n);
@@ -127,7 +127,7 @@ void SmoothMode::run(FramePrefetcher& frames) {
     SequentialLocalizer forward(cache_of(0), options.filter, /*online=*/false, options.recentre_margin);
     std::size_t stretch = 0;
     for (std::size_t t = 0; t < n; ++t) {
-      const RouteFrame& f = route.frames[t];
+      const io::RouteFrame& f = route.frames[t];
       if (t > 0 && region_of(t) != region_of(t - 1)) forward.hand_over(cache_of(t));
       std::optional<GridFix> gps;
       if (f.gps) {

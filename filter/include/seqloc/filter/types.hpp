@@ -7,12 +7,16 @@
 #include <stdexcept>
 #include <string>
 
+#include "seqloc/core/error.hpp"
+
 namespace seqloc::filter {
 
 /// A frame volume or a configuration the filter cannot use; the message says what and why.
-class FilterError : public std::invalid_argument {
+/// Data by default (a frame's values or shape); usage for a configuration (FilterConfig::validate).
+class FilterError : public Error {
  public:
-  using std::invalid_argument::invalid_argument;
+  explicit FilterError(const std::string& message, ErrorCategory category = ErrorCategory::data)
+      : Error(category, message) {}
 };
 
 /// Motion between frames t-1 and t in the body frame of t-1 (conventions.md section 1):

@@ -1,21 +1,22 @@
 #pragma once
 // Errors of the osm module: problems with input data or files, never programmer errors.
 
-#include <stdexcept>
 #include <string>
+
+#include "seqloc/core/error.hpp"
 
 namespace seqloc::osm {
 
 /// Base of every data or I/O error raised while reading OpenStreetMap input.
-class OsmError : public std::runtime_error {
+class OsmError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit OsmError(const std::string& message) : Error(ErrorCategory::data, message) {}
 };
 
 /// The input file cannot be opened, is truncated or is not valid OSM data.
 class OsmInputError : public OsmError {
  public:
-  using OsmError::OsmError;
+  explicit OsmInputError(const std::string& message) : OsmError(message) {}
 };
 
 }  // namespace seqloc::osm

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "seqloc/pipeline/calibration.hpp"
+#include "seqloc/matcher/calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
 
 namespace seqloc::pipeline {
@@ -21,16 +21,16 @@ namespace seqloc::pipeline {
 /// The volume cell (v, u, bin) of a frame's ground truth, nearest, for a volume of the given shape
 /// lying on `crop` (its axes turned clockwise by crop.rotation_deg from grid north); nullopt
 /// without a true heading.
-[[nodiscard]] std::optional<std::array<int, 3>> true_volume_cell(const RouteFrame& frame, const GridCrop& crop,
+[[nodiscard]] std::optional<std::array<int, 3>> true_volume_cell(const io::RouteFrame& frame, const GridCrop& crop,
                                                                  const osm::RegionProjection& projection, int height,
                                                                  int width, int bins, double cell_m);
 
 /// The grid a backbone's calibration is fitted on: temperatures of log-probabilities from 1/8 to
 /// 8 in half octaves, blurs up to 4 cells and 3 bins, the floors of CalibrationFit's grid.
-[[nodiscard]] CalibrationFit::Grid backbone_calibration_grid();
+[[nodiscard]] matcher::CalibrationFit::Grid backbone_calibration_grid();
 
 struct BackboneFit {
-  CalibrationFit::Result best;  ///< the fit (its NLL, a uniform volume's, the frames)
+  matcher::CalibrationFit::Result best;  ///< the fit (its NLL, a uniform volume's, the frames)
   double as_given_nll = 0;      ///< the mean NLL of the volumes as given (temperature 1, no blur, no floor)
 };
 
@@ -38,7 +38,7 @@ struct BackboneFit {
 /// route's .npy volumes, or the built-in matcher's), before any temperature or calibration of
 /// `options`. `on_frame` (optional) is called after each frame. Throws DataError when no frame's
 /// true pose lies in its volume.
-[[nodiscard]] BackboneFit fit_backbone_calibration(const std::vector<Route>& routes, raster::CacheReader& cache,
+[[nodiscard]] BackboneFit fit_backbone_calibration(const std::vector<io::Route>& routes, raster::CacheReader& cache,
                                                    const LocalizeOptions& options,
                                                    const std::function<void()>& on_frame = {});
 

@@ -15,19 +15,17 @@
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
-#include "seqloc/pipeline/calibration.hpp"
+#include "seqloc/io/results.hpp"
+#include "seqloc/io/route.hpp"
+#include "seqloc/matcher/calibration.hpp"
+#include "seqloc/matcher/matcher.hpp"
 #include "seqloc/pipeline/frame_prefetcher.hpp"
-#include "seqloc/pipeline/matcher.hpp"
 #include "seqloc/pipeline/region_window.hpp"
-#include "seqloc/pipeline/route.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::pipeline {
 
 class RegionCatalog;
-
-enum class Mode { seqloc, online, single, offline, smooth };
-[[nodiscard]] const char* mode_name(Mode mode);
 
 struct LocalizeOptions {
   filter::FilterConfig filter;  ///< window size, components, threads (online mode turns ETU/MGR/PAS off)
@@ -40,14 +38,14 @@ struct LocalizeOptions {
   /// smoothing, for real time with a delay of `lag` frames); 0: the filter's own pose.
   int lag = 0;
   /// The built-in matcher, for frames with an observation instead of a volume.
-  MatcherConfig matcher;
+  matcher::MatcherConfig matcher;
   /// Every frame's volume (a backbone's or the matcher's) is tempered before filtering: its
   /// log-probabilities divided by T and renormalized (filter::temper_frame with power 1 / T).
   /// T > 1 flattens an overconfident backbone; T < 1 sharpens. 1: as given.
   double volume_temperature = 1.0;
   /// Then blurred and floored (calibration.hpp; identity by default), as `seqloc calibrate` fits a
   /// backbone (`--calibration calibration.json` sets both).
-  VolumeCalibration volume_calibration;
+  matcher::VolumeCalibration volume_calibration;
   /// Largest distance between consecutive crop centres (m) before the route is refused as
   /// implausible; 0: the belief window's size (a larger jump leaves the window anyway).
   double max_crop_jump_m = 0;
@@ -68,50 +66,6 @@ struct LocalizeOptions {
   void validate() const;
 };
 
-struct FramePose {
-  std::string frame;
-  double timestamp_s = 0;
-  double x_m = 0, y_m = 0;       ///< region CRS
-  double lat_deg = 0, lon_deg = 0;
-  double compass_heading_deg = 0;  ///< clockwise from true north
-  double grid_heading_deg = 0;     ///< clockwise from grid north (for files in the region CRS)
-  double entropy = 0;              ///< the frame volume's normalized entropy
-  double etu_weight = 1;
-  /// The power self-calibration raised the frame's volume to (seqloc mode; 1 in the others and
-  /// with --no-self-calibrate): for volumes sharpened as p^k it tends to 1 / k.
-  double volume_power = 1;
-  bool relocalized = false;
-  std::optional<double> position_error_m, heading_error_deg, lateral_error_m, longitudinal_error_m;
-  /// The ground truth of the frame, when the route has it, in the same forms as the estimate.
-  struct Truth {
-    double x_m = 0, y_m = 0, lat_deg = 0, lon_deg = 0;
-    std::optional<double> grid_heading_deg;  ///< clockwise from grid north
-  };
-  std::optional<Truth> truth;
-  /// The region (cache file stem) whose CRS x_m, y_m and the errors are in.
-  std::string region;
-};
-
-struct RouteResult {
-  std::string route;
-  Mode mode = Mode::seqloc;
-  std::vector<FramePose> poses;
-  int recentres = 0;  ///< how often the window moved
-  int region_crossings = 0;  ///< how often the route crossed into another region
-  int lag = 0;        ///< online and seqloc: the fixed lag the poses were smoothed with (LocalizeOptions::lag)
-  /// Where the time went (seconds). Reading and preparing the next frame's volume overlaps the
-  /// filter's step on the current one; `wait_seconds` is what the filter waited for it.
-  double prepare_seconds = 0;
-  double filter_seconds = 0;
-  double wait_seconds = 0;
-  /// With LocalizeOptions::keep_beliefs (online and seqloc): after each frame, the position marginal of
-  /// the belief, (frames, belief_height, belief_width) row-major, and the region pixel of each
-  /// frame's window cell (0, 0).
-  int belief_width = 0, belief_height = 0;
-  std::vector<float> beliefs;
-  std::vector<std::array<std::int64_t, 2>> belief_origins;
-};
-
 /// A frame's volume made ready for the filter as localize makes every frame: prepared for
 /// options.filter.headings, tempered by options.volume_temperature, blurred and floored by
 /// options.volume_calibration. Throws filter::FilterError
@@ -123,36 +77,37 @@ struct RouteResult {
 
 /// The route's own frames: its .npy volumes, or the built-in matcher run on its observations
 /// against the cache's class raster. Throws DataError naming the file.
-[[nodiscard]] FrameSource route_frames(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options);
+[[nodiscard]] FrameSource route_frames(const io::Route& route, raster::CacheReader& cache,
+                                       const LocalizeOptions& options);
 
 /// route_frames through a FrameStore with `readers` readers: each frame with the float16 values
 /// that localize_routes gives every mode, held only until it has been taken that often.
 /// localize_route's default, and what render and the benchmark use to see the frames as localize
 /// saw them.
-[[nodiscard]] FrameSource stored_route_frames(const Route& route, raster::CacheReader& cache,
+[[nodiscard]] FrameSource stored_route_frames(const io::Route& route, raster::CacheReader& cache,
                                               const LocalizeOptions& options, int readers = 1);
 
 /// How often a mode takes each frame of `route` from the route's FrameStore (which holds a frame
 /// until its last reader took it): 1, but 2 for smooth on a route the matcher scores (smooth reads
 /// every frame in its forward and again in its backward pass; a .npy volume is read again rather
 /// than held, a volume the matcher scored is held rather than scored again).
-[[nodiscard]] int frame_reads(Mode mode, const Route& route);
+[[nodiscard]] int frame_reads(io::Mode mode, const io::Route& route);
 
 /// The built-in matcher's raw volume for an observation frame: (size, size, headings) float32
 /// log-likelihood scores over the frame's crop (before any calibration). Throws DataError for an
 /// unreadable observation.
-[[nodiscard]] std::vector<float> match_frame(const RouteFrame& frame, raster::CacheReader& cache,
-                                             const BevMatcher& matcher);
+[[nodiscard]] std::vector<float> match_frame(const io::RouteFrame& frame, raster::CacheReader& cache,
+                                             const matcher::BevMatcher& matcher);
 
 /// Where a frame's crop lies in the region grid (GridCrop, region_window.hpp).
-[[nodiscard]] GridCrop frame_crop(const RouteFrame& frame, const raster::RegionGrid& grid,
+[[nodiscard]] GridCrop frame_crop(const io::RouteFrame& frame, const raster::RegionGrid& grid,
                                   const osm::RegionProjection& projection);
 
 /// Checks a route's crops against the region before any work: every crop centre must lie in the
 /// region grid (or within options.max_crop_outside_m of it), and consecutive centres at most
 /// options.crop_jump_limit_m() apart. Throws DataError "DIR/frames.csv:LINE: ..." (a lat/lon crop
 /// that would fall in the region with its two coordinates exchanged is called swapped).
-void check_crops(const Route& route, const raster::RegionGrid& grid, const osm::RegionProjection& projection,
+void check_crops(const io::Route& route, const raster::RegionGrid& grid, const osm::RegionProjection& projection,
                  const LocalizeOptions& options);
 
 /// What a frame left behind, for pictures: its prepared volume and crop, and for the online modes
@@ -170,14 +125,15 @@ using FrameInspector = std::function<void(const FrameInspection&)>;
 /// `source` defaults to stored_route_frames(route, cache, options); a caller running several
 /// modes on one route may share one that keeps the frames. Throws DataError (volumes), filter::FilterError
 /// or raster::CacheError. Routes may run in parallel threads on one CacheReader.
-[[nodiscard]] RouteResult localize_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
-                                         Mode mode, const std::function<void()>& on_frame = {},
-                                         FrameSource source = {}, const FrameInspector& inspect = {});
+[[nodiscard]] io::RouteResult localize_route(const io::Route& route, raster::CacheReader& cache,
+                                             const LocalizeOptions& options, io::Mode mode,
+                                             const std::function<void()>& on_frame = {}, FrameSource source = {},
+                                             const FrameInspector& inspect = {});
 
 /// What localize_routes did: one result per (route, mode), route-major and the modes in the
 /// order given; and how the routes' shared frames were held.
 struct BatchResult {
-  std::vector<RouteResult> results;
+  std::vector<io::RouteResult> results;
   std::size_t frames_made = 0;     ///< volumes scored or read and prepared (once per frame and route)
   std::size_t frames_spilled = 0;  ///< of those, frames held in the temporary file
   std::size_t peak_frame_memory_bytes = 0;  ///< the largest float16 memory one route's frames took
@@ -189,8 +145,8 @@ struct BatchResult {
 /// The modes of a route share its frames through a FrameStore, so each volume is scored or read
 /// once. `on_frame` (optional) is called after each frame of each job, from the worker threads.
 /// The first error of any job stops the others from starting and is rethrown.
-[[nodiscard]] BatchResult localize_routes(const std::vector<Route>& routes, raster::CacheReader& cache,
-                                          const LocalizeOptions& options, const std::vector<Mode>& modes,
+[[nodiscard]] BatchResult localize_routes(const std::vector<io::Route>& routes, raster::CacheReader& cache,
+                                          const LocalizeOptions& options, const std::vector<io::Mode>& modes,
                                           const std::function<void()>& on_frame = {});
 
 /// The same over several regions (region_catalog.hpp): each frame is placed in a region, staying
@@ -201,30 +157,16 @@ struct BatchResult {
 /// offline's window is in frame t's region with its neighbours' crops carried into it.
 /// What localize_routes checks of a route before any work over a catalog: each frame in a
 /// region and each leg's crops (check_crops). Throws DataError "DIR/frames.csv:LINE: ...".
-void check_route(const Route& route, const RegionCatalog& catalog, const LocalizeOptions& options);
+void check_route(const io::Route& route, const RegionCatalog& catalog, const LocalizeOptions& options);
 
-[[nodiscard]] BatchResult localize_routes(const std::vector<Route>& routes, const RegionCatalog& catalog,
-                                          const LocalizeOptions& options, const std::vector<Mode>& modes,
+[[nodiscard]] BatchResult localize_routes(const std::vector<io::Route>& routes, const RegionCatalog& catalog,
+                                          const LocalizeOptions& options, const std::vector<io::Mode>& modes,
                                           const std::function<void()>& on_frame = {});
 
 /// Zero-mean Gaussian noise on each odometry increment in the KITTI convention: translation sigma
 /// `translation_pct` % of the step length (on forward and left), heading sigma
 /// `rotation_deg_per_m` times the step length; integrated by the filter, so the trajectory drifts.
 /// Deterministic for a seed; ground truth is never touched.
-void perturb_odometry(Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed);
-
-/// conventions.md section 7, over every frame with ground truth.
-struct Metrics {
-  std::size_t frames = 0;  ///< frames with ground truth
-  double position_recall[3] = {};  ///< % of frames within 1, 3, 5 m
-  double heading_recall[3] = {};   ///< % within 1, 3, 5 degrees (frames with a true heading)
-  double mean_position_error_m = 0, median_position_error_m = 0;
-  double mean_heading_error_deg = 0, median_heading_error_deg = 0;
-  double mean_abs_lateral_m = 0, mean_abs_longitudinal_m = 0;
-};
-[[nodiscard]] Metrics compute_metrics(std::span<const FramePose> poses);
-
-/// Compass heading difference: min(|a - b| mod 360, 360 - |a - b| mod 360).
-[[nodiscard]] double heading_difference_deg(double a, double b);
+void perturb_odometry(io::Route& route, double translation_pct, double rotation_deg_per_m, std::uint64_t seed);
 
 }  // namespace seqloc::pipeline

@@ -17,7 +17,7 @@ namespace seqloc::pipeline {
 /// it (stored_route_frames: the matcher's calibrated volume, normalized, in float16). Frames that
 /// already carry a volume are written the same way. `on_frame` (optional) is called after each
 /// frame. Throws DataError naming the file that cannot be read or written.
-void write_volume_route(const Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
+void write_volume_route(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
                         const std::filesystem::path& dir, const std::function<void()>& on_frame = {});
 
 }  // namespace seqloc::pipeline

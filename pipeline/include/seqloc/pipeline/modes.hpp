@@ -32,13 +32,13 @@ struct FrameEstimate {
 
 /// The pose a mode estimated for frame `f`, in every form the outputs take (region metres,
 /// lat/lon, compass and grid heading), with its errors against the frame's ground truth.
-[[nodiscard]] FramePose frame_pose(const RouteFrame& f, const FrameEstimate& e,
-                                   const osm::RegionProjection& projection);
+[[nodiscard]] io::FramePose frame_pose(const io::RouteFrame& f, const FrameEstimate& e,
+                                       const osm::RegionProjection& projection);
 
 /// What a mode works on: one route against one region cache, or against the regions of a catalog
 /// for a route that crosses from one into the next. The references outlive the mode.
 struct RouteContext {
-  const Route& route;
+  const io::Route& route;
   raster::CacheReader& cache;  ///< the first frame's region
   const LocalizeOptions& options;
   const FrameInspector& inspect;  ///< may be empty
@@ -61,7 +61,7 @@ class LocalizationMode {
   /// frames it no longer needs.
   [[nodiscard]] virtual FrameEstimate estimate(std::size_t i, const GridCrop& crop, FramePrefetcher& frames) = 0;
   /// Adds what the mode gathered along the route (re-centring, filter time, kept beliefs).
-  virtual void finish(RouteResult& result);
+  virtual void finish(io::RouteResult& result);
 
  protected:
   explicit LocalizationMode(const RouteContext& context)
@@ -81,6 +81,6 @@ class LocalizationMode {
 };
 
 /// The mode's class for `mode`.
-[[nodiscard]] std::unique_ptr<LocalizationMode> make_mode(Mode mode, const RouteContext& context);
+[[nodiscard]] std::unique_ptr<LocalizationMode> make_mode(io::Mode mode, const RouteContext& context);
 
 }  // namespace seqloc::pipeline

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "seqloc/io/route.hpp"
 #include "seqloc/osm/projection.hpp"
-#include "seqloc/pipeline/route.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::pipeline {
@@ -53,6 +53,7 @@ class RegionCatalog {
 /// at least `margin_m` inside it. Throws DataError "DIR/frames.csv:LINE: ..." for a crop that no
 /// region holds, and for crops given in region-grid coordinates (crop_x, crop_y) with more than one
 /// region (they belong to the region they were made for; give crop_lat, crop_lon).
-[[nodiscard]] std::vector<std::size_t> route_regions(const Route& route, const RegionCatalog& catalog, double margin_m);
+[[nodiscard]] std::vector<std::size_t> route_regions(const io::Route& route, const RegionCatalog& catalog,
+                                                     double margin_m);
 
 }  // namespace seqloc::pipeline

@@ -19,6 +19,7 @@
 #include <utility>
 #include <vector>
 
+#include "seqloc/core/error.hpp"
 #include "seqloc/osm/features.hpp"
 #include "seqloc/osm/projection.hpp"
 #include "seqloc/raster/grid.hpp"
@@ -33,24 +34,25 @@ class Statement;
 }
 
 /// Base of the cache's data and I/O errors. Messages name the file (and tile) concerned.
-class CacheError : public std::runtime_error {
+class CacheError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit CacheError(const std::string& message, ErrorCategory category = ErrorCategory::data)
+      : Error(category, message) {}
 };
 /// The file cannot be opened, read or written.
 class CacheIoError : public CacheError {
  public:
-  using CacheError::CacheError;
+  explicit CacheIoError(const std::string& message) : CacheError(message, ErrorCategory::io) {}
 };
 /// The file is not a seqloc cache, or one of another format version.
 class CacheFormatError : public CacheError {
  public:
-  using CacheError::CacheError;
+  explicit CacheFormatError(const std::string& message) : CacheError(message) {}
 };
 /// A tile or window outside the cached region, or a tile missing from a cache.
 class CacheRangeError : public CacheError {
  public:
-  using CacheError::CacheError;
+  explicit CacheRangeError(const std::string& message) : CacheError(message) {}
 };
 
 /// Version of the cache layout this build reads and writes.

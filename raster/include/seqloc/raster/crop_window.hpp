@@ -6,15 +6,17 @@
 #include <stdexcept>
 #include <string>
 
+#include "seqloc/core/error.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::raster {
 
 /// A crop that cannot be placed as asked: a bad argument, or a point outside the region.
-class CropError : public std::invalid_argument {
+class CropError : public Error {
  public:
   enum class Kind { bad_argument, outside };
-  CropError(Kind kind, const std::string& message) : std::invalid_argument(message), kind_(kind) {}
+  CropError(Kind kind, const std::string& message)
+      : Error(kind == Kind::bad_argument ? ErrorCategory::usage : ErrorCategory::data, message), kind_(kind) {}
   [[nodiscard]] Kind kind() const { return kind_; }
 
  private:

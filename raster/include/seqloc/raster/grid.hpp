@@ -12,9 +12,11 @@
 #include <cmath>
 #include <cstdint>
 
+#include "seqloc/core/units.hpp"
+
 namespace seqloc::raster {
 
-inline constexpr double kCellM = 0.5;
+using core::kCellM;  // 0.5 m, the one resolution of every raster (core/units.hpp)
 inline constexpr double kPixelsPerMetre = 2.0;
 inline constexpr int kTilePx = 512;
 inline constexpr double kTileM = kTilePx * kCellM;

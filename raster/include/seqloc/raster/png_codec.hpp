@@ -8,11 +8,14 @@
 #include <string>
 #include <vector>
 
+#include "seqloc/core/error.hpp"
+
 namespace seqloc::raster {
 
-class PngError : public std::runtime_error {
+/// Corrupt or unsupported PNG data.
+class PngError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit PngError(const std::string& message) : Error(ErrorCategory::data, message) {}
 };
 
 struct PngImage {

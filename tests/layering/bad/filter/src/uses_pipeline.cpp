@@ -1,2 +1,2 @@
-// A fixture for the layering check: the filter (Eigen only) including a pipeline header must fail.
-#include "seqloc/pipeline/route.hpp"
+// A fixture for the layering check: the filter (core and Eigen only) including a pipeline header must fail.
+#include "seqloc/pipeline/localize.hpp"

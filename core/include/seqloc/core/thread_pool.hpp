@@ -1,0 +1,72 @@
+#pragma once
+// One pool of worker threads for every parallel loop of the process: the filter's per-step
+// chunks, localize's (route, mode) jobs, the matcher's headings, preprocessing's tiles. Threads
+// are started when first needed and kept; a loop hands its tasks to idle workers and takes part
+// itself, so that nothing starts a thread per call and a loop inside a loop cannot deadlock (the
+// caller always works its own tasks off).
+
+#include <algorithm>
+#include <condition_variable>
+#include <cstddef>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace seqloc::core {
+
+class ThreadPool {
+ public:
+  /// The process's pool (created on first use, its threads joined at exit).
+  [[nodiscard]] static ThreadPool& shared();
+
+  ThreadPool() = default;
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+
+  /// Runs task(0) ... task(tasks - 1), each once and in index order of their start, on at most
+  /// `concurrency` threads at a time, the calling thread one of them; returns when all have
+  /// ended. The first exception a task throws stops further tasks from starting and is rethrown
+  /// once the running ones have ended.
+  void run(std::size_t tasks, int concurrency, const std::function<void(std::size_t)>& task);
+
+  /// Worker threads started so far.
+  [[nodiscard]] std::size_t workers() const;
+
+ private:
+  struct Batch;
+  void work();
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<std::shared_ptr<Batch>> queue_;  ///< batches that still want helpers
+  std::vector<std::thread> threads_;
+  std::size_t idle_ = 0;
+  bool stopping_ = false;
+};
+
+/// Calls body(begin, end, chunk) on `chunks` contiguous parts of [0, n) (fewer when n is
+/// smaller), in parallel on the shared pool: part c is [n * c / chunks, n * (c + 1) / chunks), so
+/// the split depends on n and chunks alone, never on which thread runs a part.
+template <class Body>
+void parallel_chunks(int n, int chunks, Body&& body) {
+  chunks = std::max(1, std::min(chunks, n));
+  if (chunks == 1) {
+    body(0, n, 0);
+    return;
+  }
+  ThreadPool::shared().run(static_cast<std::size_t>(chunks), chunks, [&body, n, chunks](std::size_t c) {
+    const int t = static_cast<int>(c);
+    body(n * t / chunks, n * (t + 1) / chunks, t);
+  });
+}
+
+/// Runs job(0) ... job(jobs - 1), each once, on min(threads, jobs) threads of the shared pool
+/// (the calling thread one of them); jobs start in index order. The first exception a job throws
+/// stops further jobs from starting; it is rethrown once the running ones have ended.
+void run_jobs(std::size_t jobs, int threads, const std::function<void(std::size_t)>& job);
+
+}  // namespace seqloc::core

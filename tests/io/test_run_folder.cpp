@@ -1,0 +1,137 @@
+// The run output folder: what the writer puts there the reader gives back, field by field, for
+// any frame id and region name (RFC 4180 quoting), the folder appears whole or not at all, and
+// evaluate's search finds every mode.
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "seqloc/core/error.hpp"
+#include "seqloc/io/run_folder.hpp"
+#include "support/test_support.hpp"
+
+namespace seqloc::io {
+namespace {
+
+RouteResult result_with_ids(Mode mode, const std::vector<std::string>& ids, const std::string& region) {
+  RouteResult r;
+  r.route = "route,1";
+  r.mode = mode;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    FramePose p;
+    p.frame = ids[i];
+    p.timestamp_s = 10.0 + static_cast<double>(i);
+    p.lat_deg = 49.5 + 1e-5 * static_cast<double>(i);
+    p.lon_deg = 11.25;
+    p.compass_heading_deg = 90.5;
+    p.x_m = 3.25 * static_cast<double>(i);
+    p.y_m = -4.5;
+    p.entropy = 0.25;
+    p.etu_weight = 0.5;
+    p.volume_power = 0.75;
+    p.relocalized = i % 2 == 1;
+    p.position_error_m = 1.5 * static_cast<double>(i);
+    p.heading_error_deg = 2.0;
+    p.lateral_error_m = -0.5;
+    p.longitudinal_error_m = 1.25;
+    p.region = region;
+    r.poses.push_back(p);
+  }
+  return r;
+}
+
+TEST(RunFolder, IdsWithCommasAndQuotesRoundTrip) {
+  test::ScratchDir dir;
+  const std::vector<std::string> ids{"cam,0", "cam,1", "say \"2\"", " padded ", "plain", "cam,5"};
+  const std::string region = "nb, north";
+  const auto out = dir / "out";
+  {
+    RunFolderWriter writer(out);
+    writer.add(result_with_ids(Mode::smooth, ids, region));
+    writer.add(result_with_ids(Mode::single, ids, region));
+    const MetricsByMode metrics = writer.commit({"route,1"});
+    EXPECT_EQ(metrics.size(), 2u);
+  }
+  const RunFolder run(out);
+  ASSERT_TRUE(run.has_route("route,1"));
+  const auto poses = run.route_poses("route,1");
+  ASSERT_EQ(poses.size(), 2u);
+  EXPECT_EQ(poses[0].first, Mode::single) << "the recall table's order";
+  EXPECT_EQ(poses[1].first, Mode::smooth);
+  const auto written = result_with_ids(Mode::smooth, ids, region).poses;
+  ASSERT_EQ(poses[1].second.size(), ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const FramePose& p = poses[1].second[i];
+    EXPECT_EQ(p.frame, ids[i]);
+    EXPECT_EQ(p.region, region);
+    EXPECT_DOUBLE_EQ(p.timestamp_s, written[i].timestamp_s);
+    EXPECT_NEAR(p.lat_deg, written[i].lat_deg, 1e-9);
+    EXPECT_NEAR(p.x_m, written[i].x_m, 1e-3);
+    EXPECT_EQ(p.relocalized, written[i].relocalized);
+    EXPECT_NEAR(*p.position_error_m, *written[i].position_error_m, 1e-4);
+  }
+}
+
+TEST(RunFolder, KeptBeliefsReadBackWithQuotedIds) {
+  test::ScratchDir dir;
+  RouteResult r = result_with_ids(Mode::seqloc, {"a,1", "a,2"}, "region");
+  r.belief_width = 3;
+  r.belief_height = 2;
+  r.beliefs = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11};
+  r.belief_origins = {{{-5, 7}}, {{100, 200}}};
+  const auto out = dir / "out";
+  RunFolderWriter writer(out);
+  writer.add(r);
+  (void)writer.commit({r.route});
+  const RunFolder run(out);
+  ASSERT_TRUE(run.has_beliefs(r.route, Mode::seqloc));
+  const KeptBeliefs kept(run.mode_dir(r.route, Mode::seqloc), 2);
+  EXPECT_EQ(kept.width(), 3);
+  EXPECT_EQ(kept.height(), 2);
+  EXPECT_EQ(kept.origin(0), (std::array<std::int64_t, 2>{-5, 7}));
+  EXPECT_EQ(kept.origin(1), (std::array<std::int64_t, 2>{100, 200}));
+  EXPECT_EQ(kept.marginal(1), (std::vector<double>{6, 7, 8, 9, 10, 11}));
+  EXPECT_THROW(KeptBeliefs(run.mode_dir(r.route, Mode::seqloc), 3), DataError) << "not the route's frames";
+}
+
+TEST(RunFolder, AWriterNotCommittedLeavesThePreviousFolder) {
+  test::ScratchDir dir;
+  const auto out = dir / "out";
+  std::filesystem::create_directories(out);
+  std::ofstream(out / "previous.txt") << "kept";
+  {
+    RunFolderWriter writer(out);
+    writer.add(result_with_ids(Mode::seqloc, {"f"}, "r"));
+  }  // an error before commit()
+  EXPECT_TRUE(std::filesystem::exists(out / "previous.txt"));
+  EXPECT_FALSE(std::filesystem::exists(out / "route,1"));
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    EXPECT_EQ(entry.path().filename(), "out") << "a staging folder was left: " << entry.path();
+  }
+}
+
+TEST(RunFolder, EvaluateFindsEveryModeAtAnyLevel) {
+  test::ScratchDir dir;
+  const auto out = dir / "out";
+  RunFolderWriter writer(out);
+  for (const Mode mode : kModes) writer.add(result_with_ids(mode, {"x", "y"}, "r"));
+  (void)writer.commit({"route,1"});
+  const auto files = find_poses_files({out, out / "route,1", out / "route,1" / "smooth"});
+  EXPECT_EQ(files.size(), kModes.size()) << "a file reached twice counts once";
+  const MetricsByMode metrics = evaluate_poses_files(files);
+  ASSERT_EQ(metrics.size(), kModes.size());
+  EXPECT_EQ(metrics.at("smooth").frames, 2u);
+  EXPECT_THROW((void)find_poses_files({dir / "missing"}), DataError);
+}
+
+TEST(RunFolder, ModeNamesParseBack) {
+  for (const Mode mode : kModes) EXPECT_EQ(parse_mode(mode_name(mode)), mode);
+  EXPECT_FALSE(parse_mode("Seqloc").has_value());
+  EXPECT_FALSE(parse_mode("").has_value());
+}
+
+}  // namespace
+}  // namespace seqloc::io
