@@ -1,19 +1,13 @@
-#include <algorithm>
 #include <atomic>
-#include <exception>
 #include <mutex>
 
 #include <cstdio>
 #include <filesystem>
-#include <map>
-#include <set>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "command.hpp"
 #include "seqloc/core/error.hpp"
-#include "seqloc/core/files.hpp"
 #include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
@@ -106,18 +100,11 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
         throw seqloc::UsageError("--odometry-noise '" + noise_ + "': expected SIGMA_T_PCT,SIGMA_R_DEG_PER_M >= 0");
       }
     }
+    // --mode is one of the mode names or "all" (CLI::IsMember checked it).
     if (mode_ == "all") {
-      modes_ = {io::Mode::single, io::Mode::offline, io::Mode::online, io::Mode::seqloc, io::Mode::smooth};
-    } else if (mode_ == "smooth") {
-      modes_ = {io::Mode::smooth};
-    } else if (mode_ == "single") {
-      modes_ = {io::Mode::single};
-    } else if (mode_ == "offline") {
-      modes_ = {io::Mode::offline};
-    } else if (mode_ == "online") {
-      modes_ = {io::Mode::online};
+      modes_.assign(io::kModes.begin(), io::kModes.end());
     } else {
-      modes_ = {io::Mode::seqloc};
+      modes_ = {io::parse_mode(mode_).value()};
     }
     if (!shard_text_.empty()) {
       const auto v = parse_numbers<int>(shard_text_, '/', 2);

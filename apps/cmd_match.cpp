@@ -7,7 +7,6 @@
 #include "seqloc/core/error.hpp"
 #include "seqloc/core/files.hpp"
 #include "seqloc/io/route.hpp"
-#include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/match_routes.hpp"
 
 namespace seqloc::app {

@@ -13,7 +13,6 @@
 #include "command.hpp"
 #include "seqloc/core/files.hpp"
 #include "seqloc/ingest/preprocess.hpp"
-#include "seqloc/io/run_folder.hpp"
 
 namespace seqloc::app {
 

@@ -49,8 +49,8 @@ class RenderCommand : public Command {
     raster::CacheReader cache(cache_path_, 256);
     const io::Route route = io::read_route(route_dir_);
     std::vector<std::pair<std::string, std::vector<io::FramePose>>> poses;
+    const io::RunFolder run(localized_);
     if (!localized_.empty()) {
-      const io::RunFolder run(localized_);
       if (!run.has_route(route.name)) {
         throw seqloc::UsageError((localized_ / route.name).string() + ": no localize results for route '" + route.name +
                                  "' there");
@@ -58,15 +58,15 @@ class RenderCommand : public Command {
       // Every mode the run has (smooth's too), in the recall table's order.
       for (auto& [mode, mode_poses] : run.route_poses(route.name))
         poses.emplace_back(io::mode_name(mode), std::move(mode_poses));
-      options_.beliefs_dir =
-          run.mode_dir(route.name, io::Mode::seqloc);  // used when localize kept the beliefs (--beliefs)
+      // Used when localize kept the beliefs (--beliefs).
+      options_.beliefs_dir = run.mode_dir(route.name, io::Mode::seqloc);
     } else {
       // Both modes side by side on the route's shared frames, as seqloc localize runs them.
       auto batch = pipeline::localize_routes({route}, cache, options_.localize, {io::Mode::single, io::Mode::seqloc});
       for (auto& result : batch.results) poses.emplace_back(io::mode_name(result.mode), std::move(result.poses));
     }
     if (frame_ == "collapse") {
-      if (!io::RunFolder(localized_).has_beliefs(route.name, io::Mode::seqloc)) {
+      if (!run.has_beliefs(route.name, io::Mode::seqloc)) {
         throw seqloc::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
       }
       std::span<const io::FramePose> seqloc;

@@ -49,7 +49,8 @@ std::size_t ThreadPool::workers() const {
 }
 
 void ThreadPool::run(std::size_t tasks, int concurrency, const std::function<void(std::size_t)>& task) {
-  const std::size_t helpers = std::min(tasks, static_cast<std::size_t>(std::max(1, concurrency))) - (tasks > 0 ? 1 : 0);
+  if (tasks == 0) return;
+  const std::size_t helpers = std::min(tasks, static_cast<std::size_t>(std::max(1, concurrency))) - 1;
   if (helpers == 0) {
     for (std::size_t i = 0; i < tasks; ++i) task(i);
     return;

@@ -28,7 +28,7 @@ void RouteLimits::validate() const {
   auto fail = [](const std::string& field, double value, const char* constraint) {
     std::ostringstream s;
     s << "route limits: " << field << " = " << value << ": " << constraint;
-    throw DataError(s.str());
+    throw UsageError(s.str());
   };
   if (!(max_step_m > 0)) fail("max_step_m", max_step_m, "must be > 0");
   if (!(max_speed_mps > 0)) fail("max_speed_mps", max_speed_mps, "must be > 0");

@@ -42,10 +42,6 @@ nlohmann::ordered_json metrics_json(const Metrics& m) {
   return j;
 }
 
-}  // namespace
-
-namespace {
-
 // poses.csv: one row per frame (docs/localize.md "Outputs").
 std::string poses_csv(const RouteResult& r) {
   std::ostringstream csv;

@@ -18,7 +18,7 @@
 #include "seqloc/raster/cache.hpp"
 #include "support/test_support.hpp"
 
-namespace seqloc::pipeline {
+namespace seqloc {
 namespace {
 
 const char* kBbox = "11.520,49.995,11.566,50.024";  // ~3.3 x 3.2 km of north-bayreuth: ~1 s of work
@@ -229,4 +229,4 @@ TEST(Concurrency, ReadersOfACacheBeingRebuiltSeeOneWholeBuild) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc

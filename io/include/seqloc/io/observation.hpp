@@ -34,7 +34,7 @@ inline constexpr int kMaxObservationSize = 513;
 /// pixel format, an even or too large side, or a code outside its channel's list.
 [[nodiscard]] Observation read_observation(const std::filesystem::path& path);
 
-/// Writes the PNG through a temporary file renamed into place. Throws DataError on I/O failure.
+/// Writes the PNG through a temporary file renamed into place. Throws IoError on I/O failure.
 void write_observation(const std::filesystem::path& path, const Observation& observation);
 
 }  // namespace seqloc::io

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "seqloc/core/error.hpp"
+#include "seqloc/core/units.hpp"
 #include "seqloc/filter/types.hpp"
 #include "seqloc/osm/projection.hpp"
 
@@ -46,7 +47,7 @@ struct Route {
   std::filesystem::path dir;
   std::string name;
   filter::VolumeValues volume_kind = filter::VolumeValues::log_prob;
-  double cell_m = 0.5;
+  double cell_m = core::kCellM;
   VolumeLayout layout = VolumeLayout::hwn;
   bool layout_declared = false;  ///< route.json names the layout (else HWN, with a check of each shape)
   /// route.json's "simulated" object as JSON text (the provenance `seqloc simulate` records), or
@@ -61,7 +62,7 @@ struct RouteLimits {
   double max_speed_mps = 70.0;  ///< translation over the time between frames (250 km/h)
   double max_yaw_deg = 120.0;   ///< one increment's heading change
 
-  void validate() const;
+  void validate() const;  ///< throws UsageError naming the bad field
 };
 
 /// Reads and checks a route directory. Throws DataError: "DIR/route.json: ..." or
