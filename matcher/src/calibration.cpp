@@ -5,12 +5,12 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
-#include <thread>
 #include <utility>
 
 #include <Eigen/Core>
 
 #include "seqloc/core/error.hpp"
+#include "seqloc/core/thread_pool.hpp"
 
 namespace seqloc::matcher {
 namespace {
@@ -38,23 +38,6 @@ double log_sum_exp(std::span<const float> values, float top, double temperature)
   return static_cast<double>(top) / temperature + std::log(sum);
 }
 
-// Runs f(begin, end) over [0, n) split into `threads` contiguous ranges, one thread each.
-template <class F>
-void parallel_ranges(std::size_t n, int threads, F&& f) {
-  const auto parts = static_cast<std::size_t>(std::max(1, threads));
-  if (parts == 1 || n < 2) {
-    f(std::size_t{0}, n);
-    return;
-  }
-  const std::size_t chunk = (n + parts - 1) / parts;
-  std::vector<std::thread> pool;
-  for (std::size_t begin = chunk; begin < n; begin += chunk) {
-    pool.emplace_back([&f, begin, end = std::min(n, begin + chunk)] { f(begin, end); });
-  }
-  f(std::size_t{0}, std::min(n, chunk));
-  for (auto& t : pool) t.join();
-}
-
 // values[i] = f(values[i]) for an Eigen array expression f, over [0, n) shared among `threads`
 // threads. Eigen computes exp and log differently in a vectorized body and in the scalar head
 // and tail it peels off by address, so each block of values is copied into an aligned buffer of
@@ -64,7 +47,7 @@ template <class F>
 void vectorized(float* values, std::size_t n, int threads, F&& f) {
   constexpr std::size_t kBlock = 4096;
   const std::size_t blocks = (n + kBlock - 1) / kBlock;
-  parallel_ranges(blocks, threads, [&](std::size_t k0, std::size_t k1) {
+  core::parallel_chunks(blocks, threads, [&](std::size_t k0, std::size_t k1, int) {
     Eigen::ArrayXf buffer(static_cast<Eigen::Index>(kBlock));  // Eigen aligns its own storage
     for (std::size_t k = k0; k < k1; ++k) {
       const std::size_t start = k * kBlock, m = std::min(kBlock, n - start);
@@ -193,7 +176,7 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
              N = static_cast<std::size_t>(bins);
   if (c.blur_bins > 0) {
     const auto taps = float_taps(c.blur_bins);
-    parallel_ranges(H * W, threads, [&](std::size_t l0, std::size_t l1) {
+    core::parallel_chunks(H * W, threads, [&](std::size_t l0, std::size_t l1, int) {
       std::vector<float> padded;
       convolve_circular(p + l0 * N, padded, l1 - l0, bins, taps);
     });
@@ -201,7 +184,7 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
   if (c.blur_cells > 0) {
     const auto taps = float_taps(c.blur_cells);
     // Along u: each row is `width` blocks of N headings (rows shared among threads).
-    parallel_ranges(H, threads, [&](std::size_t r0, std::size_t r1) {
+    core::parallel_chunks(H, threads, [&](std::size_t r0, std::size_t r1, int) {
       std::vector<float> row(W * N);
       for (std::size_t r = r0; r < r1; ++r) {
         float* out = p + r * W * N;
@@ -210,8 +193,9 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
       }
     });
     // Along v: `height` blocks of whole rows (runs of each row shared among threads).
-    parallel_ranges(W * N, threads,
-                    [&](std::size_t b0, std::size_t b1) { convolve_blocks_in_place(p, height, W * N, b0, b1, taps); });
+    core::parallel_chunks(W * N, threads, [&](std::size_t b0, std::size_t b1, int) {
+      convolve_blocks_in_place(p, height, W * N, b0, b1, taps);
+    });
   }
   // A plain loop: a vectorized reduction would group the terms by the buffer's address.
   double sum = 0;

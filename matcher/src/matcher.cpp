@@ -4,13 +4,13 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
-#include <thread>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "seqloc/core/error.hpp"
 #include "seqloc/core/flat_index.hpp"
+#include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 #include "seqloc/osm/classes.hpp"
 
@@ -408,15 +408,9 @@ std::vector<float> BevMatcher::match(const io::Observation& observation, std::sp
                             static_cast<std::size_t>(n_bins));
   const HeadingJob job{bodies, map_spectra, t, s, n, n_bins, static_cast<float>(1.0 / config_.temperature)};
   const int quarter = n_bins / 4;
-  const int threads = std::max(1, std::min(config_.threads, quarter));
-  {
-    std::vector<std::jthread> workers;
-    for (int w = 1; w < threads; ++w) {
-      workers.emplace_back(score_headings, std::cref(job), quarter * w / threads, quarter * (w + 1) / threads,
-                           volume.data());
-    }
-    score_headings(job, 0, quarter / threads, volume.data());
-  }
+  // A quarter of the headings, shared among the threads (the other three quarters are rotations).
+  core::parallel_chunks(quarter, config_.threads,
+                        [&](int begin, int end, int) { score_headings(job, begin, end, volume.data()); });
   return volume;
 }
 

@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <random>
 
@@ -31,6 +32,24 @@ TEST(CalibrateVolume, IdentityIsALogSoftmax) {
   for (float v : volume) z += std::exp(static_cast<double>(v) - 100.0);
   for (std::size_t i = 0; i < volume.size(); ++i) {
     EXPECT_NEAR(calibrated[i], static_cast<double>(volume[i]) - 100.0 - std::log(z), 1e-5);
+  }
+}
+
+TEST(CalibrateVolume, TheSameBitsForAnyNumberOfThreads) {
+  // Every stage works on separate cells (the blocks of exp and log, the heading blur per cell, the
+  // row and column blurs): however the shared pool splits them, each value is computed alike.
+  const int H = 37, W = 29, N = 12;
+  std::mt19937 rng(3);
+  std::normal_distribution<float> d(0.0F, 4.0F);
+  std::vector<float> volume(static_cast<std::size_t>(H * W * N));
+  for (auto& v : volume) v = d(rng);
+  const matcher::VolumeCalibration c{2.0, 1.5, 0.05};
+  auto one = volume;
+  matcher::calibrate_volume(one, H, W, N, c, 1);
+  for (const int threads : {2, 3, 7}) {
+    auto many = volume;
+    matcher::calibrate_volume(many, H, W, N, c, threads);
+    ASSERT_EQ(std::memcmp(one.data(), many.data(), one.size() * sizeof(float)), 0) << threads << " threads";
   }
 }
 

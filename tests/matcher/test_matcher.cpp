@@ -3,6 +3,7 @@
 // observation PNG round-trips and every malformed one is one clear error.
 
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <random>
 #include <utility>
@@ -38,6 +39,30 @@ std::vector<std::uint8_t> random_map(int side, std::uint32_t seed) {
     }
   }
   return rgb;
+}
+
+TEST(Matcher, TheSameVolumeForAnyNumberOfThreads) {
+  // The headings are shared among the threads of the pool; each is scored alike wherever it runs.
+  matcher::MatcherConfig config;
+  config.size = 12;
+  config.headings = 80;
+  const int t = 7;
+  io::Observation obs(t);
+  std::mt19937 rng(9);
+  for (std::size_t i = 0; i < obs.cells(); ++i) {
+    obs.visible[i] = rng() % 4 != 0;
+    obs.classes[3 * i] = static_cast<std::uint8_t>(rng() % 3);
+    obs.classes[3 * i + 1] = rng() % 5 == 0 ? 8 : 0;
+  }
+  config.threads = 1;
+  const auto map = random_map(matcher::BevMatcher(config).map_side(t), 21u);
+  const auto one = matcher::BevMatcher(config).match(obs, map);
+  for (const int threads : {2, 3, 8}) {
+    config.threads = threads;
+    const auto many = matcher::BevMatcher(config).match(obs, map);
+    ASSERT_EQ(one.size(), many.size());
+    ASSERT_EQ(std::memcmp(one.data(), many.data(), one.size() * sizeof(float)), 0) << threads << " threads";
+  }
 }
 
 TEST(Matcher, FftCorrelationEqualsDirectSum) {

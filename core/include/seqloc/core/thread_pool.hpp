@@ -6,6 +6,7 @@
 // caller always works its own tasks off).
 
 #include <algorithm>
+#include <concepts>
 #include <condition_variable>
 #include <cstddef>
 #include <deque>
@@ -49,18 +50,20 @@ class ThreadPool {
 };
 
 /// Calls body(begin, end, chunk) on `chunks` contiguous parts of [0, n) (fewer when n is
-/// smaller), in parallel on the shared pool: part c is [n * c / chunks, n * (c + 1) / chunks), so
-/// the split depends on n and chunks alone, never on which thread runs a part.
-template <class Body>
-void parallel_chunks(int n, int chunks, Body&& body) {
-  chunks = std::max(1, std::min(chunks, n));
-  if (chunks == 1) {
-    body(0, n, 0);
+/// smaller), in parallel on the shared pool: part c is [n * c / chunks, n * (c + 1) / chunks)
+/// (computed in n's type), so the split depends on n and chunks alone, never on which thread
+/// runs a part.
+template <std::integral Index, class Body>
+void parallel_chunks(Index n, int chunks, Body&& body) {
+  const auto parts = static_cast<Index>(std::max(1, chunks));
+  const Index count = n < parts ? std::max(n, Index{1}) : parts;
+  if (count == 1) {
+    body(Index{0}, n, 0);
     return;
   }
-  ThreadPool::shared().run(static_cast<std::size_t>(chunks), chunks, [&body, n, chunks](std::size_t c) {
-    const int t = static_cast<int>(c);
-    body(n * t / chunks, n * (t + 1) / chunks, t);
+  ThreadPool::shared().run(static_cast<std::size_t>(count), static_cast<int>(count), [&body, n, count](std::size_t c) {
+    const auto t = static_cast<Index>(c);
+    body(n * t / count, n * (t + 1) / count, static_cast<int>(c));
   });
 }
 
