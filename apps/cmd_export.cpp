@@ -39,11 +39,7 @@ class ExportCommand : public Command, public WithOverwrite, public WithProgress 
     if (!layer) throw seqloc::UsageError("--layer '" + layer_ + "': classes, road_distance or road_prior");
     options_.layer = *layer;
     if (!bbox_.empty()) options_.bbox = parse_bbox(bbox_);
-    try {
-      options_.validate();  // --prior-sigma, --bbox
-    } catch (const serve::ExportError& e) {
-      throw seqloc::UsageError(e.what());
-    }
+    options_.validate();  // --prior-sigma, --bbox: usage errors (exit 2)
   }
 
   int run() override {

@@ -49,12 +49,9 @@ class ServeCommand : public Command {
   }
 
   void check() override {
-    try {
-      service_.validate();  // --max-crop-m, --prior-sigma, ...
-      server_.validate();
-    } catch (const serve::ServiceError& e) {
-      throw seqloc::UsageError(e.what());
-    }
+    // Usage errors (ServiceError's category): exit 2.
+    service_.validate();  // --max-crop-m, --prior-sigma, ...
+    server_.validate();
   }
 
   int run() override {

@@ -118,7 +118,7 @@ Response Service::crop(Region& region, const Request& request, bool sidecar_only
   // A sidecar describes the crop without reading it.
   const MapBlock block = [&] {
     if (!sidecar_only) return read_crop(*region.cache, lat, lon, size_m, layers, options_.layers, options_.max_crop_m);
-    const CropWindow w = serve::locate_crop(*region.cache, lat, lon, size_m, options_.max_crop_m);
+    const CropWindow w = raster::locate_crop(*region.cache, lat, lon, size_m, options_.max_crop_m);
     return describe_block(*region.cache, w.u0, w.v0, w.size, w.size, layers);
   }();
   const auto& m = region.cache->metadata();

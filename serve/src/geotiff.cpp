@@ -152,10 +152,10 @@ void ExportOptions::validate() const {
   try {
     layer_options.validate();
   } catch (const RequestError& e) {
-    throw ExportError(std::string("export options: ") + e.what());
+    throw ExportError(std::string("export options: ") + e.what(), ErrorCategory::usage);
   }
   if (bbox && !(bbox->min_lon < bbox->max_lon && bbox->min_lat < bbox->max_lat)) {
-    throw ExportError("export options: bbox: must have min_lon < max_lon and min_lat < max_lat");
+    throw ExportError("export options: bbox: must have min_lon < max_lon and min_lat < max_lat", ErrorCategory::usage);
   }
 }
 

@@ -142,30 +142,9 @@ MapBlock read_tile(raster::CacheReader& cache, MapLayer layer, std::int64_t col,
                     options);
 }
 
-namespace {
-
-// raster's crop placement, its errors as HTTP's.
-template <class F>
-CropWindow placed(F&& locate) {
-  try {
-    return locate();
-  } catch (const raster::CropError& e) {
-    throw RequestError(e.kind() == raster::CropError::Kind::outside ? RequestError::Kind::not_found
-                                                                    : RequestError::Kind::bad_request,
-                       e.what());
-  }
-}
-
-}  // namespace
-
-CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
-                       double max_size_m) {
-  return placed([&] { return raster::locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m); });
-}
-
 MapBlock read_crop(raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
                    const std::vector<MapLayer>& layers, const LayerOptions& options, double max_size_m) {
-  const CropWindow w = serve::locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m);
+  const CropWindow w = raster::locate_crop(cache, lat_deg, lon_deg, size_m, max_size_m);
   if (layers.empty()) throw RequestError(RequestError::Kind::bad_request, "layers: no layer requested");
   return read_block(cache, w.u0, w.v0, w.size, w.size, layers, options, /*fill_outside=*/true);
 }

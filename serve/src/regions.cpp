@@ -12,7 +12,7 @@ namespace seqloc::serve {
 
 void ServiceOptions::validate() const {
   auto fail = [](const std::string& field, const std::string& value, const char* constraint) {
-    throw ServiceError("service options: " + field + " = " + value + ": " + constraint);
+    throw ServiceError("service options: " + field + " = " + value + ": " + constraint, ErrorCategory::usage);
   };
   if (!(max_crop_m > 0) || !std::isfinite(max_crop_m)) fail("max_crop_m", std::to_string(max_crop_m), "must be finite and > 0");
   if (tile_lru < 1) fail("tile_lru", std::to_string(tile_lru), "must be >= 1");
@@ -21,7 +21,7 @@ void ServiceOptions::validate() const {
   try {
     layers.validate();
   } catch (const RequestError& e) {
-    throw ServiceError(std::string("service options: ") + e.what());
+    throw ServiceError(std::string("service options: ") + e.what(), ErrorCategory::usage);
   }
 }
 

@@ -33,7 +33,7 @@ using tcp = asio::ip::tcp;
 using error_code = boost::system::error_code;
 
 void ServerOptions::validate() const {
-  auto fail = [](const std::string& what) { throw ServiceError("server option " + what); };
+  auto fail = [](const std::string& what) { throw ServiceError("server option " + what, ErrorCategory::usage); };
   auto seconds = [&](const char* name, double value) {
     if (!(value >= 0.1 && value <= 3600))
       fail(std::string(name) + " " + std::to_string(value) + ": must be in 0.1..3600 s");
@@ -209,10 +209,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
       const auto host = req[http::field::host];
       request.base_url = base_url(std::string_view(host.data(), host.size()), core_.fallback_base);
       response = core_.service.handle(request);
-    } catch (const RequestError& e) {
-      response = error_response(400, e.what());
-    } catch (const std::exception& e) {  // out of memory, say: this request fails, not the server
-      response = error_response(500, std::string("internal error: ") + e.what());
+    } catch (const std::exception& e) {
+      // A malformed target (400); out of memory, say: this request fails, not the server.
+      const int status = http_status(e);
+      response = error_response(status, status == 500 ? std::string("internal error: ") + e.what() : e.what());
     }
     if (core_.options.access_log) {
       std::lock_guard lock(core_.log_mutex);
@@ -368,7 +368,8 @@ void HttpServer::bind() {
   Core& core = impl_->core;
   const auto& options = core.options;
   const auto fail = [&](const std::string& why) {
-    throw ServiceError("cannot listen on " + options.bind + ":" + std::to_string(options.port) + " (" + why + ")");
+    throw ServiceError("cannot listen on " + options.bind + ":" + std::to_string(options.port) + " (" + why + ")",
+                       ErrorCategory::io);
   };
   error_code ec;
   tcp::endpoint endpoint;

@@ -79,6 +79,16 @@ Response error_response(int status, const std::string& message) {
   return r;
 }
 
+int http_status(const std::exception& error) {
+  const auto* request = dynamic_cast<const RequestError*>(&error);
+  const auto* crop = dynamic_cast<const raster::CropError*>(&error);
+  if ((request && request->kind() == RequestError::Kind::not_found) ||
+      dynamic_cast<const raster::CacheRangeError*>(&error) || (crop && crop->kind() == raster::CropError::Kind::outside)) {
+    return 404;
+  }
+  return category_of(error) == ErrorCategory::usage ? 400 : 500;
+}
+
 Response Service::handle(const Request& request) {
   ++requests_;
   if (request.method != "GET" && request.method != "HEAD") {
@@ -89,13 +99,8 @@ Response Service::handle(const Request& request) {
   Response response;
   try {
     response = route(request);
-  } catch (const RequestError& e) {
-    response = error_response(e.kind() == RequestError::Kind::not_found ? 404 : 400, e.what());
-  } catch (const raster::CacheRangeError& e) {
-    response = error_response(404, e.what());
   } catch (const std::exception& e) {
-    // A damaged cache or a GDAL failure: the server's fault, not the client's.
-    response = error_response(500, e.what());
+    response = error_response(http_status(e), e.what());
   }
   if (!request.if_none_match.empty() && response.status == 200) {
     for (const auto& [key, value] : response.headers) {

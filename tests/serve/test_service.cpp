@@ -304,6 +304,19 @@ TEST_F(ServiceTest, BadRequestsGetOneClearError) {
   EXPECT_EQ(service_->handle(post).status, 405);
 }
 
+TEST(HttpStatus, FromTheErrorOnce) {
+  using raster::CropError;
+  EXPECT_EQ(http_status(RequestError(RequestError::Kind::not_found, "x")), 404);
+  EXPECT_EQ(http_status(RequestError(RequestError::Kind::bad_request, "x")), 400);
+  EXPECT_EQ(http_status(CropError(CropError::Kind::outside, "x")), 404) << "a point outside the region";
+  EXPECT_EQ(http_status(CropError(CropError::Kind::bad_argument, "x")), 400);
+  EXPECT_EQ(http_status(raster::CacheRangeError("x")), 404);
+  EXPECT_EQ(http_status(UsageError("x")), 400);
+  EXPECT_EQ(http_status(raster::CacheFormatError("x")), 500) << "a damaged cache is the server's fault";
+  EXPECT_EQ(http_status(ExportError("x")), 500);
+  EXPECT_EQ(http_status(std::runtime_error("x")), 500);
+}
+
 TEST(ParseRequest, DecodesTheTargetLikeABrowserEncodesIt) {
   const Request r = parse_request("GET", "/regions/mon%61co/crop?lat=43.7&lon=%2D7.4&layers=classes%2Croad_prior&q=a+b&&=x&flag");
   EXPECT_EQ(r.method, "GET");

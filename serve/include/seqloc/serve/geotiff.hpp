@@ -14,10 +14,12 @@
 
 namespace seqloc::serve {
 
-/// GDAL failed, or the output cannot be written; the message names the file.
-class ExportError : public std::runtime_error {
+/// GDAL failed, or the output cannot be written (io); the message names the file. Export options
+/// that cannot be carried out (ExportOptions::validate) are usage errors.
+class ExportError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit ExportError(const std::string& message, ErrorCategory category = ErrorCategory::io)
+      : Error(category, message) {}
 };
 
 /// The block as a tiled GeoTIFF (Byte when every band is uint8, else Float32; deflate), bands

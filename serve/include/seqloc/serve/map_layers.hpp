@@ -17,16 +17,19 @@
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/raster/cache.hpp"
+#include "seqloc/core/error.hpp"
 #include "seqloc/raster/crop_window.hpp"
 
 namespace seqloc::serve {
 
 /// A request that cannot be served as asked (a bad parameter, a point outside the region); the
-/// message says which parameter and why. The HTTP layer answers 400 or 404.
-class RequestError : public std::runtime_error {
+/// message says which parameter and why. A usage error, or a data error for what is not there;
+/// the HTTP layer answers 400 or 404 (http_status, service.hpp).
+class RequestError : public Error {
  public:
   enum class Kind { bad_request, not_found };
-  RequestError(Kind kind, const std::string& message) : std::runtime_error(message), kind_(kind) {}
+  RequestError(Kind kind, const std::string& message)
+      : Error(kind == Kind::bad_request ? ErrorCategory::usage : ErrorCategory::data, message), kind_(kind) {}
   [[nodiscard]] Kind kind() const { return kind_; }
 
  private:
@@ -93,10 +96,6 @@ void require_tile(const raster::CacheReader& cache, std::int64_t col, std::int64
 using raster::kDefaultMaxCropM;
 using raster::CropWindow;
 
-/// The window of read_crop (below): raster::locate_crop, its errors as RequestError (bad request,
-/// or not found for a point outside the region).
-[[nodiscard]] CropWindow locate_crop(const raster::CacheReader& cache, double lat_deg, double lon_deg, double size_m,
-                                     double max_size_m = kDefaultMaxCropM);
 
 /// A square crop of side `size_m` (rounded to whole cells) around a WGS84 point, in region-grid
 /// coordinates: its centre (crop_x, crop_y of conventions.md section 4) is the centre of the

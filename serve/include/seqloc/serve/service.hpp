@@ -66,9 +66,12 @@ struct ServiceOptions {
 };
 
 /// A configuration that cannot be served (a missing cache, two regions of one id); names the file.
-class ServiceError : public std::runtime_error {
+/// Data by default (the caches given); usage for an option (validate()), io for a socket that
+/// cannot be bound.
+class ServiceError : public Error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit ServiceError(const std::string& message, ErrorCategory category = ErrorCategory::data)
+      : Error(category, message) {}
 };
 
 class Service {
@@ -128,5 +131,11 @@ class Service {
 
 /// A JSON error body {"error": {"status": S, "message": M}} with that status.
 [[nodiscard]] Response error_response(int status, const std::string& message);
+
+/// The HTTP status of an error, decided here once: 404 for what is not there (a request of kind
+/// not found, a tile or window outside the region, a crop around a point outside it), 400 for the
+/// other usage errors (the client's request), 500 for everything else (a damaged cache, a GDAL
+/// failure: the server's fault, not the client's).
+[[nodiscard]] int http_status(const std::exception& error);
 
 }  // namespace seqloc::serve
