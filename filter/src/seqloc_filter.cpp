@@ -639,15 +639,23 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
                                  const GpsFix* gps, const FrameWeighting* weighting) {
   if (config_.mgr && road_distance_m == nullptr)
     throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
-  const int W = config_.width, H = config_.height, R = config_.headings;
-  const std::size_t n = belief_.slice_cells();
-  const auto N = static_cast<Eigen::Index>(n);
+  // Self-calibration estimates from this frame unless a weighting repeats an earlier pass.
+  const bool calibrating = config_.self_calibrate && weighting == nullptr;
+  FrameResult result = weigh(given, weighting, calibrating);
+  const float outside = temper(given, result);
+  const double total = multiply_in(given, crop, outside, gps, result, calibrating);
+  const Peak peak = normalize(total, road_distance_m);
+  result.peak_log_belief = std::log(peak.value);
+  result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), belief_.bin_heading_deg(peak.k)};
+  result.pose = refine(peak);
+  return result;
+}
 
+FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating) {
   // Self-calibration: the frame raised to the power kappa the frames before it favour,
   // q = p^kappa / Z(kappa). q is never written out: its peak and entropy come from one pass over
   // the given frame, which also bins the frame's cells by depth for the estimator.
   FrameResult result;
-  const bool calibrating = config_.self_calibrate && weighting == nullptr;
   if (weighting != nullptr) {
     result.volume_power = weighting->volume_power;
     result.etu_weight = weighting->etu_weight;
@@ -675,12 +683,14 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
     result.etu_weight = config_.etu ? etu_weight(used.entropy, config_.etu_reference_entropy) : 1.0;
   }
   result.weighting = {result.volume_power, result.etu_weight, used.max_log_prob};
-  const auto w = static_cast<float>(result.etu_weight);
+  return result;
+}
 
+float SeqLocFilter::temper(const PreparedFrame& frame, const FrameResult& result) {
   // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
   // normalization): exp(w kappa (log p - log p_max)); log(1/M) - outside_crop_nats outside the crop.
-  const PreparedFrame& frame = given;
-  const float log_p_max = used.max_log_prob;
+  const auto w = static_cast<float>(result.etu_weight);
+  const float log_p_max = result.weighting.peak_log_prob;
   impl_->tempered.resize(frame.log_prob.size());
   const auto exponent_f = static_cast<float>(w * result.volume_power);
   core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
@@ -691,23 +701,35 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
                           impl_->tempered.data() + begin);
     }
   });
-  const auto outside = static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
+  // The value of a window cell outside the crop.
+  return static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
+}
 
-  std::vector<float> gps_factor;
-  if (config_.gps_prior && gps != nullptr) {
-    gps_factor.resize(n);
-    const double sigma_cells = gps->sigma_m / kCellM;
-    for (int v = 0; v < H; ++v)
-      for (int u = 0; u < W; ++u) {
-        const double du = u - gps->u, dv = v - gps->v;
-        gps_factor[static_cast<std::size_t>(v) * W + u] =
-            static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
-      }
-  }
+std::vector<float> SeqLocFilter::gps_factor(const GpsFix* gps) const {
+  std::vector<float> factor;
+  if (!config_.gps_prior || gps == nullptr) return factor;
+  const int W = config_.width, H = config_.height;
+  factor.resize(belief_.slice_cells());
+  const double sigma_cells = gps->sigma_m / kCellM;
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) {
+      const double du = u - gps->u, dv = v - gps->v;
+      factor[static_cast<std::size_t>(v) * W + u] =
+          static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
+    }
+  return factor;
+}
 
+double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
+                                 const FrameResult& result, bool calibrating) {
+  const int W = config_.width, H = config_.height, R = config_.headings;
+  const std::size_t n = belief_.slice_cells();
+  const auto N = static_cast<Eigen::Index>(n);
+  const std::vector<float> gps_factor = this->gps_factor(gps);
   // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum. The first
   // pass also collects self-calibration's evidence from the predicted belief.
   std::vector<double> slice_sum(static_cast<std::size_t>(R));
+  const auto w = static_cast<float>(result.etu_weight);
   const double exponent = static_cast<double>(w) * result.volume_power;  // s = exp(exponent * r)
   auto update_slices = [&](bool with_prior) {
     const bool collect = calibrating && with_prior;
@@ -734,18 +756,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
     });
   };
   update_slices(true);
-  if (calibrating) {
-    CalibrationEvidence evidence;
-    evidence.log_outside = -given.log_cells - config_.outside_crop_nats;
-    evidence.window_cells = static_cast<double>(belief_.size());
-    for (const auto& worker : impl_->workers) {
-      evidence.frame_cells.merge(worker.frame_cells);
-      evidence.belief_in_crop.merge(worker.belief_in_crop);
-      evidence.belief_outside += worker.belief_outside;
-      evidence.outside_cells += worker.outside_cells;
-    }
-    impl_->estimator.add(evidence);
-  }
+  if (calibrating) feed_estimator(frame);
   double total = 0;
   for (double x : slice_sum) total += x;
   if (!(total > 0) || !std::isfinite(total)) {
@@ -755,7 +766,26 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
     for (double x : slice_sum) total += x;
     if (!(total > 0)) throw FilterError("the frame volume has no mass inside the window");
   }
+  return total;
+}
 
+void SeqLocFilter::feed_estimator(const PreparedFrame& frame) {
+  CalibrationEvidence evidence;
+  evidence.log_outside = -frame.log_cells - config_.outside_crop_nats;
+  evidence.window_cells = static_cast<double>(belief_.size());
+  for (const auto& worker : impl_->workers) {
+    evidence.frame_cells.merge(worker.frame_cells);
+    evidence.belief_in_crop.merge(worker.belief_in_crop);
+    evidence.belief_outside += worker.belief_outside;
+    evidence.outside_cells += worker.outside_cells;
+  }
+  impl_->estimator.add(evidence);
+}
+
+SeqLocFilter::Peak SeqLocFilter::normalize(double total, const float* road_distance_m) {
+  const int W = config_.width, H = config_.height, R = config_.headings;
+  const std::size_t n = belief_.slice_cells();
+  const auto N = static_cast<Eigen::Index>(n);
   // Normalize, MGR (b <- log((1 - eps) exp(b) + eps q) is, in probabilities, an affine blend),
   // and the argmax of every slice.
   std::vector<float> eps_q;
@@ -787,29 +817,30 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   const float* star_slice = belief_.slice(k_star);
   const auto cell = static_cast<int>(std::find(star_slice, star_slice + n, best_value[static_cast<std::size_t>(k_star)]) -
                                      star_slice);
-  const int u_star = cell % W, v_star = cell / W;
-  result.peak_log_belief = std::log(best_value[static_cast<std::size_t>(k_star)]);
-  result.argmax = {static_cast<double>(u_star), static_cast<double>(v_star), belief_.bin_heading_deg(k_star)};
-  result.pose = result.argmax;
+  return {cell % W, cell / W, k_star, best_value[static_cast<std::size_t>(k_star)]};
+}
 
+Pose SeqLocFilter::refine(const Peak& peak) const {
+  const int R = config_.headings;
+  Pose pose{static_cast<double>(peak.u), static_cast<double>(peak.v), belief_.bin_heading_deg(peak.k)};
   if (config_.pas) {
-    const Pose x_hat = peak_anchored_position(belief_, u_star, v_star, config_.pas_radius);
-    result.pose.u = x_hat.u;
-    result.pose.v = x_hat.v;
+    const Pose x_hat = peak_anchored_position(belief_, peak.u, peak.v, config_.pas_radius);
+    pose.u = x_hat.u;
+    pose.v = x_hat.v;
   }
   if (config_.subbin_heading) {
     // Circular mean of the bin headings around th* at x*, weighted by the belief.
     double sx = 0, sy = 0;
     for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
-      const int k = (k_star + i + R) % R;
-      const double weight = belief_.prob(u_star, v_star, k);
+      const int k = (peak.k + i + R) % R;
+      const double weight = belief_.prob(peak.u, peak.v, k);
       const double h = belief_.bin_heading_deg(k) * kDegToRad;
       sx += weight * std::sin(h);
       sy += weight * std::cos(h);
     }
-    result.pose.heading_deg = core::wrap360(std::atan2(sx, sy) / kDegToRad);
+    pose.heading_deg = core::wrap360(std::atan2(sx, sy) / kDegToRad);
   }
-  return result;
+  return pose;
 }
 
 }  // namespace seqloc::filter

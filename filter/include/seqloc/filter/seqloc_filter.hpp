@@ -170,6 +170,26 @@ class SeqLocFilter {
 
  private:
   struct Impl;
+  /// The belief's largest cell after an update.
+  struct Peak {
+    int u = 0, v = 0, k = 0;
+    float value = 0;
+  };
+  // update()'s stages, in order: the frame's power, ETU weight and peak (weigh); q^w over the
+  // frame, scaled by its peak, and the value of a cell outside the crop (temper); the belief times
+  // the frame resampled into the window, and the GPS term, returning the belief's total, with
+  // self-calibration's evidence collected on the way (multiply_in, feed_estimator); the
+  // normalization and MGR's blend with the road prior, and the largest cell (normalize); PAS and
+  // the sub-bin heading around it (refine).
+  FrameResult weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating);
+  float temper(const PreparedFrame& frame, const FrameResult& result);
+  [[nodiscard]] std::vector<float> gps_factor(const GpsFix* gps) const;
+  double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
+                     const FrameResult& result, bool calibrating);
+  void feed_estimator(const PreparedFrame& frame);
+  Peak normalize(double total, const float* road_distance_m);
+  [[nodiscard]] Pose refine(const Peak& peak) const;
+
   FilterConfig config_;
   BeliefVolume belief_;
   std::unique_ptr<Impl> impl_;
