@@ -526,7 +526,7 @@ PYBIND11_MODULE(seqloc, m) {
 
   py::class_<PyLocalizer>(m, "Localizer",
                           "seqloc localize's seqloc (or online) mode one frame at a time over a region cache: it "
-                          "owns the window, its road distances and re-centring (docs/serve.md)")
+                          "owns the window, its road distances and re-centring (docs/python.md)")
       .def(py::init<const std::string&, const py::dict&, const std::string&, double, double,
                     const std::optional<std::string>&, int>(),
            py::arg("cache"), py::arg("config") = py::dict(), py::arg("mode") = "seqloc",

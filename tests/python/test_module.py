@@ -89,6 +89,20 @@ class CacheCrop(unittest.TestCase):
             self.cache.crop(*self.centre, 64.0, layers=["roads"])
         with self.assertRaises(OSError):
             seqloc.Cache("/nonexistent.gpkg")
+        # One hierarchy (docs/python.md): each under seqloc.Error and the built-in it was before.
+        with self.assertRaises(seqloc.RequestError):  # a point outside the region
+            self.cache.crop(0.0, 0.0, 64.0)
+        with self.assertRaises(seqloc.CacheError):
+            seqloc.Cache("/nonexistent.gpkg")
+
+    def test_errors_form_one_hierarchy(self):
+        for cls, builtin in [(seqloc.UsageError, ValueError), (seqloc.DataError, ValueError),
+                             (seqloc.IOError, OSError), (seqloc.InternalError, RuntimeError),
+                             (seqloc.CacheError, OSError), (seqloc.FilterError, seqloc.DataError),
+                             (seqloc.RequestError, seqloc.UsageError)]:
+            self.assertTrue(issubclass(cls, seqloc.Error), cls.__name__)
+            self.assertTrue(issubclass(cls, builtin), cls.__name__)
+            self.assertEqual(cls.__module__, "seqloc", cls.__name__)
 
 
 class FilterOnline(unittest.TestCase):
@@ -370,6 +384,8 @@ class LocalizerAsLocalize(unittest.TestCase):
             with open(calibration, "w") as f:
                 f.write('{"format": "seqloc-calibration", "version": 2}')
             with self.assertRaisesRegex(ValueError, "calibration.json"):
+                seqloc.Localizer(CACHE, calibration=calibration)
+            with self.assertRaises(seqloc.DataError):  # the file's fault: its category's class
                 seqloc.Localizer(CACHE, calibration=calibration)
 
     def test_bad_arguments_are_short_errors(self):
