@@ -1,0 +1,147 @@
+// The resampling kernels the online filter, the offline baseline and the smoother share: the
+// odometry's displacement, bilinear translation, a frame sampled into a window slice, the warp of
+// a whole belief.
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Core>
+
+#include "internal.hpp"
+#include "seqloc/core/angles.hpp"
+#include "seqloc/core/thread_pool.hpp"
+#include "seqloc/core/units.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+using core::kCellM;
+using core::kDegToRad;
+
+}  // namespace
+
+namespace detail {
+
+void displacement_cells(const Odometry& o, double heading_deg, double& du, double& dv) {
+  const double h = heading_deg * kDegToRad;
+  const double east = o.forward_m * std::sin(h) - o.left_m * std::cos(h);
+  const double north = o.forward_m * std::cos(h) + o.left_m * std::sin(h);
+  du = east / kCellM;
+  dv = -north / kCellM;
+  // sin and cos of multiples of 90 degrees are not exactly 0 in floating point; a move that is
+  // a whole number of cells up to 1e-9 is taken as one, so that it translates without blurring.
+  if (std::abs(du - std::round(du)) < 1e-9) du = std::round(du);
+  if (std::abs(dv - std::round(dv)) < 1e-9) dv = std::round(dv);
+}
+
+}  // namespace detail
+
+void detail::translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill) {
+  const double fu = std::floor(ou), fv = std::floor(ov);
+  const auto au = static_cast<float>(ou - fu), av = static_cast<float>(ov - fv);
+  const int iu = static_cast<int>(fu), iv = static_cast<int>(fv);
+  // Valid u: 0 <= u + ou <= sw - 1.
+  const int u_lo = std::max(0, static_cast<int>(std::ceil(-ou)));
+  const int u_hi = std::min(dw - 1, static_cast<int>(std::floor(sw - 1 - ou)));
+  const int v_lo = std::max(0, static_cast<int>(std::ceil(-ov)));
+  const int v_hi = std::min(dh - 1, static_cast<int>(std::floor(sh - 1 - ov)));
+  const float w00 = (1 - au) * (1 - av), w01 = au * (1 - av), w10 = (1 - au) * av, w11 = au * av;
+  for (int v = 0; v < dh; ++v) {
+    float* out = dst + static_cast<std::size_t>(v) * dw;
+    if (v < v_lo || v > v_hi || u_lo > u_hi) {
+      std::fill(out, out + dw, fill);
+      continue;
+    }
+    const int r0 = v + iv, r1 = std::min(r0 + 1, sh - 1);
+    const float* a = src + static_cast<std::size_t>(r0) * sw + iu;
+    const float* b = src + static_cast<std::size_t>(r1) * sw + iu;
+    std::fill(out, out + u_lo, fill);
+    // Columns whose right neighbour exists; the last valid one may need the clamp.
+    const int u_inner = std::min(u_hi, sw - 2 - iu);
+    for (int u = u_lo; u <= u_inner; ++u) out[u] = w00 * a[u] + w01 * a[u + 1] + w10 * b[u] + w11 * b[u + 1];
+    for (int u = std::max(u_lo, u_inner + 1); u <= u_hi; ++u)
+      out[u] = w00 * a[u] + w10 * b[u] + w01 * a[u] + w11 * b[u];
+    std::fill(out + u_hi + 1, out + dw, fill);
+  }
+}
+
+void detail::sample_slice(const float* values, int bins, int vh, int vw, double cell_m, const CropPose& crop,
+                          double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer,
+                          float* out) {
+  // Heading: the crop's own heading of window heading h is h - rotation.
+  const double p = core::wrap360(heading_deg - crop.rotation_deg) * bins / 360.0;
+  const int j0 = static_cast<int>(std::floor(p)) % bins;
+  const int j1 = (j0 + 1) % bins;
+  const auto a = static_cast<float>(p - std::floor(p));
+  const std::size_t slice = static_cast<std::size_t>(vw) * vh;
+  const float* s0 = values + static_cast<std::size_t>(j0) * slice;
+  const float* s1 = values + static_cast<std::size_t>(j1) * slice;
+  const float* blended = s0;
+  if (a > 0) {
+    blend_buffer.resize(slice);
+    for (std::size_t i = 0; i < slice; ++i) blend_buffer[i] = (1 - a) * s0[i] + a * s1[i];
+    blended = blend_buffer.data();
+  }
+  const double scale = kCellM / cell_m;
+  if (crop.rotation_deg == 0.0 && scale == 1.0) {
+    // Axis-aligned, same cells: a translation (crops served by seqloc itself).
+    translate(blended, vw, vh, out, width, height, (vw - 1) / 2.0 - crop.centre_u, (vh - 1) / 2.0 - crop.centre_v,
+              fill);
+    return;
+  }
+  // General affine map from window cells to volume cells: the crop's axes are the window's
+  // turned clockwise by the rotation.
+  const double r = crop.rotation_deg * kDegToRad, c = std::cos(r), s = std::sin(r);
+  const double cu = (vw - 1) / 2.0, cv = (vh - 1) / 2.0;
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const double du = u - crop.centre_u, dv = v - crop.centre_v;
+      const double x = cu + scale * (du * c + dv * s);
+      const double y = cv + scale * (-du * s + dv * c);
+      float value = fill;
+      if (x >= 0 && y >= 0 && x <= vw - 1 && y <= vh - 1) {
+        const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+        const int x1 = std::min(x0 + 1, vw - 1), y1 = std::min(y0 + 1, vh - 1);
+        const auto ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
+        const float* r0 = blended + static_cast<std::size_t>(y0) * vw;
+        const float* r1 = blended + static_cast<std::size_t>(y1) * vw;
+        value = (1 - ay) * ((1 - ax) * r0[x0] + ax * r0[x1]) + ay * ((1 - ax) * r1[x0] + ax * r1[x1]);
+      }
+      out[static_cast<std::size_t>(v) * width + u] = value;
+    }
+  }
+}
+
+void detail::warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odometry& odometry, float fill, int threads) {
+  const int W = in.width(), H = in.height(), R = in.headings();
+  // New bin k takes source bins k + s and k + s + 1 (heading k * 360 / R + yaw), weights 1 - a, a.
+  const double p = odometry.yaw_deg * R / 360.0;
+  const double floor_p = std::floor(p);
+  const auto a = static_cast<float>(p - floor_p);
+  const int s = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
+  const std::size_t n = in.slice_cells();
+  auto translated = [&](int j, float* dst) {
+    double du = 0, dv = 0;
+    displacement_cells(odometry, in.bin_heading_deg(j), du, dv);
+    translate(in.slice(j), W, H, dst, W, H, -du, -dv, fill);
+  };
+  core::parallel_chunks(R, threads, [&](int k0, int k1, int) {
+    std::vector<float> buffer_a(n), buffer_b(n);
+    float* current = buffer_a.data();
+    float* next = buffer_b.data();
+    translated((k0 + s) % R, current);
+    for (int k = k0; k < k1; ++k) {
+      float* dst = out.slice(k);
+      if (a == 0.0f) {
+        std::copy(current, current + n, dst);
+        if (k + 1 < k1) translated((k + 1 + s) % R, current);
+        continue;
+      }
+      translated((k + s + 1) % R, next);
+      for (std::size_t i = 0; i < n; ++i) dst[i] = (1 - a) * current[i] + a * next[i];
+      std::swap(current, next);
+    }
+  });
+}
+
+}  // namespace seqloc::filter

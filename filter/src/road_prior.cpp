@@ -1,0 +1,38 @@
+// The road prior of MGR (conventions.md section 6): g over the road distance, and q over a window.
+
+#include "seqloc/filter/seqloc_filter.hpp"
+
+#include <cmath>
+
+namespace seqloc::filter {
+
+std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_m) {
+  std::vector<float> g(distance_m.size());
+  float last = 0, value = 1.0f;
+  for (std::size_t i = 0; i < distance_m.size(); ++i) {
+    if (i == 0 || distance_m[i] != last) {
+      last = distance_m[i];
+      value = static_cast<float>(road_prior_g(static_cast<double>(last), sigma_m));
+    }
+    g[i] = value;
+  }
+  return g;
+}
+
+std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int height, int headings, double sigma_m) {
+  const std::size_t n = static_cast<std::size_t>(width) * height;
+  std::vector<double> g(n);
+  double z = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    g[i] = road_prior_g(road_distance_m[i], sigma_m);
+    z += g[i];
+  }
+  std::vector<float> log_q(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double q = (0.9 * (z > 0 ? g[i] / z : 0.0) + 0.1 / static_cast<double>(n)) / headings;
+    log_q[i] = static_cast<float>(std::log(q));
+  }
+  return log_q;
+}
+
+}  // namespace seqloc::filter
