@@ -53,53 +53,70 @@ void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
 
 FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& crop, const Odometry& odo,
                                   const float* road_distance_m, const GpsFix* gps, double volume_power) {
-  const int W = c_.width, H = c_.height, R = c_.headings;
-  const int vh = volume.height, vw = volume.width, vn = volume.bins;
+  // 1. Predict (not on the first frame after a reset).
+  if (!first_) predict(odo);
+  // 2. ETU: the frame's log-probabilities raised to the power and normalized, and its weight.
+  FrameResult r;
+  r.volume_power = volume_power;
+  const std::vector<double> logp = weigh(volume, r);
+  // 3. Update with the weighted frame sampled into the window, and the GPS term.
+  update(volume, logp, crop, gps, r.etu_weight);
+  // 4. MGR.
+  if (c_.mgr) blend_road_prior(road_distance_m);
+  // 5. The argmax, and PAS around it.
+  estimate(r);
+  first_ = false;
+  return r;
+}
 
-  // 1. Predict: b_hat(x, th) = log of the probability-domain interpolation: bilinear in space
+void ReferenceFilter::predict(const Odometry& odo) {
+  const int W = c_.width, H = c_.height, R = c_.headings;
+  // b_hat(x, th) = log of the probability-domain interpolation: bilinear in space
   //    (each source bin j translated by the odometry's displacement d(th_j)), linear between the
   //    two source bins around th + yaw; sources outside the window count as the window minimum.
-  if (!first_) {
-    const double window_min = *std::min_element(b_.begin(), b_.end());
-    std::vector<double> hat(b_.size());
-    for (int k = 0; k < R; ++k) {
-      const double p = k + odo.yaw_deg * R / 360.0;
-      const double fp = std::floor(p);
-      const double a = p - fp;
-      const int j0 = static_cast<int>(((static_cast<long long>(fp) % R) + R) % R), j1 = (j0 + 1) % R;
-      for (int v = 0; v < H; ++v)
-        for (int u = 0; u < W; ++u) {
-          std::vector<std::pair<double, double>> terms;  // (log value, weight)
-          for (int side = 0; side < 2; ++side) {
-            const int j = side == 0 ? j0 : j1;
-            const double wj = side == 0 ? 1 - a : a;
-            if (wj == 0) continue;
-            const double h = j * 360.0 / R * kPi / 180.0;
-            double du = (odo.forward_m * std::sin(h) - odo.left_m * std::cos(h)) / 0.5;
-            double dv = -(odo.forward_m * std::cos(h) + odo.left_m * std::sin(h)) / 0.5;
-            if (std::abs(du - std::round(du)) < 1e-9) du = std::round(du);
-            if (std::abs(dv - std::round(dv)) < 1e-9) dv = std::round(dv);
-            const double x = u - du, y = v - dv;
-            if (x < 0 || y < 0 || x > W - 1 || y > H - 1) {
-              terms.emplace_back(window_min, wj);
-              continue;
-            }
-            const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-            const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
-            const double ax = x - x0, ay = y - y0;
-            terms.emplace_back(b_[index(x0, y0, j)], wj * (1 - ax) * (1 - ay));
-            terms.emplace_back(b_[index(x1, y0, j)], wj * ax * (1 - ay));
-            terms.emplace_back(b_[index(x0, y1, j)], wj * (1 - ax) * ay);
-            terms.emplace_back(b_[index(x1, y1, j)], wj * ax * ay);
+  const double window_min = *std::min_element(b_.begin(), b_.end());
+  std::vector<double> hat(b_.size());
+  for (int k = 0; k < R; ++k) {
+    const double p = k + odo.yaw_deg * R / 360.0;
+    const double fp = std::floor(p);
+    const double a = p - fp;
+    const int j0 = static_cast<int>(((static_cast<long long>(fp) % R) + R) % R), j1 = (j0 + 1) % R;
+    for (int v = 0; v < H; ++v)
+      for (int u = 0; u < W; ++u) {
+        std::vector<std::pair<double, double>> terms;  // (log value, weight)
+        for (int side = 0; side < 2; ++side) {
+          const int j = side == 0 ? j0 : j1;
+          const double wj = side == 0 ? 1 - a : a;
+          if (wj == 0) continue;
+          const double h = j * 360.0 / R * kPi / 180.0;
+          double du = (odo.forward_m * std::sin(h) - odo.left_m * std::cos(h)) / 0.5;
+          double dv = -(odo.forward_m * std::cos(h) + odo.left_m * std::sin(h)) / 0.5;
+          if (std::abs(du - std::round(du)) < 1e-9) du = std::round(du);
+          if (std::abs(dv - std::round(dv)) < 1e-9) dv = std::round(dv);
+          const double x = u - du, y = v - dv;
+          if (x < 0 || y < 0 || x > W - 1 || y > H - 1) {
+            terms.emplace_back(window_min, wj);
+            continue;
           }
-          hat[index(u, v, k)] = weighted_log_sum_exp(terms);
+          const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+          const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
+          const double ax = x - x0, ay = y - y0;
+          terms.emplace_back(b_[index(x0, y0, j)], wj * (1 - ax) * (1 - ay));
+          terms.emplace_back(b_[index(x1, y0, j)], wj * ax * (1 - ay));
+          terms.emplace_back(b_[index(x0, y1, j)], wj * (1 - ax) * ay);
+          terms.emplace_back(b_[index(x1, y1, j)], wj * ax * ay);
         }
-    }
-    b_ = hat;
+        hat[index(u, v, k)] = weighted_log_sum_exp(terms);
+      }
   }
+  b_ = hat;
+}
 
-  // 2. ETU: the frame raised to the given power (self-calibration's), normalized over its own M
-  //    cells, its normalized entropy and weight.
+std::vector<double> ReferenceFilter::weigh(const FrameVolume& volume, FrameResult& r) {
+  // The frame raised to the given power (self-calibration's), normalized over its own M cells,
+  // its normalized entropy and weight.
+  const double volume_power = r.volume_power;
+  const int vh = volume.height, vw = volume.width, vn = volume.bins;
   const std::size_t m_cells = static_cast<std::size_t>(vh) * vw * vn;
   std::vector<double> logp(m_cells);  // [bin][v][u]
   for (int v = 0; v < vh; ++v)
@@ -149,8 +166,17 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
     w = c_.etu_reference_entropy > 0 ? std::clamp((1 - h_hat) / (1 - c_.etu_reference_entropy), 1e-3, 1.0)
                                      : std::max(1 - h_hat, 1e-3);
   }
+  r.frame_entropy = h_hat;
+  r.etu_weight = w;
+  return logp;
+}
 
-  // 3. Update: b = log_softmax(w log p + b_hat). The tempered likelihood p^w is sampled at every
+void ReferenceFilter::update(const FrameVolume& volume, const std::vector<double>& logp, const CropPose& crop,
+                             const GpsFix* gps, double w) {
+  const int W = c_.width, H = c_.height, R = c_.headings;
+  const int vh = volume.height, vw = volume.width, vn = volume.bins;
+  const double log_m = std::log(static_cast<double>(static_cast<std::size_t>(vh) * vw * vn));
+  // b = log_softmax(w log p + b_hat). The tempered likelihood p^w is sampled at every
   //    window cell and bin by linear interpolation of p^w (bilinear in space, linear between the
   //    two bins around the crop's heading), computed here as a log-sum-exp of the neighbours.
   const double rot = crop.rotation_deg * kPi / 180.0;
@@ -196,30 +222,30 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
   for (double x : val) vsum += std::exp(x - vmax);
   const double lse = vmax + std::log(vsum);
   for (std::size_t i = 0; i < b_.size(); ++i) b_[i] = val[i] - lse;
+}
 
-  // 4. MGR: b <- log((1 - eps) exp(b) + eps q), q = (0.9 g / Z + 0.1 / M_xy) / R.
-  if (c_.mgr) {
-    const std::size_t mxy = static_cast<std::size_t>(W) * H;
-    std::vector<double> g(mxy);
-    double z = 0;
-    for (std::size_t i = 0; i < mxy; ++i) {
-      const double d = road_distance_m[i];
-      g[i] = std::exp(-d * d / (2 * c_.mgr_sigma_m * c_.mgr_sigma_m));
-      z += g[i];
-    }
-    for (int k = 0; k < R; ++k)
-      for (std::size_t i = 0; i < mxy; ++i) {
-        const double q = (0.9 * g[i] / z + 0.1 / static_cast<double>(mxy)) / R;
-        double& b = b_[static_cast<std::size_t>(k) * mxy + i];
-        b = std::log((1 - c_.mgr_epsilon) * std::exp(b) + c_.mgr_epsilon * q);
-      }
+void ReferenceFilter::blend_road_prior(const float* road_distance_m) {
+  // b <- log((1 - eps) exp(b) + eps q), q = (0.9 g / Z + 0.1 / M_xy) / R.
+  const int W = c_.width, H = c_.height, R = c_.headings;
+  const std::size_t mxy = static_cast<std::size_t>(W) * H;
+  std::vector<double> g(mxy);
+  double z = 0;
+  for (std::size_t i = 0; i < mxy; ++i) {
+    const double d = road_distance_m[i];
+    g[i] = std::exp(-d * d / (2 * c_.mgr_sigma_m * c_.mgr_sigma_m));
+    z += g[i];
   }
+  for (int k = 0; k < R; ++k)
+    for (std::size_t i = 0; i < mxy; ++i) {
+      const double q = (0.9 * g[i] / z + 0.1 / static_cast<double>(mxy)) / R;
+      double& b = b_[static_cast<std::size_t>(k) * mxy + i];
+      b = std::log((1 - c_.mgr_epsilon) * std::exp(b) + c_.mgr_epsilon * q);
+    }
+}
 
-  // 5. PAS around the argmax.
-  FrameResult r;
-  r.frame_entropy = h_hat;
-  r.etu_weight = w;
-  r.volume_power = volume_power;
+void ReferenceFilter::estimate(FrameResult& r) const {
+  // The argmax, and PAS around it.
+  const int W = c_.width, H = c_.height, R = c_.headings;
   int bu = 0, bv = 0, bk = 0;
   double best = -std::numeric_limits<double>::infinity();
   for (int k = 0; k < R; ++k)
@@ -248,8 +274,7 @@ FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& cro
     r.pose.u = su / sm;
     r.pose.v = sv / sm;
   }
-  first_ = false;
-  return r;
 }
+
 
 }  // namespace seqloc::filter

@@ -27,6 +27,16 @@ class ReferenceFilter {
   [[nodiscard]] double at(int u, int v, int k) const { return b_[index(u, v, k)]; }
 
  private:
+  // step()'s five steps (conventions.md section 6).
+  void predict(const Odometry& odometry);
+  /// The frame's log-probabilities ([bin][v][u]) raised to r.volume_power and normalized; sets
+  /// r's frame entropy and ETU weight.
+  std::vector<double> weigh(const FrameVolume& volume, FrameResult& r);
+  void update(const FrameVolume& volume, const std::vector<double>& logp, const CropPose& crop, const GpsFix* gps,
+              double etu_weight);
+  void blend_road_prior(const float* road_distance_m);
+  void estimate(FrameResult& r) const;
+
   [[nodiscard]] std::size_t index(int u, int v, int k) const {
     return (static_cast<std::size_t>(k) * c_.height + static_cast<std::size_t>(v)) * c_.width + u;
   }
