@@ -8,6 +8,7 @@
 #include <cstring>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -276,14 +277,14 @@ class PyFilter {
     }
 
     py::array_t<float, py::array::c_style | py::array::forcecast> distance;
-    const float* distance_data = nullptr;
+    std::span<const float> distance_window;
     if (!road_distance.is_none()) {
       distance = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(as_array(road_distance, "road_distance"));
       if (!distance || distance.ndim() != 2 || distance.shape(0) != c.height || distance.shape(1) != c.width) {
         throw py::value_error("road_distance: expected a (" + std::to_string(c.height) + ", " + std::to_string(c.width) +
                               ") float array, the window's size");
       }
-      distance_data = distance.data();
+      distance_window = {distance.data(), static_cast<std::size_t>(distance.size())};
     } else if (c.mgr) {
       throw py::value_error("road_distance: MGR is on and needs the window's road distance (or set mgr=False)");
     }
@@ -291,7 +292,7 @@ class PyFilter {
     {
       py::gil_scoped_release release;
       const auto frame = filter::prepare_frame(view, c.headings, c.threads);
-      r = filter_.step(frame, crop, odo, distance_data);
+      r = filter_.step(frame, crop, odo, distance_window);
     }
     py::dict d = pose_dict(r.pose);
     d["argmax"] = pose_dict(r.argmax);

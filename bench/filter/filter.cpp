@@ -61,7 +61,7 @@ int main() {
           const auto frame = seqloc::filter::prepare_frame(view, c.headings, threads);
           intake_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
           const auto r =
-              filter.step(frame, {size / 2.0 + (i % 3), size / 2.0 - (i % 2), 0}, {3.7, 0.2, 4.3}, road.data());
+              filter.step(frame, {size / 2.0 + (i % 3), size / 2.0 - (i % 2), 0}, {3.7, 0.2, 4.3}, road);
           step_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
           if (r.pose.u < -1e9) std::puts("");  // keep the result alive
         }

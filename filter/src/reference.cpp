@@ -52,7 +52,7 @@ void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
 }
 
 FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& crop, const Odometry& odo,
-                                  const float* road_distance_m, const GpsFix* gps, double volume_power) {
+                                  std::span<const float> road_distance_m, const GpsFix* gps, double volume_power) {
   // 1. Predict (not on the first frame after a reset).
   if (!first_) predict(odo);
   // 2. ETU: the frame's log-probabilities raised to the power and normalized, and its weight.
@@ -224,10 +224,11 @@ void ReferenceFilter::update(const FrameVolume& volume, const std::vector<double
   for (std::size_t i = 0; i < b_.size(); ++i) b_[i] = val[i] - lse;
 }
 
-void ReferenceFilter::blend_road_prior(const float* road_distance_m) {
+void ReferenceFilter::blend_road_prior(std::span<const float> road_distance_m) {
   // b <- log((1 - eps) exp(b) + eps q), q = (0.9 g / Z + 0.1 / M_xy) / R.
   const int W = c_.width, H = c_.height, R = c_.headings;
   const std::size_t mxy = static_cast<std::size_t>(W) * H;
+  if (road_distance_m.size() != mxy) throw FilterError("reference: the road-distance window is not W x H", ErrorCategory::usage);
   std::vector<double> g(mxy);
   double z = 0;
   for (std::size_t i = 0; i < mxy; ++i) {

@@ -3,6 +3,7 @@
 #include "seqloc/filter/seqloc_filter.hpp"
 
 #include <cmath>
+#include <string>
 
 namespace seqloc::filter {
 
@@ -19,8 +20,13 @@ std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_
   return g;
 }
 
-std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int height, int headings, double sigma_m) {
+std::vector<float> road_prior_log_q(std::span<const float> road_distance_m, int width, int height, int headings, double sigma_m) {
   const std::size_t n = static_cast<std::size_t>(width) * height;
+  if (road_distance_m.size() != n) {
+    throw FilterError("the road-distance window holds " + std::to_string(road_distance_m.size()) + " values, not " +
+                          std::to_string(width) + " x " + std::to_string(height),
+                      ErrorCategory::usage);
+  }
   std::vector<double> g(n);
   double z = 0;
   for (std::size_t i = 0; i < n; ++i) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <string>
 
 #include <Eigen/Core>
 
@@ -278,7 +279,7 @@ void SeqLocFilter::predict(const Odometry& odometry) {
 }
 
 FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
-                               const float* road_distance_m, const GpsFix* gps) {
+                               std::span<const float> road_distance_m, const GpsFix* gps) {
   if (!first_) predict(odometry);
   FrameResult result = update(frame, crop, road_distance_m, gps);
   if (last_estimate_ && !first_) {
@@ -292,10 +293,16 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
   return result;
 }
 
-FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop, const float* road_distance_m,
+FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop, std::span<const float> road_distance_m,
                                  const GpsFix* gps, const FrameWeighting* weighting) {
-  if (config_.mgr && road_distance_m == nullptr)
+  // Checked before anything changes: a refused step leaves the belief as it was.
+  if (config_.mgr && road_distance_m.empty())
     throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
+  if (config_.mgr && road_distance_m.size() != belief_.slice_cells()) {
+    throw FilterError("the road-distance window holds " + std::to_string(road_distance_m.size()) + " values, not " +
+                          std::to_string(config_.width) + " x " + std::to_string(config_.height),
+                      ErrorCategory::usage);
+  }
   // Self-calibration estimates from this frame unless a weighting repeats an earlier pass.
   const bool calibrating = config_.self_calibrate && weighting == nullptr;
   FrameResult result = weigh(given, weighting, calibrating);
@@ -439,7 +446,7 @@ void SeqLocFilter::feed_estimator(const PreparedFrame& frame) {
   impl_->estimator.add(evidence);
 }
 
-SeqLocFilter::Peak SeqLocFilter::normalize(double total, const float* road_distance_m) {
+SeqLocFilter::Peak SeqLocFilter::normalize(double total, std::span<const float> road_distance_m) {
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);

@@ -28,7 +28,7 @@ BackwardFilter::BackwardFilter(const FilterConfig& config) : filter_(backward_co
 void BackwardFilter::reset() { filter_.reset_uniform(); }
 
 void BackwardFilter::absorb(const PreparedFrame& frame, const CropPose& crop, const FrameWeighting& weighting,
-                            const float* road_distance_m, const GpsFix* gps) {
+                            std::span<const float> road_distance_m, const GpsFix* gps) {
   (void)filter_.update(frame, crop, road_distance_m, gps, &weighting);
 }
 

@@ -49,7 +49,7 @@ void BackwardPass::step_back(const StepRecord& record, const filter::PreparedFra
   // beta stands in the window the forward belief ended the step in; the frame was taken in where
   // the window was before that step's re-centring.
   move_window(filter_, window_, record.origin);
-  const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
+  const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
   filter_.absorb(frame, record.crop, record.weighting, road, record.fix ? &*record.fix : nullptr);
   filter_.step_back(record.odometry);
   if (&previous_region == &window_.cache()) {
@@ -76,7 +76,7 @@ void ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& 
   // window and fills what enters).
   move_window(filter_, window_, record.origin);
   filter_.predict(record.odometry);
-  const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
+  const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
   (void)filter_.update(frame, record.crop, road, record.fix ? &*record.fix : nullptr, &record.weighting);
   move_window(filter_, window_, record.origin_after);
 }

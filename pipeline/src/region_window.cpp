@@ -36,12 +36,12 @@ void RegionWindow::move_to(std::int64_t origin_u, std::int64_t origin_v) {
   road_stale_ = true;
 }
 
-const float* RegionWindow::road_distance_m() {
+std::span<const float> RegionWindow::road_distance_m() {
   if (road_stale_) {
     cache_->read_road_distance_m(origin_u_, origin_v_, width_, height_, road_m_, /*fill_outside=*/true);
     road_stale_ = false;
   }
-  return road_m_.data();
+  return road_m_;
 }
 
 filter::BeliefVolume carry_belief(const filter::BeliefVolume& belief, const RegionWindow& from,

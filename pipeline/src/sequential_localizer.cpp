@@ -53,7 +53,7 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
   keep_in_window(window_.u_of(crop.x), window_.v_of(crop.y));
   std::optional<filter::GpsFix> fix;
   if (config_.gps_prior && gps) fix = filter::GpsFix{window_.u_of(gps->x_m), window_.v_of(gps->y_m), gps->sigma_m};
-  const float* road = config_.mgr ? window_.road_distance_m() : nullptr;
+  const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
   const filter::CropPose crop_pose = window_.crop_pose(crop);
   const filter::FrameResult r = filter_->step(*frame, crop_pose, odometry, road, fix ? &*fix : nullptr);
   FrameEstimate e;

@@ -1,11 +1,14 @@
 // The SeqLoc filter: the fast implementation against the double-precision reference on seeded
 // random inputs, the analytic cases of conventions.md section 6, and robust intake.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <limits>
 #include <random>
+#include <string>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -102,8 +105,8 @@ TEST_P(FastAgainstReference, AgreeOnSeededRandomSequences) {
     const FrameVolume view = vol.view(h, w, p.bins, p.cell_m);
     const CropPose crop{6 + 12 * unit(rng), 5 + 10 * unit(rng), p.rotation_deg == 0 ? 0.0 : p.rotation_deg + 10 * step};
     const Odometry odo{3 * unit(rng), unit(rng) - 0.5, 40 * unit(rng) - 20};
-    const auto a = fast.step(prepare_frame(view, c.headings), crop, odo, road.data());
-    const auto b = ref.step(view, crop, odo, road.data(), nullptr, a.volume_power);
+    const auto a = fast.step(prepare_frame(view, c.headings), crop, odo, road);
+    const auto b = ref.step(view, crop, odo, road, nullptr, a.volume_power);
     expect_same_belief(fast.belief(), ref, std::string(p.name) + " step " + std::to_string(step));
     EXPECT_EQ(a.argmax.u, b.argmax.u);
     EXPECT_EQ(a.argmax.v, b.argmax.v);
@@ -145,6 +148,27 @@ Volume delta_volume(int h, int w, int n, int v, int u, int j) {
   return d;
 }
 
+TEST(Analytic, TheRoadDistanceWindowMustBeTheWindows) {
+  // MGR reads the road distance as W x H: a window of another size is refused, never read past.
+  FilterConfig c = small_config();
+  c.mgr = true;
+  SeqLocFilter filter(c);
+  const Volume d = delta_volume(9, 11, 16, 3, 7, 4);
+  const auto frame = prepare_frame(d.view(9, 11, 16), c.headings);
+  const std::vector<float> short_road(static_cast<std::size_t>(c.width * c.height) - 1, 0.0f);
+  const BeliefVolume& belief = std::as_const(filter).belief();
+  const std::vector<float> before(belief.data(), belief.data() + belief.size());
+  try {
+    (void)filter.step(frame, {12, 10, 0}, {}, short_road);
+    FAIL() << "a road-distance window one value short was taken";
+  } catch (const FilterError& e) {
+    EXPECT_EQ(e.category(), ErrorCategory::usage);
+    EXPECT_NE(std::string(e.what()).find("road-distance window holds"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(std::equal(before.begin(), before.end(), belief.data())) << "the refused step changed the belief";
+  EXPECT_THROW((void)filter.step(frame, {12, 10, 0}, {}, {}), FilterError) << "none at all with MGR on";
+}
+
 TEST(Analytic, ASharpLikelihoodGivesItsOwnPose) {
   FilterConfig c = small_config();
   c.mgr = false;
@@ -152,7 +176,7 @@ TEST(Analytic, ASharpLikelihoodGivesItsOwnPose) {
   const Volume d = delta_volume(9, 11, 16, 3, 7, 4);
   const auto frame = prepare_frame(d.view(9, 11, 16), c.headings);
   const CropPose crop{12, 10, 0};
-  const auto r = filter.step(frame, crop, {}, nullptr);
+  const auto r = filter.step(frame, crop, {}, {});
   const Pose expected = single_frame_pose(frame, crop);
   EXPECT_EQ(expected.u, 12 + (7 - 5));
   EXPECT_EQ(expected.v, 10 + (3 - 4));
@@ -251,7 +275,7 @@ TEST(Analytic, BeliefSumsToOneAfterEveryStep) {
     SeqLocFilter filter(c);
     for (int step = 0; step < 6; ++step) {
       const Volume vol = random_volume(rng, 9, 11, 16);
-      filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {1.5, 0.2, 7}, road.data());
+      filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {1.5, 0.2, 7}, road);
       EXPECT_NEAR(filter.belief().total_probability(), 1.0, 1e-3) << "mgr " << mgr << " step " << step;
     }
   }
@@ -268,7 +292,7 @@ TEST(Analytic, AFlatCropPullsTheBeliefIntoItByTheOutsideOffset) {
     SeqLocFilter filter(c);
     Volume flat;
     flat.values.assign(static_cast<std::size_t>(7 * 9 * 16), 0.0F);
-    filter.step(prepare_frame(flat.view(7, 9, 16), c.headings), {12, 10, 0}, {}, nullptr);
+    filter.step(prepare_frame(flat.view(7, 9, 16), c.headings), {12, 10, 0}, {}, {});
     // Crop cells: u in [8, 16], v in [7, 13] (centre (12, 10), 9 x 7 cells, whole cells).
     const double inside = filter.belief().position_mass(12, 10), outside = filter.belief().position_mass(2, 2);
     EXPECT_NEAR(std::log(inside / outside), nats, 1e-4) << "offset " << nats;
@@ -333,8 +357,8 @@ TEST(Analytic, MgrKeepsEverySuppressedCellAtLeastEpsQ) {
     for (int u = 0; u < c.width; ++u) road[static_cast<std::size_t>(v * c.width + u)] = static_cast<float>(std::abs(v - 10));
   // A very confident frame elsewhere suppresses most cells to nothing, but not below eps q.
   const Volume d = delta_volume(9, 11, 16, 2, 2, 3);
-  filter.step(prepare_frame(d.view(9, 11, 16), c.headings), {12, 10, 0}, {}, road.data());
-  const auto log_q = road_prior_log_q(road.data(), c.width, c.height, c.headings, c.mgr_sigma_m);
+  filter.step(prepare_frame(d.view(9, 11, 16), c.headings), {12, 10, 0}, {}, road);
+  const auto log_q = road_prior_log_q(road, c.width, c.height, c.headings, c.mgr_sigma_m);
   for (int k = 0; k < c.headings; ++k)
     for (std::size_t i = 0; i < log_q.size(); ++i) {
       ASSERT_GE(filter.belief().slice(k)[i], c.mgr_epsilon * std::exp(log_q[i]) * (1 - 1e-6));
@@ -403,7 +427,7 @@ TEST(Intake, MinusInfinityIsAZeroWithoutNaN) {
   for (int step = 0; step < 4; ++step) {
     Volume vol = random_volume(rng, 9, 11, 16);
     for (std::size_t i = 0; i < vol.values.size(); i += 3) vol.values[i] = -std::numeric_limits<float>::infinity();
-    filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {2, 0, 30}, nullptr);
+    filter.step(prepare_frame(vol.view(9, 11, 16), c.headings), {12, 10, 0}, {2, 0, 30}, {});
     for (std::size_t i = 0; i < filter.belief().size(); ++i) {
       ASSERT_TRUE(std::isfinite(filter.belief().data()[i]) && filter.belief().data()[i] >= 0) << i;
     }

@@ -188,7 +188,7 @@ TEST(Intake, FewerAndMoreBinsThanTheWindowMapToTheRightHeadings) {
     c.pas = false;
     SeqLocFilter filter(c);
     const auto vol = bump(9, 9, bins, 4, 4, bins / 4.0);  // heading 90
-    const auto r = filter.step(prepare_frame(view(vol, 9, 9, bins), 16), {12, 12, 0}, {}, nullptr);
+    const auto r = filter.step(prepare_frame(view(vol, 9, 9, bins), 16), {12, 12, 0}, {}, {});
     EXPECT_EQ(r.argmax.heading_deg, 90) << bins << " bins";
     EXPECT_EQ(r.argmax.u, 12);
     EXPECT_EQ(r.argmax.v, 12);
@@ -213,7 +213,7 @@ TEST(Beyond, SubBinHeadingRefinesBetweenBins) {
   SeqLocFilter filter(c);
   // True heading 30 degrees = bin 1.333 of 16.
   const auto vol = bump(9, 9, 64, 4, 4, 30.0 / 360.0 * 64, 1.0, 2.0);
-  const auto r = filter.step(prepare_frame(view(vol, 9, 9, 64), 16), {12, 12, 0}, {}, nullptr);
+  const auto r = filter.step(prepare_frame(view(vol, 9, 9, 64), 16), {12, 12, 0}, {}, {});
   EXPECT_EQ(r.argmax.heading_deg, 22.5);
   EXPECT_LT(std::abs(r.pose.heading_deg - 30.0), std::abs(r.argmax.heading_deg - 30.0));
 }
@@ -247,12 +247,12 @@ TEST(Beyond, GpsPriorPullsTowardsTheFix) {
   SeqLocFilter filter(c);
   std::vector<float> flat(9 * 9 * 8, 0.0f);
   const GpsFix fix{30, 10, 2.0};
-  const auto r = filter.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, nullptr, &fix);
+  const auto r = filter.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, {}, &fix);
   EXPECT_EQ(r.argmax.u, 30);
   EXPECT_EQ(r.argmax.v, 10);
   c.gps_prior = false;
   SeqLocFilter without(c);
-  EXPECT_NE(without.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, nullptr, &fix).argmax.u, 30);
+  EXPECT_NE(without.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, {}, &fix).argmax.u, 30);
 }
 
 TEST(Beyond, RelocalizationIsFlaggedWhenTheArgmaxJumps) {
@@ -262,20 +262,20 @@ TEST(Beyond, RelocalizationIsFlaggedWhenTheArgmaxJumps) {
   c.relocalization_jump_m = 5;
   SeqLocFilter filter(c);
   const auto here = bump(9, 9, 8, 4, 4, 0);
-  auto r = filter.step(prepare_frame(view(here, 9, 9, 8), 8), {20, 40, 0}, {}, nullptr);
+  auto r = filter.step(prepare_frame(view(here, 9, 9, 8), 8), {20, 40, 0}, {}, {});
   EXPECT_FALSE(r.relocalized);
-  r = filter.step(prepare_frame(view(here, 9, 9, 8), 8), {20, 36, 0}, {2, 0, 0}, nullptr);
+  r = filter.step(prepare_frame(view(here, 9, 9, 8), 8), {20, 36, 0}, {2, 0, 0}, {});
   EXPECT_FALSE(r.relocalized) << "moved as the odometry says";
   // A much stronger peak 15 m away.
   std::vector<float> there(9 * 9 * 8);
   const auto sharp = bump(9, 9, 8, 4, 4, 0, 0.3, 0.3);
   for (std::size_t i = 0; i < there.size(); ++i) there[i] = 20 * sharp[i];
   // Two frames of it outweigh the two of the old place; the jump is flagged once, when it happens.
-  const auto first = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 32, 0}, {2, 0, 0}, nullptr);
-  const auto second = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 28, 0}, {2, 0, 0}, nullptr);
+  const auto first = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 32, 0}, {2, 0, 0}, {});
+  const auto second = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 28, 0}, {2, 0, 0}, {});
   EXPECT_NE(first.relocalized, second.relocalized);
   EXPECT_EQ(second.argmax.u, 50);
-  const auto third = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 24, 0}, {2, 0, 0}, nullptr);
+  const auto third = filter.step(prepare_frame(view(there, 9, 9, 8), 8), {50, 24, 0}, {2, 0, 0}, {});
   EXPECT_FALSE(third.relocalized);
 }
 

@@ -81,7 +81,7 @@ std::vector<FrameResult> run(Generator& g, const FilterConfig& c, int frames) {
   for (int t = 0; t < frames; ++t) {
     const auto f = g.frame(t);
     const Odometry odo{t == 0 ? 0.0 : 0.5, 0, 0};
-    results.push_back(filter.step(prepare_frame(g.view(f), c.headings), f.pose, odo, road.data()));
+    results.push_back(filter.step(prepare_frame(g.view(f), c.headings), f.pose, odo, road));
   }
   return results;
 }
@@ -113,7 +113,7 @@ TEST(SelfCalibration, PredictiveLikelihoodEqualsTheBruteForceSum) {
   std::vector<double> belief(b.data(), b.data() + b.size());
   const CropPose crop{7, 6, 0};  // volume cell (v, u) is window cell (u + 2, v + 2)
   const FrameVolume view{volume.data(), VolumeType::float32, VolumeValues::log_prob, h, w, n, 0.5};
-  (void)filter.step(prepare_frame(view, c.headings), crop, {}, nullptr);
+  (void)filter.step(prepare_frame(view, c.headings), crop, {}, {});
 
   const PowerEstimator prior(c.self_calibration_prior_octaves, c.self_calibration_outlier_share);
   const double rho = c.self_calibration_outlier_share;
@@ -182,7 +182,7 @@ TEST(SelfCalibration, IsCausal) {
       for (auto& x : f.values) x = normal(noise);  // different frames from here on
     }
     const Odometry odo{t == 0 ? 0.0 : 0.5, 0, 0};
-    const auto r = filter.step(prepare_frame(b.view(f), c.headings), f.pose, odo, road.data());
+    const auto r = filter.step(prepare_frame(b.view(f), c.headings), f.pose, odo, road);
     if (t < 20) {
       EXPECT_EQ(r.volume_power, ra[static_cast<std::size_t>(t)].volume_power) << "frame " << t;
       EXPECT_EQ(r.pose.u, ra[static_cast<std::size_t>(t)].pose.u) << "frame " << t;
@@ -219,7 +219,7 @@ TEST(SelfCalibration, OneFrameAndPureNoiseNeitherCrashNorRunAway) {
   for (int t = 0; t < 40; ++t) {
     for (auto& x : values) x = normal(rng);
     const FrameVolume view{values.data(), VolumeType::float32, VolumeValues::log_prob, g.crop, g.crop, g.bins, 0.5};
-    const auto r = filter.step(prepare_frame(view, c.headings), {48, 48, 0}, {0.5, 0, 0}, road.data());
+    const auto r = filter.step(prepare_frame(view, c.headings), {48, 48, 0}, {0.5, 0, 0}, road);
     ASSERT_TRUE(std::isfinite(r.volume_power) && r.volume_power > 0) << "frame " << t;
     EXPECT_LE(r.volume_power, 1.0) << "frame " << t << ": noise must not be sharpened";
     ASSERT_TRUE(std::isfinite(r.pose.u) && std::isfinite(r.pose.v)) << "frame " << t;

@@ -113,7 +113,7 @@ Smoothed smooth(const std::vector<Frame>& frames, const FilterConfig& config) {
   std::vector<BeliefVolume> alpha;
   std::vector<FrameWeighting> weighting;
   for (std::size_t t = 0; t < frames.size(); ++t) {
-    weighting.push_back(forward.step(prepared_frames[t], frames[t].crop, frames[t].odometry, nullptr).weighting);
+    weighting.push_back(forward.step(prepared_frames[t], frames[t].crop, frames[t].odometry, {}).weighting);
     alpha.push_back(forward.belief());
   }
   BackwardFilter backward(config);
@@ -122,7 +122,7 @@ Smoothed smooth(const std::vector<Frame>& frames, const FilterConfig& config) {
   out.results.resize(frames.size());
   for (std::size_t t = frames.size(); t-- > 0;) {
     out.results[t] = smoothed_result(alpha[t], backward.belief(), config, &out.posterior[t]);
-    backward.absorb(prepared_frames[t], frames[t].crop, weighting[t], nullptr);
+    backward.absorb(prepared_frames[t], frames[t].crop, weighting[t], {});
     if (t > 0) backward.step_back(frames[t].odometry);
   }
   return out;
@@ -221,7 +221,7 @@ TEST(Smoother, TheLastFrameIsTheForwardFiltersAndTheFirstSeesTheWholeRoute) {
   forward.reset_uniform();
   FrameResult first, last;
   for (const auto& f : frames) {
-    last = forward.step(prepared(f), f.crop, f.odometry, nullptr);
+    last = forward.step(prepared(f), f.crop, f.odometry, {});
     if (&f == &frames.front()) first = last;
   }
   EXPECT_EQ(s.results.back().argmax.u, last.argmax.u);

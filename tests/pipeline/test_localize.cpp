@@ -612,7 +612,8 @@ TEST(RegionWindow, ConvertsCentresShiftsAndReadsTheRoadOfItsCells) {
   std::vector<std::uint16_t> cm;
   auto expect_road_of_window = [&] {
     cache.read_road_distance(window.origin_u(), window.origin_v(), 64, 48, cm, true);
-    const float* road = window.road_distance_m();
+    const std::span<const float> road = window.road_distance_m();
+    ASSERT_EQ(road.size(), cm.size()) << "the window's cells";
     for (std::size_t i = 0; i < cm.size(); ++i) ASSERT_EQ(road[i], static_cast<float>(cm[i] * 0.01)) << i;
   };
   expect_road_of_window();

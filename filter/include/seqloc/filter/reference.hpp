@@ -4,6 +4,7 @@
 // seqloc_filter.hpp, sharing no code with the fast filter beyond the half-float conversion. The
 // tests run both on seeded random volumes and motions and compare them.
 
+#include <span>
 #include <vector>
 
 #include "seqloc/filter/config.hpp"
@@ -22,7 +23,7 @@ class ReferenceFilter {
   /// made here: the tests hand in the power the fast filter reports, and check the estimator
   /// against its own brute-force reference).
   FrameResult step(const FrameVolume& volume, const CropPose& crop, const Odometry& odometry,
-                   const float* road_distance_m, const GpsFix* gps = nullptr, double volume_power = 1.0);
+                   std::span<const float> road_distance_m, const GpsFix* gps = nullptr, double volume_power = 1.0);
 
   [[nodiscard]] double at(int u, int v, int k) const { return b_[index(u, v, k)]; }
 
@@ -34,7 +35,7 @@ class ReferenceFilter {
   std::vector<double> weigh(const FrameVolume& volume, FrameResult& r);
   void update(const FrameVolume& volume, const std::vector<double>& logp, const CropPose& crop, const GpsFix* gps,
               double etu_weight);
-  void blend_road_prior(const float* road_distance_m);
+  void blend_road_prior(std::span<const float> road_distance_m);
   void estimate(FrameResult& r) const;
 
   [[nodiscard]] std::size_t index(int u, int v, int k) const {

@@ -92,8 +92,8 @@ inline constexpr std::size_t kEtuRouteFrames = 256;
 [[nodiscard]] std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_m);
 
 /// The road prior of MGR over the window: log q(x) for every cell (one heading's share).
-/// `road_distance_m` is W x H, row-major (v, u).
-[[nodiscard]] std::vector<float> road_prior_log_q(const float* road_distance_m, int width, int height, int headings,
+/// `road_distance_m` is W x H, row-major (v, u) (FilterError when it holds another number of values).
+[[nodiscard]] std::vector<float> road_prior_log_q(std::span<const float> road_distance_m, int width, int height, int headings,
                                                   double sigma_m);
 
 /// A GPS fix in window cells, for the optional GPS prior term.
@@ -147,7 +147,7 @@ class SeqLocFilter {
   /// with the frame's volume at `crop`, MGR with the road distance window (W x H metres; may be
   /// null when MGR is off), PAS. `gps` is used when the config enables the GPS term.
   FrameResult step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
-                   const float* road_distance_m, const GpsFix* gps = nullptr);
+                   std::span<const float> road_distance_m, const GpsFix* gps = nullptr);
 
   /// The stages, exposed for tests and for callers that move the window between frames.
   void predict(const Odometry& odometry);
@@ -162,7 +162,7 @@ class SeqLocFilter {
   /// in, MGR, the argmax and PAS. With `weighting` the frame is weighed as given (a pass repeating
   /// an earlier one: nothing is estimated, self-calibration and ETU's route history are left as
   /// they are); without it, as the configuration says.
-  FrameResult update(const PreparedFrame& given, const CropPose& crop, const float* road_distance_m,
+  FrameResult update(const PreparedFrame& given, const CropPose& crop, std::span<const float> road_distance_m,
                      const GpsFix* gps = nullptr, const FrameWeighting* weighting = nullptr);
 
   /// Self-calibration's estimator (its power is what the next step uses).
@@ -187,7 +187,7 @@ class SeqLocFilter {
   double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
                      const FrameResult& result, bool calibrating);
   void feed_estimator(const PreparedFrame& frame);
-  Peak normalize(double total, const float* road_distance_m);
+  Peak normalize(double total, std::span<const float> road_distance_m);
   [[nodiscard]] Pose refine(const Peak& peak) const;
 
   FilterConfig config_;

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <optional>
 #include <vector>
 
@@ -64,7 +65,7 @@ class RegionWindow {
 
   /// The road distance over the window in metres, width x height row-major (v, u); cells outside
   /// the region read as the cache's fill. Read from the cache on the first call after a move.
-  [[nodiscard]] const float* road_distance_m();
+  [[nodiscard]] std::span<const float> road_distance_m();
 
  private:
   raster::CacheReader* cache_;
