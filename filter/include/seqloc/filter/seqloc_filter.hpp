@@ -144,8 +144,9 @@ class SeqLocFilter {
   void reset_gaussian(double u, double v, double sigma_m);
 
   /// One frame: predict through `odometry` (skipped on the first frame after a reset), update
-  /// with the frame's volume at `crop`, MGR with the road distance window (W x H metres; may be
-  /// null when MGR is off), PAS. `gps` is used when the config enables the GPS term.
+  /// with the frame's volume at `crop`, MGR with the road distance window (W x H metres, row-major;
+  /// empty when MGR is off; FilterError for another size), PAS. `gps` is used when the config
+  /// enables the GPS term.
   FrameResult step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
                    std::span<const float> road_distance_m, const GpsFix* gps = nullptr);
 
