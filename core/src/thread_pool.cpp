@@ -12,19 +12,32 @@ struct ThreadPool::Batch {
   std::size_t tasks = 0;
   std::atomic<std::size_t> next{0};
   std::atomic<bool> failed{false};
-  std::exception_ptr error;         ///< guarded by the pool's mutex
-  std::size_t helpers_wanted = 0;   ///< guarded by the pool's mutex
-  std::size_t helpers_running = 0;  ///< guarded by the pool's mutex
-  std::condition_variable helpers_done;
+  std::atomic<std::size_t> finished{0};  ///< tasks run (or skipped after a failure) to their end
+  std::exception_ptr error;              ///< guarded by the pool's mutex
+  std::size_t helpers_wanted = 0;        ///< guarded by the pool's mutex
+  std::condition_variable all_finished;  ///< with the pool's mutex
 
-  // Claims and runs tasks until none is left or one failed; the first error is kept.
-  void drain(std::mutex& mutex) {
-    try {
-      for (std::size_t i = next++; i < tasks && !failed; i = next++) (*task)(i);
-    } catch (...) {
-      std::lock_guard lock(mutex);
-      if (!error) error = std::current_exception();
-      failed = true;
+  // Claims tasks until every one is claimed, running each (skipping those claimed after a failure,
+  // whose first error is kept). The caller waits for the tasks, never for a helper: one that
+  // arrives after the last claim leaves without touching anything but `next`.
+  // `busy` (a helper's): the pool's count of workers running a task, raised while this one does.
+  void drain(std::mutex& mutex, std::atomic<std::size_t>* busy = nullptr) {
+    for (std::size_t i = next++; i < tasks; i = next++) {
+      if (busy) ++*busy;
+      if (!failed) {
+        try {
+          (*task)(i);
+        } catch (...) {
+          std::lock_guard lock(mutex);
+          if (!error) error = std::current_exception();
+          failed = true;
+        }
+      }
+      if (busy) --*busy;
+      if (++finished == tasks) {
+        std::lock_guard lock(mutex);
+        all_finished.notify_all();
+      }
     }
   }
 };
@@ -62,19 +75,22 @@ void ThreadPool::run(std::size_t tasks, int concurrency, const std::function<voi
     std::lock_guard lock(mutex_);
     batch->helpers_wanted = helpers;
     queue_.push_back(batch);
-    // Start the threads this batch would wait for: every busy worker stays busy meanwhile.
-    while (idle_ < helpers) {
-      threads_.emplace_back([this] { work(); });
-      ++idle_;
-    }
+    // Every helper wanted has an idle worker of its own: loops running side by side (the filter's
+    // step and the next frame's preparation) each get the threads they ask for, as when each
+    // started its own, and no thread is started while enough stand idle.
+    // A worker that is not running a task is idle or on its way back to the queue (it took a
+    // slot of a batch whose tasks were all claimed): either way it will take a slot soon.
+    wanted_ += helpers;
+    while (threads_.size() - busy_ < wanted_) threads_.emplace_back([this] { work(); });
   }
   wake_.notify_all();
   batch->drain(mutex_);
   std::unique_lock lock(mutex_);
   // Helpers not yet arrived are no longer wanted; those running finish the task they hold.
+  wanted_ -= batch->helpers_wanted;
   batch->helpers_wanted = 0;
   std::erase(queue_, batch);
-  batch->helpers_done.wait(lock, [&] { return batch->helpers_running == 0; });
+  batch->all_finished.wait(lock, [&] { return batch->finished == batch->tasks; });
   if (batch->error) std::rethrow_exception(batch->error);
 }
 
@@ -85,13 +101,10 @@ void ThreadPool::work() {
     if (queue_.empty()) return;  // stopping
     const std::shared_ptr<Batch> batch = queue_.front();
     if (--batch->helpers_wanted == 0) queue_.pop_front();
-    ++batch->helpers_running;
-    --idle_;
+    --wanted_;
     lock.unlock();
-    batch->drain(mutex_);
+    batch->drain(mutex_, &busy_);  // the batch stays alive here through its shared_ptr
     lock.lock();
-    ++idle_;
-    if (--batch->helpers_running == 0) batch->helpers_done.notify_all();
   }
 }
 

@@ -6,6 +6,7 @@
 // caller always works its own tasks off).
 
 #include <algorithm>
+#include <atomic>
 #include <concepts>
 #include <condition_variable>
 #include <cstddef>
@@ -45,14 +46,18 @@ class ThreadPool {
   std::condition_variable wake_;
   std::deque<std::shared_ptr<Batch>> queue_;  ///< batches that still want helpers
   std::vector<std::thread> threads_;
-  std::size_t idle_ = 0;
+  std::atomic<std::size_t> busy_{0};  ///< workers running a task
+  std::size_t wanted_ = 0;            ///< helpers the queued batches still want (at most the workers not busy)
   bool stopping_ = false;
 };
 
 /// Calls body(begin, end, chunk) on `chunks` contiguous parts of [0, n) (fewer when n is
-/// smaller), in parallel on the shared pool: part c is [n * c / chunks, n * (c + 1) / chunks)
-/// (computed in n's type), so the split depends on n and chunks alone, never on which thread
-/// runs a part.
+/// smaller), in parallel: part c is [n * c / chunks, n * (c + 1) / chunks) (computed in n's type),
+/// so the split depends on n and chunks alone, never on which thread runs a part. The calling
+/// thread runs part 0 and a thread of its own runs each other part: measured, this beats the
+/// shared pool for the filter's short loops when two of them run side by side (the step and the
+/// next frame's preparation), where a pool's hand-offs cost more than starting the threads
+/// (docs/development.md, "Threads").
 template <std::integral Index, class Body>
 void parallel_chunks(Index n, int chunks, Body&& body) {
   const auto parts = static_cast<Index>(std::max(1, chunks));
@@ -61,10 +66,12 @@ void parallel_chunks(Index n, int chunks, Body&& body) {
     body(Index{0}, n, 0);
     return;
   }
-  ThreadPool::shared().run(static_cast<std::size_t>(count), static_cast<int>(count), [&body, n, count](std::size_t c) {
-    const auto t = static_cast<Index>(c);
-    body(n * t / count, n * (t + 1) / count, static_cast<int>(c));
-  });
+  std::vector<std::jthread> workers;
+  workers.reserve(static_cast<std::size_t>(count) - 1);
+  for (Index t = 1; t < count; ++t) {
+    workers.emplace_back([&body, n, count, t] { body(n * t / count, n * (t + 1) / count, static_cast<int>(t)); });
+  }
+  body(Index{0}, n / count, 0);
 }
 
 /// Runs job(0) ... job(jobs - 1), each once, on min(threads, jobs) threads of the shared pool
