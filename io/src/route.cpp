@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <set>
@@ -10,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "seqloc/core/csv.hpp"
+#include "seqloc/io/npy.hpp"
 
 namespace seqloc::io {
 namespace {
@@ -213,6 +215,35 @@ void check_motion(const RouteFrame* previous, const RouteFrame& f, const std::st
 }
 
 }  // namespace
+
+void check_volume_layout(const Route& route, const RouteFrame& f, const NpyVolume& npy) {
+  if (route.layout != VolumeLayout::hwn || route.layout_declared) return;
+  if (npy.width() != npy.bins() || npy.height() == npy.width()) return;
+  const std::string shape =
+      "(" + std::to_string(npy.height()) + ", " + std::to_string(npy.width()) + ", " + std::to_string(npy.bins()) + ")";
+  throw DataError(f.volume.string() + " (frames.csv line " + std::to_string(f.line) + "): shape " + shape +
+                  " looks like (N, H, W), headings first and a square crop " +
+                  R"(last, but volumes are read as (H, W, N); set "layout": "NHW" in route.json (or )" +
+                  R"("layout": "HWN" if )" + shape + " is H, W, N)");
+}
+
+filter::FrameVolume frame_volume(const Route& route, const RouteFrame& f, const NpyVolume& npy,
+                                 std::vector<unsigned char>& buffer) {
+  check_volume_layout(route, f, npy);
+  if (route.layout == VolumeLayout::hwn) return npy.view(route.volume_kind, route.cell_m);
+  const int n = npy.height(), h = npy.width(), w = npy.bins();
+  const std::size_t element = npy.type() == filter::VolumeType::float16 ? 2 : 4;
+  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(h) * static_cast<std::size_t>(w);
+  buffer.resize(cells * element);
+  const auto* source = static_cast<const unsigned char*>(npy.data());
+  std::size_t from = 0;  // (k, y, x) in C order
+  for (std::size_t k = 0; k < static_cast<std::size_t>(n); ++k) {
+    for (std::size_t yx = 0; yx < static_cast<std::size_t>(h) * static_cast<std::size_t>(w); ++yx, ++from) {
+      std::memcpy(buffer.data() + (yx * static_cast<std::size_t>(n) + k) * element, source + from * element, element);
+    }
+  }
+  return {buffer.data(), npy.type(), route.volume_kind, h, w, n, route.cell_m};
+}
 
 Route read_route(const std::filesystem::path& dir, const RouteLimits& limits) {
   limits.validate();

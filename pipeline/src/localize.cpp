@@ -23,43 +23,8 @@
 #include "seqloc/pipeline/region_catalog.hpp"
 
 namespace seqloc::pipeline {
-namespace {
 
 using core::kCellM;
-
-// A frame's .npy volume as the filter takes it, (H, W, N). An NHW volume is transposed into
-// `buffer`; an undeclared layout whose shape reads better as (N, H, W) is refused, since reading
-// it as (H, W, N) would run to the end and give nonsense.
-filter::FrameVolume volume_view(const io::Route& route, const io::RouteFrame& f, const io::NpyVolume& npy,
-                                std::vector<unsigned char>& buffer) {
-  auto where = [&] { return f.volume.string() + " (frames.csv line " + std::to_string(f.line) + ")"; };
-  auto shape = [&] {
-    return "(" + std::to_string(npy.height()) + ", " + std::to_string(npy.width()) + ", " + std::to_string(npy.bins()) +
-           ")";
-  };
-  if (route.layout == io::VolumeLayout::hwn) {
-    if (!route.layout_declared && npy.width() == npy.bins() && npy.height() != npy.width()) {
-      throw DataError(where() + ": shape " + shape() + " looks like (N, H, W), headings first and a square crop " +
-                      R"(last, but volumes are read as (H, W, N); set "layout": "NHW" in route.json (or )" +
-                      R"("layout": "HWN" if )" + shape() + " is H, W, N)");
-    }
-    return npy.view(route.volume_kind, route.cell_m);
-  }
-  const int n = npy.height(), h = npy.width(), w = npy.bins();
-  const std::size_t element = npy.type() == filter::VolumeType::float16 ? 2 : 4;
-  const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(h) * static_cast<std::size_t>(w);
-  buffer.resize(cells * element);
-  const auto* source = static_cast<const unsigned char*>(npy.data());
-  std::size_t from = 0;  // (k, y, x) in C order
-  for (std::size_t k = 0; k < static_cast<std::size_t>(n); ++k) {
-    for (std::size_t yx = 0; yx < static_cast<std::size_t>(h) * static_cast<std::size_t>(w); ++yx, ++from) {
-      std::memcpy(buffer.data() + (yx * static_cast<std::size_t>(n) + k) * element, source + from * element, element);
-    }
-  }
-  return {buffer.data(), npy.type(), route.volume_kind, h, w, n, route.cell_m};
-}
-
-}  // namespace
 
 GridCrop frame_crop(const io::RouteFrame& f, const raster::RegionGrid& grid, const osm::RegionProjection& projection) {
   GridCrop crop;
@@ -131,7 +96,7 @@ FrameSource frames_from(const io::Route& route, std::function<raster::CacheReade
     if (f.observation.empty()) {
       const io::NpyVolume npy(f.volume);
       std::vector<unsigned char> transposed;
-      const filter::FrameVolume volume = volume_view(route, f, npy, transposed);
+      const filter::FrameVolume volume = io::frame_volume(route, f, npy, transposed);
       try {
         return prepared(volume);
       } catch (const filter::FilterError& e) {

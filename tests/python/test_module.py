@@ -33,36 +33,36 @@ class CacheCrop(unittest.TestCase):
     def setUp(self):
         self.cache = seqloc.Cache(CACHE)
         info = self.cache.info
-        self.centre = (info["centre_lat"], info["centre_lon"])
+        self.centre = (info.centre_lat, info.centre_lon)
 
     def test_crop_equals_gdal_reading_the_geopackage(self):
         for size_m, lat_off in ((64.0, 0.0), (50.5, 0.001), (128.0, -0.002)):
             lat, lon = self.centre[0] + lat_off, self.centre[1] + lat_off
             crop = self.cache.crop(lat, lon, size_m)
             n = round(size_m * 2)
-            self.assertEqual(crop["classes"].shape, (n, n, 3))
-            self.assertEqual(crop["classes"].dtype, np.uint8)
-            self.assertEqual(crop["road_distance"].dtype, np.float32)
-            classes = gdal_window("classes", crop["geotransform"], n)
+            self.assertEqual(crop.classes.shape, (n, n, 3))
+            self.assertEqual(crop.classes.dtype, np.uint8)
+            self.assertEqual(crop.road_distance.dtype, np.float32)
+            classes = gdal_window("classes", crop.geotransform, n)
             for c in range(3):
-                np.testing.assert_array_equal(crop["classes"][:, :, c], classes[c])
-            (metres,) = gdal_window("road_distance", crop["geotransform"], n)
-            np.testing.assert_allclose(crop["road_distance"], metres, atol=1e-4)
-            d = crop["road_distance"].astype(np.float64)
-            np.testing.assert_allclose(crop["road_prior"], np.exp(-d * d / (2 * 3.0**2)), atol=1e-6)
+                np.testing.assert_array_equal(crop.classes[:, :, c], classes[c])
+            (metres,) = gdal_window("road_distance", crop.geotransform, n)
+            np.testing.assert_allclose(crop.road_distance, metres, atol=1e-4)
+            d = crop.road_distance.astype(np.float64)
+            np.testing.assert_allclose(crop.road_prior, np.exp(-d * d / (2 * 3.0**2)), atol=1e-6)
             # The crop's centre is within half a cell of the point (a cell centre or corner).
             x, y = self.cache.to_grid(lat, lon)
-            self.assertLessEqual(abs(x - crop["crop_x"]), 0.25 + 1e-9)
-            self.assertLessEqual(abs(y - crop["crop_y"]), 0.25 + 1e-9)
+            self.assertLessEqual(abs(x - crop.crop_x), 0.25 + 1e-9)
+            self.assertLessEqual(abs(y - crop.crop_y), 0.25 + 1e-9)
 
     def test_crop_by_region_metres_is_the_crop_by_lat_lon(self):
         lat, lon = self.centre[0] + 0.0007, self.centre[1] - 0.0004
         x, y = self.cache.to_grid(lat, lon)
         by_geo = self.cache.crop(lat, lon, 40.0)
         by_metres = self.cache.crop(x=x, y=y, size_m=40.0)
-        self.assertEqual(by_geo["geotransform"], by_metres["geotransform"])
+        self.assertEqual(by_geo.geotransform, by_metres.geotransform)
         for name in ("classes", "road_distance", "road_prior"):
-            np.testing.assert_array_equal(by_geo[name], by_metres[name], name)
+            np.testing.assert_array_equal(getattr(by_geo, name), getattr(by_metres, name), name)
         # from_grid inverts to_grid (to well under a millimetre).
         back = self.cache.from_grid(x, y)
         self.assertAlmostEqual(back[0], lat, places=9)
@@ -77,8 +77,8 @@ class CacheCrop(unittest.TestCase):
     def test_arrays_are_not_copies(self):
         crop = self.cache.crop(*self.centre, 32.0)
         for name in ("classes", "road_distance", "road_prior"):
-            self.assertFalse(crop[name].flags["OWNDATA"], name)  # owned by the C++ buffer's capsule
-            self.assertTrue(crop[name].flags["C_CONTIGUOUS"], name)
+            self.assertFalse(getattr(crop, name).flags["OWNDATA"], name)  # owned by the C++ buffer's capsule
+            self.assertTrue(getattr(crop, name).flags["C_CONTIGUOUS"], name)
 
     def test_bad_requests_raise(self):
         with self.assertRaises(ValueError):
@@ -112,10 +112,10 @@ class FilterOnline(unittest.TestCase):
         vol[10, 20, 8] = 0.0  # 8 * 360 / 32 = 90 degrees
         r = f.step(vol, (0.0, 0.0, 0.0), (32.0, 32.0, 0.0))
         # Volume cell (v, u) = (10, 20) lies (20 - 15, 10 - 15) cells from the crop centre.
-        self.assertAlmostEqual(r["argmax"]["u"], 37.0)
-        self.assertAlmostEqual(r["argmax"]["v"], 27.0)
-        self.assertAlmostEqual(r["heading_deg"], 90.0)
-        self.assertLess(r["frame_entropy"], 0.2)
+        self.assertAlmostEqual(r.argmax.u, 37.0)
+        self.assertAlmostEqual(r.argmax.v, 27.0)
+        self.assertAlmostEqual(r.grid_heading_deg, 90.0)
+        self.assertLess(r.frame_entropy, 0.2)
 
     def test_without_a_crop_pose_the_volume_sits_at_the_window_centre(self):
         f = seqloc.Filter({"width": 64, "height": 48, "headings": 32, "mgr": False})
@@ -124,8 +124,8 @@ class FilterOnline(unittest.TestCase):
         r = f.step(vol)
         # The window's centre: cell ((64 - 1) / 2, (48 - 1) / 2), within the half cell a cell
         # grid allows, not the window's corner.
-        self.assertAlmostEqual(r["argmax"]["u"], 31.5, delta=0.5)
-        self.assertAlmostEqual(r["argmax"]["v"], 23.5, delta=0.5)
+        self.assertAlmostEqual(r.argmax.u, 31.5, delta=0.5)
+        self.assertAlmostEqual(r.argmax.v, 23.5, delta=0.5)
 
     def test_belief_marginal_is_the_belief_over_the_window(self):
         f = seqloc.Filter({"width": 40, "height": 30, "headings": 16, "mgr": False})
@@ -136,7 +136,7 @@ class FilterOnline(unittest.TestCase):
         self.assertEqual((marginal.shape, marginal.dtype), ((30, 40), np.float32))
         self.assertAlmostEqual(float(marginal.sum()), 1.0, places=4)
         v, u = np.unravel_index(np.argmax(marginal), marginal.shape)
-        self.assertEqual((u, v), (round(r["argmax"]["u"]), round(r["argmax"]["v"])))
+        self.assertEqual((u, v), (round(r.argmax.u), round(r.argmax.v)))
 
     def test_arrays_from_dlpack_and_array_interface_give_the_same_step(self):
         vol = np.full((15, 15, 16), -25.0, np.float32)
@@ -163,8 +163,10 @@ class FilterOnline(unittest.TestCase):
         for wrap in (lambda a: a, DLPackOnly, ArrayOnly):
             f = seqloc.Filter({"width": 32, "height": 32, "headings": 16, "mgr": False})
             results.append(f.step(wrap(vol), crop_pose=(16.0, 16.0, 0.0)))
-        self.assertEqual(results[0], results[1])
-        self.assertEqual(results[0], results[2])
+        def fields(r):
+            return (r.u, r.v, r.grid_heading_deg, r.frame_entropy, r.etu_weight, r.peak_log_belief)
+        self.assertEqual(fields(results[0]), fields(results[1]))
+        self.assertEqual(fields(results[0]), fields(results[2]))
         # Errors are short and name the argument, never the array's values.
         f = seqloc.Filter({"width": 32, "height": 32, "headings": 16, "mgr": False})
         big = np.zeros((200, 200, 16), np.float32)
@@ -181,8 +183,8 @@ class FilterOnline(unittest.TestCase):
         f.step(vol, (0, 0, 0), (32.0, 32.0, 0.0))
         flat = np.zeros((15, 15, 32), np.float32)  # no information: the prediction decides
         r = f.step(flat, (5.0, 0.0, 0.0), (32.0, 32.0, 0.0))
-        self.assertAlmostEqual(r["argmax"]["u"], 32.0, delta=0.5)
-        self.assertAlmostEqual(r["argmax"]["v"], 22.0, delta=0.5)  # 5 m = 10 cells north
+        self.assertAlmostEqual(r.argmax.u, 32.0, delta=0.5)
+        self.assertAlmostEqual(r.argmax.v, 22.0, delta=0.5)  # 5 m = 10 cells north
 
     def test_mgr_needs_the_road_distance(self):
         f = seqloc.Filter({"width": 32, "height": 32, "headings": 8})
@@ -190,7 +192,7 @@ class FilterOnline(unittest.TestCase):
         with self.assertRaises(ValueError):
             f.step(vol)
         r = f.step(vol, road_distance=np.zeros((32, 32), np.float32))
-        self.assertIn("u", r)
+        self.assertIsInstance(r, seqloc.FilterResult)
         with self.assertRaises(ValueError):
             f.step(vol, road_distance=np.zeros((16, 32), np.float32))
 
@@ -235,24 +237,27 @@ class FilterOnline(unittest.TestCase):
         vol = np.full((9, 9, 8), -20.0, np.float16)
         vol[4, 6, 2] = 0.0
         r = f.step(vol, crop_pose=(16.0, 16.0, 0.0))
-        self.assertAlmostEqual(r["argmax"]["u"], 18.0)
-        self.assertAlmostEqual(r["argmax"]["v"], 16.0)
-        self.assertAlmostEqual(r["argmax"]["heading_deg"], 90.0)
+        self.assertAlmostEqual(r.argmax.u, 18.0)
+        self.assertAlmostEqual(r.argmax.v, 16.0)
+        self.assertAlmostEqual(r.argmax.grid_heading_deg, 90.0)
 
 
 class LocalizerAsLocalize(unittest.TestCase):
     """seqloc.Localizer fed a route's volumes in a Python loop gives seqloc localize's poses."""
 
-    def write_route(self, d, frames=12):
+    @staticmethod
+    def write_route(d, frames=12, truth=False, nhw=False):
         """A route of .npy volumes with lat/lon crops: a peak (with noise) that drives east 5 m a
-        frame from near the region's centre, crops off the truth by a few metres."""
+        frame from near the region's centre, crops off the truth by a few metres. With `truth`,
+        frames.csv has the ground truth; with `nhw`, the volumes are stored headings first."""
         cache = seqloc.Cache(CACHE)
-        x0, y0 = cache.to_grid(cache.info["centre_lat"], cache.info["centre_lon"])
+        x0, y0 = cache.to_grid(cache.info.centre_lat, cache.info.centre_lon)
         rng = np.random.default_rng(7)
         route = os.path.join(d, "route")
         os.makedirs(route)
         with open(os.path.join(route, "route.json"), "w") as f:
-            f.write('{"format": "seqloc-route", "version": 1, "name": "py"}')
+            layout = ', "layout": "NHW"' if nhw else ""
+            f.write('{"format": "seqloc-route", "version": 1, "name": "py"' + layout + "}")
         rows = []
         for t in range(frames):
             x, y = x0 + 5.0 * t, y0 + 0.25
@@ -260,13 +265,15 @@ class LocalizerAsLocalize(unittest.TestCase):
             crop_lat, crop_lon = cache.from_grid(x - 0.5 * dx, y - 0.5 * dy)
             vol = (rng.normal(0.0, 1.0, (31, 31, 64)) - 6.0).astype(np.float32)
             vol[15 - dy, 15 + dx, 16] = 0.0  # east: compass 90 degrees, bin 16 of 64
-            np.save(os.path.join(route, f"v{t}.npy"), vol)
-            rows.append((f"f{t}", float(t), f"v{t}.npy", f"{crop_lat:.12f}", f"{crop_lon:.12f}", 5.0 if t else 0.0,
-                         0.0, 0.0))
+            np.save(os.path.join(route, f"v{t}.npy"), vol.transpose(2, 0, 1).copy() if nhw else vol)
+            row = (f"f{t}", float(t), f"v{t}.npy", f"{crop_lat:.12f}", f"{crop_lon:.12f}", 5.0 if t else 0.0, 0.0, 0.0)
+            if truth:
+                row += tuple(f"{c:.12f}" for c in cache.from_grid(x, y)) + (90.0,)
+            rows.append(row)
         with open(os.path.join(route, "frames.csv"), "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(["frame", "timestamp", "volume", "crop_lat", "crop_lon", "odo_forward_m", "odo_left_m",
-                        "odo_yaw_deg"])
+                        "odo_yaw_deg"] + (["gt_lat", "gt_lon", "gt_heading_deg"] if truth else []))
             w.writerows(rows)
         return route, rows
 
@@ -286,14 +293,14 @@ class LocalizerAsLocalize(unittest.TestCase):
                     vol = np.load(os.path.join(route, row[2]))
                     got = loc.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
                     where = f"{mode} frame {want['frame']}"
-                    self.assertAlmostEqual(got["lat"], float(want["lat"]), places=8, msg=where)
-                    self.assertAlmostEqual(got["lon"], float(want["lon"]), places=8, msg=where)
-                    self.assertAlmostEqual(got["x"], float(want["x_m"]), delta=0.002, msg=where)
-                    self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=where)
-                    self.assertAlmostEqual(got["heading_deg"], float(want["heading_deg"]), delta=0.002, msg=where)
-                    self.assertAlmostEqual(got["entropy"], float(want["entropy"]), delta=2e-6, msg=where)
-                    self.assertAlmostEqual(got["volume_power"], float(want["volume_power"]), delta=2e-6, msg=where)
-                    self.assertEqual(int(got["relocalized"]), int(want["relocalized"]), where)
+                    self.assertAlmostEqual(got.lat, float(want["lat"]), places=8, msg=where)
+                    self.assertAlmostEqual(got.lon, float(want["lon"]), places=8, msg=where)
+                    self.assertAlmostEqual(got.x_m, float(want["x_m"]), delta=0.002, msg=where)
+                    self.assertAlmostEqual(got.y_m, float(want["y_m"]), delta=0.002, msg=where)
+                    self.assertAlmostEqual(got.heading_deg, float(want["heading_deg"]), delta=0.002, msg=where)
+                    self.assertAlmostEqual(got.entropy, float(want["entropy"]), delta=2e-6, msg=where)
+                    self.assertAlmostEqual(got.volume_power, float(want["volume_power"]), delta=2e-6, msg=where)
+                    self.assertEqual(int(got.relocalized), int(want["relocalized"]), where)
                 self.assertEqual(len(expected), len(rows))
                 marginal = loc.belief_marginal()
                 self.assertEqual(marginal.shape, (96, 96))
@@ -315,16 +322,17 @@ class LocalizerAsLocalize(unittest.TestCase):
             for t, row in enumerate(rows):
                 pose = loc.step(np.load(os.path.join(route, row[2])), (row[5], row[6], row[7]),
                                 crop_lat=float(row[3]), crop_lon=float(row[4]))
-                self.assertEqual(pose["frame"], t)
+                self.assertEqual((pose.index, pose.frame), (t, str(t)))
                 # Frame t - 3 is final once frame t is in.
-                self.assertEqual([p["frame"] for p in pose["final"]], [t - 3] if t >= 3 else [])
-                final += pose["final"]
+                ready = loc.final_poses()
+                self.assertEqual([p.index for p in ready], [t - 3] if t >= 3 else [])
+                final += ready
             final += loc.finish()
-            self.assertEqual([p["frame"] for p in final], list(range(len(rows))))
+            self.assertEqual([p.index for p in final], list(range(len(rows))))
             for got, want in zip(final, expected):
-                self.assertAlmostEqual(got["x"], float(want["x_m"]), delta=0.002, msg=want["frame"])
-                self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
-                self.assertAlmostEqual(got["heading_deg"], float(want["heading_deg"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got.x_m, float(want["x_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got.y_m, float(want["y_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got.heading_deg, float(want["heading_deg"]), delta=0.002, msg=want["frame"])
             with self.assertRaises(ValueError):
                 seqloc.Localizer(CACHE, lag=-1)
 
@@ -350,9 +358,9 @@ class LocalizerAsLocalize(unittest.TestCase):
                     log_probs = torch.log_softmax(logits.reshape(-1), 0).reshape(logits.shape)
                     pose = loc.step(log_probs, (row[5], row[6], row[7]), crop_lat=float(row[3]),
                                     crop_lon=float(row[4]))
-                    self.assertAlmostEqual(pose["x"], float(want["x_m"]), delta=0.002, msg=want["frame"])
-                    self.assertAlmostEqual(pose["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
-                    self.assertAlmostEqual(pose["heading_deg"], float(want["heading_deg"]), delta=0.002,
+                    self.assertAlmostEqual(pose.x_m, float(want["x_m"]), delta=0.002, msg=want["frame"])
+                    self.assertAlmostEqual(pose.y_m, float(want["y_m"]), delta=0.002, msg=want["frame"])
+                    self.assertAlmostEqual(pose.heading_deg, float(want["heading_deg"]), delta=0.002,
                                            msg=want["frame"])
 
     @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
@@ -376,10 +384,10 @@ class LocalizerAsLocalize(unittest.TestCase):
                 vol = np.load(os.path.join(route, row[2]))
                 got = loc.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
                 other = plain.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
-                self.assertAlmostEqual(got["x"], float(want["x_m"]), delta=0.002, msg=want["frame"])
-                self.assertAlmostEqual(got["y"], float(want["y_m"]), delta=0.002, msg=want["frame"])
-                self.assertAlmostEqual(got["entropy"], float(want["entropy"]), delta=2e-6, msg=want["frame"])
-                differs = differs or abs(got["entropy"] - other["entropy"]) > 1e-3
+                self.assertAlmostEqual(got.x_m, float(want["x_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got.y_m, float(want["y_m"]), delta=0.002, msg=want["frame"])
+                self.assertAlmostEqual(got.entropy, float(want["entropy"]), delta=2e-6, msg=want["frame"])
+                differs = differs or abs(got.entropy - other.entropy) > 1e-3
             self.assertTrue(differs, "the calibration must change the frames")
             with open(calibration, "w") as f:
                 f.write('{"format": "seqloc-calibration", "version": 2}')
@@ -397,6 +405,133 @@ class LocalizerAsLocalize(unittest.TestCase):
             loc.step(vol)  # no crop
         with self.assertRaises(TypeError):
             loc.step(vol, crop_lat=1.0, crop_x=2.0, crop_y=3.0)
+
+
+class RouteAndRunFolders(unittest.TestCase):
+    """seqloc.Route reads a route folder as localize does; Localizer.step_frame steps its frames
+    as localize does; seqloc.RunFolder reads localize's output back (io's one reader of each)."""
+
+    def test_a_route_reads_back_what_was_written(self):
+        for nhw in (False, True):
+            with tempfile.TemporaryDirectory() as d:
+                path, rows = LocalizerAsLocalize.write_route(d, frames=4, truth=True, nhw=nhw)
+                route = seqloc.Route(path)
+                self.assertEqual((route.name, len(route), route.layout), ("py", 4, "NHW" if nhw else "HWN"))
+                self.assertFalse(route.probabilities)
+                self.assertEqual(route.cell_m, 0.5)
+                for frame, row in zip(route, rows):
+                    self.assertEqual((frame.frame, frame.timestamp_s, frame.line), (row[0], row[1], frame.index + 2))
+                    self.assertEqual(frame.odometry, (row[5], row[6], row[7]))
+                    self.assertAlmostEqual(frame.crop_lat, float(row[3]), places=12)
+                    self.assertAlmostEqual(frame.crop_lon, float(row[4]), places=12)
+                    self.assertIsNone(frame.crop_x)
+                    self.assertIsNone(frame.gps)
+                    self.assertAlmostEqual(frame.truth[0], float(row[8]), places=12)
+                    self.assertEqual(frame.truth[2], 90.0)
+                    volume = frame.read_volume()
+                    stored = np.load(frame.volume_path)
+                    np.testing.assert_array_equal(volume, stored.transpose(1, 2, 0) if nhw else stored)
+                    self.assertEqual(volume.shape, (31, 31, 64))
+                    self.assertFalse(volume.flags.writeable)  # the mapped file, read-only
+                self.assertEqual(route[-1].frame, "f3")
+                with self.assertRaises(IndexError):
+                    route[4]
+
+    def test_a_bad_route_raises_data_error_naming_the_line(self):
+        with tempfile.TemporaryDirectory() as d:
+            path, _ = LocalizerAsLocalize.write_route(d, frames=3)
+            with open(os.path.join(path, "frames.csv"), "a") as f:
+                f.write("f9,not-a-time,v0.npy,1,2,0,0,0\n")
+            with self.assertRaisesRegex(seqloc.DataError, "frames.csv:5"):
+                seqloc.Route(path)
+        with self.assertRaises(seqloc.Error):
+            seqloc.Route("/nonexistent-route")
+
+    @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
+    def test_step_frame_gives_localize_poses_and_the_run_folder_reads_them(self):
+        for nhw, lag in ((False, 0), (True, 2)):
+            with tempfile.TemporaryDirectory() as d:
+                path, _ = LocalizerAsLocalize.write_route(d, frames=8, truth=True, nhw=nhw)
+                out = os.path.join(d, "out")
+                r = subprocess.run([SEQLOC, "localize", CACHE, path, "-o", out, "--window", "96", "--headings",
+                                    "64", "--lag", str(lag), "--mode", "seqloc"], capture_output=True, text=True)
+                self.assertEqual(r.returncode, 0, r.stderr)
+                run = seqloc.RunFolder(out)
+                self.assertEqual((run.routes(), run.modes("py")), (["py"], ["seqloc"]))
+                expected = run.poses("py", "seqloc")
+                with open(os.path.join(out, "py", "seqloc", "poses.csv")) as f:
+                    rows = list(csv.DictReader(f))
+                self.assertEqual([p.frame for p in expected], [row["frame"] for row in rows])
+                self.assertEqual([p.heading_deg for p in expected], [float(row["heading_deg"]) for row in rows])
+                self.assertIsNone(expected[0].grid_heading_deg)
+
+                loc = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": 64}, lag=lag)
+                got = []
+                for frame in seqloc.Route(path):
+                    pose = loc.step_frame(frame)
+                    self.assertEqual((pose.index, pose.frame), (frame.index, frame.frame))
+                    got += [pose] if lag == 0 else loc.final_poses()
+                got += loc.finish()
+                self.assertEqual([p.frame for p in got], [p.frame for p in expected])
+                for g, want in zip(got, expected):
+                    self.assertAlmostEqual(g.x_m, want.x_m, delta=0.002, msg=want.frame)
+                    self.assertAlmostEqual(g.y_m, want.y_m, delta=0.002, msg=want.frame)
+                    self.assertAlmostEqual(g.heading_deg, want.heading_deg, delta=0.002, msg=want.frame)
+                    self.assertAlmostEqual(g.position_error_m, want.position_error_m, delta=0.002, msg=want.frame)
+                    self.assertIsNotNone(g.grid_heading_deg)
+
+                # The run's metrics are seqloc evaluate's, recomputed here from the errors.
+                metrics = run.evaluate()
+                self.assertEqual(list(metrics), ["seqloc"])
+                m = metrics["seqloc"]
+                errors = [p.position_error_m for p in expected]
+                self.assertEqual(m.frames, len(errors))
+                self.assertAlmostEqual(m.position_recall[2], 100.0 * sum(e <= 5.0 for e in errors) / len(errors))
+                self.assertAlmostEqual(m.mean_position_error_m, sum(errors) / len(errors), delta=1e-3)
+                with self.assertRaises(seqloc.UsageError):
+                    run.poses("py", "best")
+                with self.assertRaises(seqloc.DataError):
+                    run.poses("py", "smooth")
+
+
+class TypingStub(unittest.TestCase):
+    """python/seqloc/_seqloc.pyi names every class, member and parameter the module has."""
+
+    def test_the_stub_matches_the_module(self):
+        import ast
+        import inspect
+        import re
+
+        stub_path = os.path.join(os.path.dirname(seqloc.__file__), "_seqloc.pyi")
+        tree = ast.parse(open(stub_path).read())
+        stub_classes = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef) and not n.name.startswith("_")}
+        module = seqloc._seqloc
+        runtime_classes = {name for name, v in vars(module).items() if inspect.isclass(v)}
+        self.assertEqual(set(stub_classes), runtime_classes)
+        self.assertEqual(set(seqloc.__all__), runtime_classes)
+        for name, node in stub_classes.items():
+            cls = getattr(module, name)
+            if issubclass(cls, BaseException):
+                continue
+            stubbed = {n.name: n for n in node.body if isinstance(n, ast.FunctionDef)}
+            public = {m for m in dir(cls) if not m.startswith("_")}
+            # A constructor is one with a signature (pybind11 gives the others one that raises).
+            public |= {m for m in ("__init__", "__len__", "__getitem__", "__iter__")
+                       if m in vars(cls) and (getattr(cls, m).__doc__ or "").startswith(m + "(")}
+            self.assertEqual(set(stubbed), public, name)
+            for member, fn in stubbed.items():
+                attribute = inspect.getattr_static(cls, member)
+                if isinstance(attribute, property):
+                    self.assertTrue(any(isinstance(d, ast.Name) and d.id == "property" for d in fn.decorator_list),
+                                    f"{name}.{member} is a property")
+                    continue
+                # pybind11's signature line: "name(self: ..., a: ..., *, b: ...) -> ..."; overloads: the first.
+                doc = getattr(cls, member).__doc__ or ""
+                line = next(l for l in doc.splitlines() if l.startswith(member + "("))
+                params = re.findall(r"(?:\(|, )(\*|\w+)(?=[:,)]|$)", line[len(member):line.rindex(") ->")])
+                stub_params = [a.arg for a in fn.args.args] + (["*"] if fn.args.kwonlyargs else [])
+                stub_params += [a.arg for a in fn.args.kwonlyargs]
+                self.assertEqual(params, stub_params, f"{name}.{member}")
 
 
 if __name__ == "__main__":

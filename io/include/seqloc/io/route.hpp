@@ -56,6 +56,18 @@ struct Route {
   std::vector<RouteFrame> frames;
 };
 
+class NpyVolume;
+
+/// Throws DataError naming the file and its frames.csv line when `route` declares no layout and
+/// frame `f`'s volume `npy` reads better as (N, H, W), headings first and a square crop last:
+/// read as (H, W, N) it would run to the end and give nonsense.
+void check_volume_layout(const Route& route, const RouteFrame& f, const NpyVolume& npy);
+
+/// Frame `f`'s volume `npy` as the filter takes it, (H, W, N): the mapped file itself, or for an
+/// NHW route its values transposed into `buffer`. Checks the layout (check_volume_layout).
+[[nodiscard]] filter::FrameVolume frame_volume(const Route& route, const RouteFrame& f, const NpyVolume& npy,
+                                               std::vector<unsigned char>& buffer);
+
 /// Plausibility limits of the odometry between consecutive frames.
 struct RouteLimits {
   double max_step_m = 200.0;    ///< one increment's translation
