@@ -712,7 +712,7 @@ std::string number_text(double v) {
   return s.str();
 }
 
-void bind_results(py::module_& m) {
+void bind_map_results(py::module_& m) {
   py::class_<Crop>(m, "Crop", "A north-up map crop around a point (Cache.crop)")
       .def_readonly("classes", &Crop::classes, "(H, W, 3) uint8 class masks, or None when not asked for")
       .def_readonly("road_distance", &Crop::road_distance, "(H, W) float32 metres to the nearest road, or None")
@@ -731,6 +731,9 @@ void bind_results(py::module_& m) {
       .def_readonly("extent", &CacheInfo::extent, "(min_x, min_y, max_x, max_y), region CRS metres")
       .def_readonly("max_distance_m", &CacheInfo::max_distance_m, "Road distances are clamped here")
       .def_readonly("crs_wkt", &CacheInfo::crs_wkt);
+}
+
+void bind_filter_results(py::module_& m) {
   py::class_<WindowPose>(m, "WindowPose", "A pose in a filter's window: cells and the grid heading")
       .def_readonly("u", &WindowPose::u, "Window column, cells")
       .def_readonly("v", &WindowPose::v, "Window row, cells (down)")
@@ -759,6 +762,9 @@ void bind_results(py::module_& m) {
         return "FilterResult(u=" + number_text(r.pose.u) + ", v=" + number_text(r.pose.v) +
                ", grid_heading_deg=" + number_text(r.pose.grid_heading_deg) + ")";
       });
+}
+
+void bind_poses(py::module_& m) {
   const auto optional_field = [](std::optional<double> io::FramePose::*field) {
     return [field](const Pose& p) { return p.pose.*field; };
   };
@@ -897,6 +903,9 @@ void bind_routes(py::module_& m) {
       .def("__len__", &PyRoute::size)
       .def("__getitem__", &PyRoute::frame, py::arg("index"))
       .def("__iter__", [](const PyRoute& r) { return py::iter(py::cast(r.frames())); });
+}
+
+void bind_run_folder(py::module_& m) {
   py::class_<PyRunFolder>(m, "RunFolder", "The output folder of seqloc localize (docs/localize.md), read back")
       .def(py::init<const std::string&>(), py::arg("path"))
       .def_property_readonly("path", &PyRunFolder::path)
@@ -907,15 +916,7 @@ void bind_routes(py::module_& m) {
       .def("evaluate", &PyRunFolder::evaluate, "{mode: Metrics} over every route (seqloc evaluate's table)");
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_seqloc, m) {
-  m.doc() = "seqloc's compiled part: region caches, route and run folders, the SeqLoc filter and localizer";
-  m.attr("__version__") = SEQLOC_VERSION;
-  register_errors(m);
-  bind_results(m);
-  bind_routes(m);
-
+void bind_cache(py::module_& m) {
   py::class_<PyCache>(m, "Cache", "A region cache (GeoPackage) opened read-only")
       .def(py::init<const std::string&, std::size_t>(), py::arg("path"), py::arg("lru_tiles") = 64)
       .def("crop", &PyCache::crop, py::arg("lat") = py::none(), py::arg("lon") = py::none(), py::arg("size_m") = 128.0,
@@ -929,7 +930,9 @@ PYBIND11_MODULE(_seqloc, m) {
       .def("from_grid", &PyCache::from_grid, py::arg("x"), py::arg("y"),
            "(lat, lon) of a region point (to_grid's inverse)")
       .def_property_readonly("info", &PyCache::info, "What the cache holds: a CacheInfo");
+}
 
+void bind_filter(py::module_& m) {
   py::class_<PyFilter>(m, "Filter", "The SeqLoc filter over a window of cells (docs/filter.md)")
       .def(py::init<const py::dict&>(), py::arg("config") = py::dict(),
            "config: any of the settings of Filter.settings() by name; the others keep their defaults ({\"preset\": "
@@ -950,7 +953,9 @@ PYBIND11_MODULE(_seqloc, m) {
       .def("recentre", &PyFilter::recentre, py::arg("du"), py::arg("dv"), "Move the window by whole cells")
       .def("belief_marginal", &PyFilter::belief_marginal,
            "The belief summed over headings: (height, width) float32, a probability per window cell");
+}
 
+void bind_localizer(py::module_& m) {
   py::class_<PyLocalizer>(m, "Localizer",
                           "seqloc localize's seqloc (or online) mode one frame at a time over a region cache: it "
                           "owns the window, its road distances and re-centring (docs/python.md)")
@@ -987,4 +992,20 @@ PYBIND11_MODULE(_seqloc, m) {
       .def_property_readonly("window_origin", &PyLocalizer::window_origin,
                              "Region pixel (u, v) of the window's cell (0, 0)")
       .def_property_readonly("config", &PyLocalizer::config, "The filter settings in use, by name");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_seqloc, m) {
+  m.doc() = "seqloc's compiled part: region caches, route and run folders, the SeqLoc filter and localizer";
+  m.attr("__version__") = SEQLOC_VERSION;
+  register_errors(m);
+  bind_map_results(m);
+  bind_filter_results(m);
+  bind_poses(m);
+  bind_routes(m);
+  bind_run_folder(m);
+  bind_cache(m);
+  bind_filter(m);
+  bind_localizer(m);
 }

@@ -110,8 +110,135 @@ OfflineAggregator::Canvas OfflineAggregator::place(const OfflineFrame& f) {
   return canvas;
 }
 
+namespace {
+
+// The part of the window where frame t observes, and the sum of the frames' log-likelihoods
+// over it, bin-major ((bin, row, column) in the box).
+struct SumBox {
+  int u0 = 0, v0 = 0, width = 0, height = 0;
+  std::size_t cells = 0;  ///< width * height
+  AlignedVector<float> sum;
+  std::vector<float> own;  ///< frame t's values in the box (NaN where it does not observe)
+};
+
+// The box of frame t's canvas (its cell (0, 0) at window cell `origin`) within a W x H window;
+// the whole window when the canvas lies outside it.
+SumBox observed_box(const std::array<int, 2>& origin, const BeliefVolume& own, int W, int H, int R) {
+  int bu0 = std::max(0, origin[0]), bv0 = std::max(0, origin[1]);
+  int bu1 = std::min(W - 1, origin[0] + own.width() - 1);
+  int bv1 = std::min(H - 1, origin[1] + own.height() - 1);
+  if (bu0 > bu1 || bv0 > bv1) bu0 = 0, bv0 = 0, bu1 = W - 1, bv1 = H - 1;  // frame t's crop outside the window
+  SumBox box;
+  box.u0 = bu0;
+  box.v0 = bv0;
+  box.width = bu1 - bu0 + 1;
+  box.height = bv1 - bv0 + 1;
+  box.cells = static_cast<std::size_t>(box.width) * static_cast<std::size_t>(box.height);
+  box.sum.assign(box.cells * static_cast<std::size_t>(R), 0.0f);
+  box.own.resize(box.sum.size());
+  return box;
+}
+
+// One frame's log-likelihood added to the sum: `relative` (its values over its maximum, in the
+// box, for bin k) where it observed the cell, log(1/M) - outside_crop_nats where not
+// (conventions.md section 6 step 3).
+class FrameTerm {
+ public:
+  FrameTerm(SumBox& box, const PreparedFrame& frame, const FilterConfig& config)
+      : box_(box),
+        no_info_(static_cast<float>(-frame.log_cells - config.outside_crop_nats)),
+        max_log_prob_(frame.max_log_prob) {}
+  void add(const float* relative, int k) const {
+    const ConstArrayMap p(relative, static_cast<Eigen::Index>(box_.cells));
+    ArrayMap(box_.sum.data() + static_cast<std::size_t>(k) * box_.cells, static_cast<Eigen::Index>(box_.cells)) +=
+        p.isNaN().select(no_info_, p.max(kRelativeFloor).log() + max_log_prob_);
+  }
+
+ private:
+  SumBox& box_;
+  float no_info_, max_log_prob_;
+};
+
+// Frame t itself, its canvas `values` with cell (0, 0) at window cell `origin`: kept in
+// box.own too.
+void add_own_frame(SumBox& box, const BeliefVolume& values, const std::array<int, 2>& origin,
+                   const PreparedFrame& frame, const FilterConfig& config) {
+  const FrameTerm term(box, frame, config);
+  const double ou = box.u0 - origin[0], ov = box.v0 - origin[1];  // box cell -> canvas cell
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  core::parallel_chunks(values.headings(), config.threads, [&](int k0, int k1, int) {
+    for (int k = k0; k < k1; ++k) {
+      float* dst = box.own.data() + static_cast<std::size_t>(k) * box.cells;
+      detail::translate(values.slice(k), values.width(), values.height(), dst, box.width, box.height, ou, ov, nan);
+      term.add(dst, k);
+    }
+  });
+}
+
+// Frame s warped to t by `motion` (s's pose to t's): box bin k takes canvas bins k + shift and
+// k + shift + 1 (heading k * 360 / R + yaw), weights 1 - a and a, each moved back by the motion
+// at its heading.
+void add_warped_frame(SumBox& box, const BeliefVolume& values, const std::array<int, 2>& origin,
+                      const PreparedFrame& frame, const Odometry& motion, const FilterConfig& config) {
+  const FrameTerm term(box, frame, config);
+  const int R = values.headings();
+  const double ou = box.u0 - origin[0], ov = box.v0 - origin[1];  // box cell -> canvas cell
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const double p = motion.yaw_deg * R / 360.0, floor_p = std::floor(p);
+  const auto a = static_cast<float>(p - floor_p);
+  const int shift = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
+  // The whole canvas counts, wherever the frame's crop lies: the window only bounds where t's
+  // pose is sought. (Reading only the part of a crop inside the window, as if the frames were
+  // placed in it, dropped every frame whose crop lay beyond it, so aggregating more frames made
+  // the poses worse: 38.6 % R@5m with all frames against 45.3 % with +-10 on a development set.)
+  auto translated = [&](int j, float* dst) {
+    double du = 0, dv = 0;
+    detail::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
+    detail::translate(values.slice(j), values.width(), values.height(), dst, box.width, box.height, ou - du, ov - dv,
+                      nan);
+  };
+  core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
+    std::vector<float> buffer_a(box.cells), buffer_b(box.cells), mixed(box.cells);
+    float* current = buffer_a.data();
+    float* next = buffer_b.data();
+    translated((k0 + shift) % R, current);
+    for (int k = k0; k < k1; ++k) {
+      if (a == 0.0f) {
+        term.add(current, k);
+        if (k + 1 < k1) translated((k + 1 + shift) % R, current);
+        continue;
+      }
+      translated((k + shift + 1) % R, next);
+      for (std::size_t i = 0; i < box.cells; ++i) mixed[i] = (1 - a) * current[i] + a * next[i];
+      term.add(mixed.data(), k);
+      std::swap(current, next);
+    }
+  });
+}
+
+// The sum's argmax among the cells frame t observes (elsewhere the sum is made of "no
+// information" terms); the whole box when it observes none.
+Pose sum_argmax(const SumBox& box, int R) {
+  const auto& sum = box.sum;
+  std::ptrdiff_t best = -1;
+  float top = -std::numeric_limits<float>::infinity();
+  for (std::size_t i = 0; i < sum.size(); ++i) {
+    if (!std::isnan(box.own[i]) && (best < 0 || sum[i] > top)) {
+      best = static_cast<std::ptrdiff_t>(i);
+      top = sum[i];
+    }
+  }
+  if (best < 0) best = std::max_element(sum.begin(), sum.end()) - sum.begin();
+  const auto k = static_cast<int>(static_cast<std::size_t>(best) / box.cells);
+  const auto rest = static_cast<std::size_t>(best) % box.cells;
+  const auto u = box.u0 + static_cast<int>(rest % static_cast<std::size_t>(box.width));
+  const auto v = box.v0 + static_cast<int>(rest / static_cast<std::size_t>(box.width));
+  return {static_cast<double>(u), static_cast<double>(v), k * 360.0 / R};
+}
+
+}  // namespace
+
 Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, int half_window) {
-  const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = frames.size();
   const auto k_half = static_cast<std::size_t>(half_window);
   const std::size_t s0 = half_window < 0 ? 0 : (t > k_half ? t - k_half : 0);
@@ -151,90 +278,16 @@ Pose OfflineAggregator::pose_at(const std::vector<OfflineFrame>& frames, std::si
 
   // The sum is needed only where frame t observes: the box of its canvas within the window.
   const auto& [own, own_origin] = placed[t - s0];
-  int bu0 = std::max(0, own_origin[0]), bv0 = std::max(0, own_origin[1]);
-  int bu1 = std::min(W - 1, own_origin[0] + own->values.width() - 1);
-  int bv1 = std::min(H - 1, own_origin[1] + own->values.height() - 1);
-  if (bu0 > bu1 || bv0 > bv1) bu0 = 0, bv0 = 0, bu1 = W - 1, bv1 = H - 1;  // frame t's crop outside the window
-  const int bw = bu1 - bu0 + 1, bh = bv1 - bv0 + 1;
-  const auto box = static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh);
-  AlignedVector<float> sum(box * static_cast<std::size_t>(R), 0.0f);
-  std::vector<float> own_box(sum.size());
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-
+  SumBox box = observed_box(own_origin, own->values, config_.width, config_.height, config_.headings);
   for (std::size_t s = s0; s <= s1; ++s) {
     const auto& [canvas, origin] = placed[s - s0];
-    const BeliefVolume& values = canvas->values;
-    const PreparedFrame& frame = *frames[s].frame;
-    const auto no_info = static_cast<float>(-frame.log_cells - config_.outside_crop_nats);
-    const float max_log_prob = frame.max_log_prob;
-    // sum += log-likelihood of frame s: its own where it observed the cell, log(1/M) -
-    // outside_crop_nats where not (conventions.md section 6 step 3).
-    auto accumulate = [&](const float* relative, int k) {
-      const ConstArrayMap p(relative, static_cast<Eigen::Index>(box));
-      ArrayMap(sum.data() + static_cast<std::size_t>(k) * box, static_cast<Eigen::Index>(box)) +=
-          p.isNaN().select(no_info, p.max(kRelativeFloor).log() + max_log_prob);
-    };
-    const double ou = bu0 - origin[0], ov = bv0 - origin[1];  // box cell -> canvas cell
     if (s == t) {
-      core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
-        for (int k = k0; k < k1; ++k) {
-          float* dst = own_box.data() + static_cast<std::size_t>(k) * box;
-          detail::translate(values.slice(k), values.width(), values.height(), dst, bw, bh, ou, ov, nan);
-          accumulate(dst, k);
-        }
-      });
-      continue;
-    }
-    // Frame s warped to t: box bin k takes canvas bins k + shift and k + shift + 1 (heading
-    // k * 360 / R + yaw), weights 1 - a and a, each moved back by the motion at its heading.
-    const Odometry motion = motion_between(frames, s, t);
-    const double p = motion.yaw_deg * R / 360.0, floor_p = std::floor(p);
-    const auto a = static_cast<float>(p - floor_p);
-    const int shift = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
-    // The whole canvas counts, wherever the frame's crop lies: the window only bounds where t's
-    // pose is sought. (Reading only the part of a crop inside the window, as if the frames were
-    // placed in it, dropped every frame whose crop lay beyond it, so aggregating more frames made
-    // the poses worse: 38.6 % R@5m with all frames against 45.3 % with +-10 on a development set.)
-    auto translated = [&](int j, float* dst) {
-      double du = 0, dv = 0;
-      detail::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
-      detail::translate(values.slice(j), values.width(), values.height(), dst, bw, bh, ou - du, ov - dv, nan);
-    };
-    core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int) {
-      std::vector<float> buffer_a(box), buffer_b(box), mixed(box);
-      float* current = buffer_a.data();
-      float* next = buffer_b.data();
-      translated((k0 + shift) % R, current);
-      for (int k = k0; k < k1; ++k) {
-        if (a == 0.0f) {
-          accumulate(current, k);
-          if (k + 1 < k1) translated((k + 1 + shift) % R, current);
-          continue;
-        }
-        translated((k + shift + 1) % R, next);
-        for (std::size_t i = 0; i < box; ++i) mixed[i] = (1 - a) * current[i] + a * next[i];
-        accumulate(mixed.data(), k);
-        std::swap(current, next);
-      }
-    });
-  }
-
-  // The argmax among the cells frame t observes (elsewhere the sum is made of "no information"
-  // terms); the whole box when it observes none.
-  std::ptrdiff_t best = -1;
-  float top = -std::numeric_limits<float>::infinity();
-  for (std::size_t i = 0; i < sum.size(); ++i) {
-    if (!std::isnan(own_box[i]) && (best < 0 || sum[i] > top)) {
-      best = static_cast<std::ptrdiff_t>(i);
-      top = sum[i];
+      add_own_frame(box, canvas->values, origin, *frames[s].frame, config_);
+    } else {
+      add_warped_frame(box, canvas->values, origin, *frames[s].frame, motion_between(frames, s, t), config_);
     }
   }
-  if (best < 0) best = std::max_element(sum.begin(), sum.end()) - sum.begin();
-  const auto k = static_cast<int>(static_cast<std::size_t>(best) / box);
-  const auto rest = static_cast<std::size_t>(best) % box;
-  const auto u = bu0 + static_cast<int>(rest % static_cast<std::size_t>(bw));
-  const auto v = bv0 + static_cast<int>(rest / static_cast<std::size_t>(bw));
-  return {static_cast<double>(u), static_cast<double>(v), k * 360.0 / R};
+  return sum_argmax(box, config_.headings);
 }
 
 Pose offline_pose_at(const std::vector<OfflineFrame>& frames, std::size_t t, const FilterConfig& config,

@@ -34,25 +34,39 @@ void BackwardFilter::absorb(const PreparedFrame& frame, const CropPose& crop, co
 
 void BackwardFilter::step_back(const Odometry& odometry) { filter_.predict(invert(odometry)); }
 
-FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& backward, const FilterConfig& config,
-                            BeliefVolume* posterior) {
+namespace {
+
+// The product gamma = alpha * beta over the window, reduced per heading slice.
+struct SlicedProduct {
+  std::vector<float> best;  ///< each slice's largest value
+  std::vector<double> sum;  ///< each slice's sum
+  bool both = true;         ///< false: the forward belief alone (beta taken as uniform)
+  double total = 0;         ///< the sums added in slice order (the same for any number of threads)
+};
+
+void check_shapes(const BeliefVolume& forward, const BeliefVolume& backward, const BeliefVolume* posterior) {
   if (forward.width() != backward.width() || forward.height() != backward.height() ||
       forward.headings() != backward.headings()) {
     throw FilterError("smoothed_result: the forward and backward beliefs cover different windows",
                       ErrorCategory::internal);
   }
-  const int W = forward.width(), R = forward.headings();
-  const std::size_t n = forward.slice_cells();
-  const auto N = static_cast<Eigen::Index>(n);
-  if (posterior != nullptr && (posterior->width() != W || posterior->height() != forward.height() ||
-                               posterior->headings() != R)) {
+  if (posterior != nullptr && (posterior->width() != forward.width() || posterior->height() != forward.height() ||
+                               posterior->headings() != forward.headings())) {
     throw FilterError("smoothed_result: the posterior's shape differs from the beliefs'", ErrorCategory::internal);
   }
-  // Per heading slice: the product's largest value and its sum, kept per slice and added in slice
-  // order (the same for any number of threads).
-  std::vector<float> best(static_cast<std::size_t>(R));
-  std::vector<double> sum(static_cast<std::size_t>(R));
-  // With `both` false the forward belief alone (beta taken as uniform).
+}
+
+// gamma's slices reduced (and written to `posterior`, normalized, when given). When the two
+// passes share no mass that float can represent (they placed the vehicle apart with certainty),
+// the forward belief alone decides, as the filter lets a frame alone decide.
+SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& backward, const FilterConfig& config,
+                             BeliefVolume* posterior) {
+  const int R = forward.headings();
+  const std::size_t n = forward.slice_cells();
+  const auto N = static_cast<Eigen::Index>(n);
+  SlicedProduct p;
+  p.best.resize(static_cast<std::size_t>(R));
+  p.sum.resize(static_cast<std::size_t>(R));
   auto reduce = [&](bool both) {
     core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
       Eigen::ArrayXf product(N);
@@ -62,50 +76,35 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
         } else {
           product = ConstArrayMap(forward.slice(k), N);
         }
-        best[static_cast<std::size_t>(k)] = product.maxCoeff();
-        sum[static_cast<std::size_t>(k)] = static_cast<double>(product.sum());
+        p.best[static_cast<std::size_t>(k)] = product.maxCoeff();
+        p.sum[static_cast<std::size_t>(k)] = static_cast<double>(product.sum());
         if (posterior != nullptr) std::copy(product.data(), product.data() + n, posterior->slice(k));
       }
     });
     double total = 0;
-    for (double s : sum) total += s;
+    for (double s : p.sum) total += s;
     return total;
   };
-  bool both = true;
-  double total = reduce(both);
-  if (!(total > 0) || !std::isfinite(total)) {
-    // The two passes share no mass that float can represent (they placed the vehicle apart with
-    // certainty): the forward belief alone decides, as the filter lets a frame alone decide.
-    both = false;
-    total = reduce(both);
-    if (!(total > 0) || !std::isfinite(total)) throw FilterError("smoothed_result: the forward belief has no mass");
+  p.total = reduce(p.both);
+  if (!(p.total > 0) || !std::isfinite(p.total)) {
+    p.both = false;
+    p.total = reduce(p.both);
+    if (!(p.total > 0) || !std::isfinite(p.total)) throw FilterError("smoothed_result: the forward belief has no mass");
   }
   if (posterior != nullptr) {
-    const auto scale = static_cast<float>(1.0 / total);
+    const auto scale = static_cast<float>(1.0 / p.total);
     for (int k = 0; k < R; ++k) {
       Eigen::Map<Eigen::ArrayXf>(posterior->slice(k), N) *= scale;
     }
   }
-  int k_star = 0;
-  for (int k = 1; k < R; ++k) {
-    if (best[static_cast<std::size_t>(k)] > best[static_cast<std::size_t>(k_star)]) k_star = k;
-  }
-  // The first cell of slice k* holding its largest product (as the forward filter's argmax).
-  const float* a = forward.slice(k_star);
-  const float* b = backward.slice(k_star);
-  std::size_t cell = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if ((both ? a[i] * b[i] : a[i]) == best[static_cast<std::size_t>(k_star)]) {
-      cell = i;
-      break;
-    }
-  }
-  const int u_star = static_cast<int>(cell % static_cast<std::size_t>(W));
-  const int v_star = static_cast<int>(cell / static_cast<std::size_t>(W));
-  FrameResult result;
-  result.argmax = {static_cast<double>(u_star), static_cast<double>(v_star), forward.bin_heading_deg(k_star)};
-  result.pose = result.argmax;
-  result.peak_log_belief = static_cast<float>(std::log(best[static_cast<std::size_t>(k_star)] / total));
+  return p;
+}
+
+// PAS and the sub-bin heading on gamma around the argmax (u*, v*, k*) in `result.argmax`.
+void refine_on_gamma(FrameResult& result, const BeliefVolume& forward, const BeliefVolume& backward, bool both,
+                     int k_star, const FilterConfig& config) {
+  const int W = forward.width(), R = forward.headings();
+  const auto u_star = static_cast<int>(result.argmax.u), v_star = static_cast<int>(result.argmax.v);
   auto gamma = [&](int u, int v, int k) {
     return static_cast<double>(forward.prob(u, v, k)) * (both ? backward.prob(u, v, k) : 1.0f);
   };
@@ -138,6 +137,37 @@ FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& bac
     const double deg = std::atan2(sx, sy) * 180.0 / M_PI;
     result.pose.heading_deg = deg < 0 ? deg + 360.0 : deg;
   }
+}
+
+}  // namespace
+
+FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& backward, const FilterConfig& config,
+                            BeliefVolume* posterior) {
+  check_shapes(forward, backward, posterior);
+  const int W = forward.width(), R = forward.headings();
+  const std::size_t n = forward.slice_cells();
+  const SlicedProduct p = reduce_product(forward, backward, config, posterior);
+  int k_star = 0;
+  for (int k = 1; k < R; ++k) {
+    if (p.best[static_cast<std::size_t>(k)] > p.best[static_cast<std::size_t>(k_star)]) k_star = k;
+  }
+  // The first cell of slice k* holding its largest product (as the forward filter's argmax).
+  const float* a = forward.slice(k_star);
+  const float* b = backward.slice(k_star);
+  std::size_t cell = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if ((p.both ? a[i] * b[i] : a[i]) == p.best[static_cast<std::size_t>(k_star)]) {
+      cell = i;
+      break;
+    }
+  }
+  const int u_star = static_cast<int>(cell % static_cast<std::size_t>(W));
+  const int v_star = static_cast<int>(cell / static_cast<std::size_t>(W));
+  FrameResult result;
+  result.argmax = {static_cast<double>(u_star), static_cast<double>(v_star), forward.bin_heading_deg(k_star)};
+  result.pose = result.argmax;
+  result.peak_log_belief = static_cast<float>(std::log(p.best[static_cast<std::size_t>(k_star)] / p.total));
+  refine_on_gamma(result, forward, backward, p.both, k_star, config);
   return result;
 }
 

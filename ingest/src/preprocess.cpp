@@ -370,13 +370,8 @@ void render_blocks(const detail::FeatureBlocks& blocks, const raster::RegionGrid
   }
 }
 
-}  // namespace
-
-PreprocessReport preprocess_region(const PreprocessOptions& options,
-                                   const std::function<void(const PreprocessProgress&)>& on_progress) {
-  const auto start = Clock::now();
-  const double start_mb = detail::rss_mb().value_or(0);
-  options.validate();
+// The output may be written: it does not exist (or --overwrite), its folder does.
+void check_output(const PreprocessOptions& options) {
   std::error_code ec;
   if (std::filesystem::exists(options.output, ec) && !options.overwrite) {
     throw UsageError(options.output.string() + ": already exists; pass --overwrite to replace it");
@@ -385,6 +380,35 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   if (!std::filesystem::is_directory(out_dir, ec)) {
     throw UsageError(options.output.string() + ": output directory '" + out_dir.string() + "' does not exist");
   }
+}
+
+// The report's account of the region read: its box, grid and features.
+PreprocessReport region_report(const osm::GeoBox& bbox, const raster::RegionGrid& grid,
+                               const osm::FeatureSet& features) {
+  PreprocessReport report;
+  const osm::GeoPoint centre = bbox.centre();
+  report.scale_error = checked_scale_error(bbox);
+  report.bbox = bbox;
+  report.centre_lat = centre.lat_deg;
+  report.centre_lon = centre.lon_deg;
+  report.tiles_wide = grid.tiles_wide();
+  report.tiles_high = grid.tiles_high();
+  report.nodes = features.points.size();
+  report.lines = features.lines.size();
+  report.areas = features.areas.size();
+  report.ways_missing_nodes = features.ways_missing_nodes;
+  report.multipolygon_open_chains = features.multipolygon_open_chains;
+  return report;
+}
+
+}  // namespace
+
+PreprocessReport preprocess_region(const PreprocessOptions& options,
+                                   const std::function<void(const PreprocessProgress&)>& on_progress) {
+  const auto start = Clock::now();
+  const double start_mb = detail::rss_mb().value_or(0);
+  options.validate();
+  check_output(options);
 
   // The cache opens before the features are read whenever the box is declared: SQLite's
   // connection and caches are then allocated beneath reading's many small blocks instead of on top
@@ -416,18 +440,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   const osm::RegionProjection projection(centre.lat_deg, centre.lon_deg);
   const raster::RegionGrid grid = grid_for(bbox, projection);
 
-  PreprocessReport report;
-  report.scale_error = checked_scale_error(bbox);
-  report.bbox = bbox;
-  report.centre_lat = centre.lat_deg;
-  report.centre_lon = centre.lon_deg;
-  report.tiles_wide = grid.tiles_wide();
-  report.tiles_high = grid.tiles_high();
-  report.nodes = features.points.size();
-  report.lines = features.lines.size();
-  report.areas = features.areas.size();
-  report.ways_missing_nodes = features.ways_missing_nodes;
-  report.multipolygon_open_chains = features.multipolygon_open_chains;
+  PreprocessReport report = region_report(bbox, grid, features);
   if (!writer) {
     writer.emplace(options.output,
                    declared_metadata ? *declared_metadata : metadata_for(options, bbox, header.replication_timestamp));

@@ -109,12 +109,11 @@ void CacheWriter::discard() {
 
 std::int64_t CacheWriter::tiles_owned() const { return metadata_.shard_tile_count(); }
 
-void CacheWriter::create_schema(const osm::RegionProjection& projection) {
-  auto& db = *db_;
-  db.exec("PRAGMA application_id = 1196444487");  // 'GPKG'
-  db.exec("PRAGMA user_version = 10200");         // GeoPackage 1.2
-  db.exec("BEGIN");
-  db.exec(R"sql(
+namespace {
+
+// The GeoPackage 1.2 tables (with the gridded coverage extension) and seqloc's own, and the two
+// spatial reference systems every GeoPackage has, plus WGS 84.
+constexpr const char* kSchemaSql = R"sql(
 CREATE TABLE gpkg_spatial_ref_sys (
   srs_name TEXT NOT NULL, srs_id INTEGER NOT NULL PRIMARY KEY, organization TEXT NOT NULL,
   organization_coordsys_id INTEGER NOT NULL, definition TEXT NOT NULL, description TEXT);
@@ -169,75 +168,93 @@ INSERT INTO gpkg_spatial_ref_sys VALUES
   ('Undefined cartesian SRS', -1, 'NONE', -1, 'undefined', 'undefined cartesian coordinate reference system'),
   ('Undefined geographic SRS', 0, 'NONE', 0, 'undefined', 'undefined geographic coordinate reference system'),
   ('WGS 84 geodetic', 4326, 'EPSG', 4326, 'GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",6378137,298.257223563,AUTHORITY["EPSG","7030"]],AUTHORITY["EPSG","6326"]],PRIMEM["Greenwich",0,AUTHORITY["EPSG","8901"]],UNIT["degree",0.0174532925199433,AUTHORITY["EPSG","9122"]],AXIS["Latitude",NORTH],AXIS["Longitude",EAST],AUTHORITY["EPSG","4326"]]', 'longitude/latitude coordinates in decimal degrees on the WGS 84 spheroid');
-)sql");
-  const RegionGrid& g = metadata_.grid;
-  {
-    detail::Statement s(db, "INSERT INTO gpkg_spatial_ref_sys VALUES (?, ?, 'NONE', ?, ?, ?)");
-    s.bind(1, std::string_view("seqloc region TM"))
-        .bind(2, detail::kSrsId)
-        .bind(3, detail::kSrsId)
-        .bind(4, projection.wkt())
-        .bind(5, projection.proj_string());
-    s.run();
-  }
-  {
-    detail::Statement s(db, "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, "
-                            "max_x, max_y, srs_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)");
-    auto add = [&](std::string_view table, std::string_view type, std::string_view description, bool spatial) {
-      s.bind(1, table).bind(2, type).bind(3, table).bind(4, description);
-      if (spatial) {
-        s.bind(5, g.min_x()).bind(6, g.min_y()).bind(7, g.max_x()).bind(8, g.max_y()).bind(9, detail::kSrsId);
-      } else {
-        s.bind_null(5).bind_null(6).bind_null(7).bind_null(8).bind_null(9);
-      }
-      s.run();
-    };
-    add("classes", "tiles", "OrienterNet semantic classes: R = areas, G = ways, B = nodes (0 = background)", true);
-    add("road_distance", "2d-gridded-coverage", "distance to the nearest road cell, metres (UInt16 cm)", true);
-    add("roads", "features", "road-group centerlines (OrienterNet 'road' ways)", true);
-    add("seqloc_metadata", "attributes", "seqloc cache metadata", false);
-  }
-  {
-    detail::Statement s(db, "INSERT INTO gpkg_tile_matrix_set VALUES (?, ?, ?, ?, ?, ?)");
-    detail::Statement m(db, "INSERT INTO gpkg_tile_matrix VALUES (?, 0, ?, ?, ?, ?, ?, ?)");
-    for (const char* table : {"classes", "road_distance"}) {
-      s.bind(1, std::string_view(table)).bind(2, detail::kSrsId).bind(3, g.min_x()).bind(4, g.min_y()).bind(5, g.max_x());
-      s.bind(6, g.max_y());
-      s.run();
-      m.bind(1, std::string_view(table)).bind(2, g.tiles_wide()).bind(3, g.tiles_high());
-      m.bind(4, std::int64_t{kTilePx}).bind(5, std::int64_t{kTilePx}).bind(6, kCellM).bind(7, kCellM);
-      m.run();
+)sql";
+
+// The region's transverse Mercator CRS, under detail::kSrsId.
+void insert_region_srs(detail::Database& db, const osm::RegionProjection& projection) {
+  detail::Statement s(db, "INSERT INTO gpkg_spatial_ref_sys VALUES (?, ?, 'NONE', ?, ?, ?)");
+  s.bind(1, std::string_view("seqloc region TM"))
+      .bind(2, detail::kSrsId)
+      .bind(3, detail::kSrsId)
+      .bind(4, projection.wkt())
+      .bind(5, projection.proj_string());
+  s.run();
+}
+
+// Each table's entry in gpkg_contents: the rasters and roads with the region's extent.
+void insert_contents(detail::Database& db, const RegionGrid& g) {
+  detail::Statement s(db,
+                      "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, "
+                      "max_x, max_y, srs_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)");
+  auto add = [&](std::string_view table, std::string_view type, std::string_view description, bool spatial) {
+    s.bind(1, table).bind(2, type).bind(3, table).bind(4, description);
+    if (spatial) {
+      s.bind(5, g.min_x()).bind(6, g.min_y()).bind(7, g.max_x()).bind(8, g.max_y()).bind(9, detail::kSrsId);
+    } else {
+      s.bind_null(5).bind_null(6).bind_null(7).bind_null(8).bind_null(9);
     }
-  }
-  {
-    detail::Statement s(db, "INSERT INTO gpkg_2d_gridded_coverage_ancillary (tile_matrix_set_name, datatype, scale, "
-                            "offset, precision, data_null, grid_cell_encoding, uom, field_name, quantity_definition) "
-                            "VALUES ('road_distance', 'integer', 0.01, 0.0, 0.01, ?, 'grid-value-is-area', 'm', "
-                            "'road_distance', 'Distance to the nearest road cell')");
-    s.bind(1, static_cast<double>(detail::kDistanceNull));
     s.run();
-  }
-  {
-    detail::Statement s(db, "INSERT INTO gpkg_extensions VALUES (?, ?, 'gpkg_2d_gridded_coverage', ?, 'read-write')");
-    auto add = [&](std::string_view table, const char* column) {
-      s.bind(1, table);
-      if (column) {
-        s.bind(2, std::string_view(column));
-      } else {
-        s.bind_null(2);
-      }
-      s.bind(3, std::string_view(detail::kGriddedCoverageSpec));
-      s.run();
-    };
-    add("gpkg_2d_gridded_coverage_ancillary", nullptr);
-    add("gpkg_2d_gridded_tile_ancillary", nullptr);
-    add("road_distance", "tile_data");
-  }
-  {
-    detail::Statement s(db, "INSERT INTO gpkg_geometry_columns VALUES ('roads', 'geom', 'LINESTRING', ?, 0, 0)");
-    s.bind(1, detail::kSrsId);
+  };
+  add("classes", "tiles", "OrienterNet semantic classes: R = areas, G = ways, B = nodes (0 = background)", true);
+  add("road_distance", "2d-gridded-coverage", "distance to the nearest road cell, metres (UInt16 cm)", true);
+  add("roads", "features", "road-group centerlines (OrienterNet 'road' ways)", true);
+  add("seqloc_metadata", "attributes", "seqloc cache metadata", false);
+}
+
+// One zoom level of kTilePx tiles at kCellM per pixel for both rasters.
+void insert_tile_matrices(detail::Database& db, const RegionGrid& g) {
+  detail::Statement s(db, "INSERT INTO gpkg_tile_matrix_set VALUES (?, ?, ?, ?, ?, ?)");
+  detail::Statement m(db, "INSERT INTO gpkg_tile_matrix VALUES (?, 0, ?, ?, ?, ?, ?, ?)");
+  for (const char* table : {"classes", "road_distance"}) {
+    s.bind(1, std::string_view(table)).bind(2, detail::kSrsId).bind(3, g.min_x()).bind(4, g.min_y()).bind(5, g.max_x());
+    s.bind(6, g.max_y());
     s.run();
+    m.bind(1, std::string_view(table)).bind(2, g.tiles_wide()).bind(3, g.tiles_high());
+    m.bind(4, std::int64_t{kTilePx}).bind(5, std::int64_t{kTilePx}).bind(6, kCellM).bind(7, kCellM);
+    m.run();
   }
+}
+
+// road_distance as a gridded coverage (UInt16 centimetres), and the roads' geometry column.
+void insert_coverage_and_geometry(detail::Database& db) {
+  detail::Statement coverage(
+      db,
+      "INSERT INTO gpkg_2d_gridded_coverage_ancillary (tile_matrix_set_name, datatype, scale, offset, precision, "
+      "data_null, grid_cell_encoding, uom, field_name, quantity_definition) VALUES ('road_distance', 'integer', "
+      "0.01, 0.0, 0.01, ?, 'grid-value-is-area', 'm', 'road_distance', 'Distance to the nearest road cell')");
+  coverage.bind(1, static_cast<double>(detail::kDistanceNull));
+  coverage.run();
+  detail::Statement s(db, "INSERT INTO gpkg_extensions VALUES (?, ?, 'gpkg_2d_gridded_coverage', ?, 'read-write')");
+  auto add = [&](std::string_view table, const char* column) {
+    s.bind(1, table);
+    if (column) {
+      s.bind(2, std::string_view(column));
+    } else {
+      s.bind_null(2);
+    }
+    s.bind(3, std::string_view(detail::kGriddedCoverageSpec));
+    s.run();
+  };
+  add("gpkg_2d_gridded_coverage_ancillary", nullptr);
+  add("gpkg_2d_gridded_tile_ancillary", nullptr);
+  add("road_distance", "tile_data");
+  detail::Statement geometry(db, "INSERT INTO gpkg_geometry_columns VALUES ('roads', 'geom', 'LINESTRING', ?, 0, 0)");
+  geometry.bind(1, detail::kSrsId);
+  geometry.run();
+}
+
+}  // namespace
+
+void CacheWriter::create_schema(const osm::RegionProjection& projection) {
+  auto& db = *db_;
+  db.exec("PRAGMA application_id = 1196444487");  // 'GPKG'
+  db.exec("PRAGMA user_version = 10200");         // GeoPackage 1.2
+  db.exec("BEGIN");
+  db.exec(kSchemaSql);
+  insert_region_srs(db, projection);
+  insert_contents(db, metadata_.grid);
+  insert_tile_matrices(db, metadata_.grid);
+  insert_coverage_and_geometry(db);
   write_metadata();
   db.exec("COMMIT");
 }

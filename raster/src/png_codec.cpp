@@ -156,15 +156,44 @@ bool unfilter(std::uint8_t* data, std::size_t stride, int height, int bpp) {
   return true;
 }
 
-// Decodes the PNGs the fast path handles; nullopt for anything else (libpng decides then).
-std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const std::string& what, int max_side) {
-  if (blob.size() < 8 + 25 || std::memcmp(blob.data(), kSignature, 8) != 0) return std::nullopt;
+// IHDR's fields into `image`; false for a format the fast path leaves to libpng (interlaced,
+// palette, grey + alpha, other depths). Throws for a corrupt header or one past `max_side`.
+bool read_header(const std::uint8_t* data, std::uint32_t size, const std::string& what, int max_side, PngImage& image) {
+  if (size != 13) throw PngError(what + ": corrupt PNG: bad IHDR");
+  image.width = static_cast<int>(get_u32(data));
+  image.height = static_cast<int>(get_u32(data + 4));
+  image.bit_depth = data[8];
+  const int color = data[9];
+  if (data[10] != 0 || data[11] != 0 || data[12] != 0) return false;  // interlaced: libpng
+  if (image.bit_depth == 8 && (color == 0 || color == 2 || color == 6)) {
+    image.channels = color == 0 ? 1 : (color == 2 ? 3 : 4);
+  } else if (image.bit_depth == 16 && color == 0) {
+    image.channels = 1;
+  } else {
+    return false;
+  }
+  // Before anything is allocated: a corrupt or hostile header cannot ask for gigabytes.
+  if (image.width <= 0 || image.height <= 0 || image.width > max_side || image.height > max_side) {
+    throw PngError(what + ": image of " + std::to_string(get_u32(data)) + " x " + std::to_string(get_u32(data + 4)) +
+                   " pixels; the largest accepted side is " + std::to_string(max_side));
+  }
+  return true;
+}
+
+// A PNG's header and its zlib stream: read in place when it is one IDAT chunk (as we write it),
+// else gathered into a thread-local buffer.
+struct PngChunks {
+  PngImage image;  ///< the header's fields, no pixels yet
+  std::span<const std::uint8_t> zdata;
+};
+
+// The chunks the fast path handles; nullopt for anything else (libpng decides then). Throws for a
+// corrupt file.
+std::optional<PngChunks> read_chunks(std::span<const std::uint8_t> blob, const std::string& what, int max_side) {
   std::size_t offset = 8;
-  PngImage image;
-  // The zlib stream: read in place when it is one IDAT chunk (as we write it), else gathered.
+  PngChunks chunks;
   thread_local std::vector<std::uint8_t> gathered;
   gathered.clear();
-  std::span<const std::uint8_t> zdata;
   int idat_chunks = 0;
   bool have_header = false, ended = false;
   while (offset + 12 <= blob.size()) {
@@ -177,34 +206,18 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
                      " chunk");
     }
     if (std::memcmp(type, "IHDR", 4) == 0) {
-      if (size != 13 || have_header) throw PngError(what + ": corrupt PNG: bad IHDR");
-      image.width = static_cast<int>(get_u32(data));
-      image.height = static_cast<int>(get_u32(data + 4));
-      image.bit_depth = data[8];
-      const int color = data[9];
-      if (data[10] != 0 || data[11] != 0 || data[12] != 0) return std::nullopt;  // interlaced: libpng
-      if (image.bit_depth == 8 && (color == 0 || color == 2 || color == 6)) {
-        image.channels = color == 0 ? 1 : (color == 2 ? 3 : 4);
-      } else if (image.bit_depth == 16 && color == 0) {
-        image.channels = 1;
-      } else {
-        return std::nullopt;
-      }
-      // Before anything is allocated: a corrupt or hostile header cannot ask for gigabytes.
-      if (image.width <= 0 || image.height <= 0 || image.width > max_side || image.height > max_side) {
-        throw PngError(what + ": image of " + std::to_string(get_u32(data)) + " x " + std::to_string(get_u32(data + 4)) +
-                       " pixels; the largest accepted side is " + std::to_string(max_side));
-      }
+      if (have_header) throw PngError(what + ": corrupt PNG: bad IHDR");
+      if (!read_header(data, size, what, max_side, chunks.image)) return std::nullopt;
       have_header = true;
     } else if (!have_header) {
       throw PngError(what + ": corrupt PNG: the first chunk is not IHDR");
     } else if (std::memcmp(type, "IDAT", 4) == 0) {
       if (++idat_chunks == 1) {
-        zdata = {data, size};
+        chunks.zdata = {data, size};
       } else {
-        if (idat_chunks == 2) gathered.assign(zdata.begin(), zdata.end());
+        if (idat_chunks == 2) gathered.assign(chunks.zdata.begin(), chunks.zdata.end());
         gathered.insert(gathered.end(), data, data + size);
-        zdata = gathered;
+        chunks.zdata = gathered;
       }
     } else if (std::memcmp(type, "IEND", 4) == 0) {
       ended = true;
@@ -215,47 +228,61 @@ std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const st
     offset += size + 12;
   }
   if (!have_header || !ended) throw PngError(what + ": corrupt PNG: truncated");
+  return chunks;
+}
+
+// 16-bit grey rows (`raw`: each row's filter byte, then its samples) into image.pixels16: rows
+// filtered with "sub" (ours) are unfiltered and byte-swapped in one pass on whole samples; other
+// filters go through the generic unfilter first.
+void unpack_grey16(std::vector<std::uint8_t>& raw, std::size_t stride, const std::string& what, PngImage& image) {
+  bool all_sub = true;
+  for (int r = 0; r < image.height && all_sub; ++r) all_sub = raw[static_cast<std::size_t>(r) * (stride + 1)] == 1;
+  if (!all_sub && !unfilter(raw.data(), stride, image.height, 2)) {
+    throw PngError(what + ": corrupt PNG: unknown filter type");
+  }
+  image.pixels16.resize(static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height));
+  for (int r = 0; r < image.height; ++r) {
+    const std::uint8_t* src = raw.data() + static_cast<std::size_t>(r) * (stride + 1) + 1;
+    std::uint16_t* dst = image.pixels16.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(image.width);
+    if (all_sub) {
+      // Byte-wise sub with bpp 2 adds the high and the low bytes separately, modulo 256.
+      std::uint8_t hi = 0, lo = 0;
+      for (int i = 0; i < image.width; ++i, src += 2) {
+        hi = static_cast<std::uint8_t>(hi + src[0]);
+        lo = static_cast<std::uint8_t>(lo + src[1]);
+        dst[i] = static_cast<std::uint16_t>((hi << 8) | lo);
+      }
+    } else {
+      for (int i = 0; i < image.width; ++i, src += 2) dst[i] = static_cast<std::uint16_t>((src[0] << 8) | src[1]);
+    }
+  }
+}
+
+// Decodes the PNGs the fast path handles; nullopt for anything else (libpng decides then).
+std::optional<PngImage> decode_fast(std::span<const std::uint8_t> blob, const std::string& what, int max_side) {
+  if (blob.size() < 8 + 25 || std::memcmp(blob.data(), kSignature, 8) != 0) return std::nullopt;
+  auto chunks = read_chunks(blob, what, max_side);
+  if (!chunks) return std::nullopt;
+  PngImage& image = chunks->image;
   const int bpp = image.channels * image.bit_depth / 8;
   const std::size_t stride = static_cast<std::size_t>(image.width) * static_cast<std::size_t>(bpp);
   thread_local std::vector<std::uint8_t> raw;  // reused: no page faults on every tile
   raw.resize((stride + 1) * static_cast<std::size_t>(image.height));
   std::size_t produced = 0;
-  const auto rc = libdeflate_zlib_decompress(thread_decompressor(), zdata.data(), zdata.size(), raw.data(), raw.size(),
-                                             &produced);
+  const auto rc = libdeflate_zlib_decompress(thread_decompressor(), chunks->zdata.data(), chunks->zdata.size(),
+                                             raw.data(), raw.size(), &produced);
   if (rc != LIBDEFLATE_SUCCESS || produced != raw.size()) throw PngError(what + ": corrupt PNG: bad image data");
   if (image.bit_depth == 16) {
-    // 16-bit grey: rows filtered with "sub" (ours) are unfiltered and byte-swapped in one pass
-    // on whole samples; other filters go through the generic unfilter first.
-    bool all_sub = true;
-    for (int r = 0; r < image.height && all_sub; ++r) all_sub = raw[static_cast<std::size_t>(r) * (stride + 1)] == 1;
-    if (!all_sub && !unfilter(raw.data(), stride, image.height, bpp)) {
-      throw PngError(what + ": corrupt PNG: unknown filter type");
-    }
-    image.pixels16.resize(static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height));
-    for (int r = 0; r < image.height; ++r) {
-      const std::uint8_t* src = raw.data() + static_cast<std::size_t>(r) * (stride + 1) + 1;
-      std::uint16_t* dst = image.pixels16.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(image.width);
-      if (all_sub) {
-        // Byte-wise sub with bpp 2 adds the high and the low bytes separately, modulo 256.
-        std::uint8_t hi = 0, lo = 0;
-        for (int i = 0; i < image.width; ++i, src += 2) {
-          hi = static_cast<std::uint8_t>(hi + src[0]);
-          lo = static_cast<std::uint8_t>(lo + src[1]);
-          dst[i] = static_cast<std::uint16_t>((hi << 8) | lo);
-        }
-      } else {
-        for (int i = 0; i < image.width; ++i, src += 2) dst[i] = static_cast<std::uint16_t>((src[0] << 8) | src[1]);
-      }
-    }
-  } else {
-    if (!unfilter(raw.data(), stride, image.height, bpp)) throw PngError(what + ": corrupt PNG: unknown filter type");
-    image.pixels8.resize(stride * static_cast<std::size_t>(image.height));
-    for (int r = 0; r < image.height; ++r) {
-      std::memcpy(image.pixels8.data() + static_cast<std::size_t>(r) * stride,
-                  raw.data() + static_cast<std::size_t>(r) * (stride + 1) + 1, stride);
-    }
+    unpack_grey16(raw, stride, what, image);
+    return std::move(image);
   }
-  return image;
+  if (!unfilter(raw.data(), stride, image.height, bpp)) throw PngError(what + ": corrupt PNG: unknown filter type");
+  image.pixels8.resize(stride * static_cast<std::size_t>(image.height));
+  for (int r = 0; r < image.height; ++r) {
+    std::memcpy(image.pixels8.data() + static_cast<std::size_t>(r) * stride,
+                raw.data() + static_cast<std::size_t>(r) * (stride + 1) + 1, stride);
+  }
+  return std::move(image);
 }
 
 }  // namespace

@@ -101,6 +101,74 @@ Response Service::xyz_tile(Region& region, std::string_view layer_text, std::str
   });
 }
 
+namespace {
+
+// A crop's sidecar: what the crop of `block` holds and where, as JSON.
+Response crop_sidecar(const std::string& region_id, const raster::CacheMetadata& m, const MapBlock& block,
+                      const std::string& format, double prior_sigma_m) {
+  double gamma = 0;
+  const osm::GeoPoint centre = m.projection().reverse({block.centre_x_m(), block.centre_y_m()}, gamma);
+  ordered_json bands = ordered_json::array();
+  for (const auto& b : block.bands) bands.push_back(b.name);
+  const bool u8 = block.all_uint8();
+  const std::string dtype =
+      format == "png" ? (block.layers[0] == MapLayer::classes ? "uint8" : "uint16") : (u8 ? "uint8" : "float32");
+  return detail::json_response({
+      {"region", region_id},
+      {"crs", "region"},
+      {"crs_wkt", m.projection().wkt()},
+      {"crs_proj", m.projection().proj_string()},
+      {"crop_x", block.centre_x_m()},
+      {"crop_y", block.centre_y_m()},
+      {"crop_lat", centre.lat_deg},
+      {"crop_lon", centre.lon_deg},
+      {"meridian_convergence_deg", gamma},
+      {"cell_m", raster::kCellM},
+      {"width", block.width},
+      {"height", block.height},
+      {"west_m", block.west_m},
+      {"north_m", block.north_m},
+      {"geotransform", {block.west_m, raster::kCellM, 0, block.north_m, 0, -raster::kCellM}},
+      {"bands", bands},
+      {"dtype", dtype},
+      {"outside_cells", block.outside_cells},
+      {"road_distance_max_m", m.max_distance_m},
+      {"road_prior_sigma_m", prior_sigma_m},
+  });
+}
+
+// A crop's data in `format` (npy, tif or png), its georeference in headers.
+Response crop_data(const std::string& region_id, const raster::CacheMetadata& m, const MapBlock& block,
+                   const std::string& format, int max_age_s) {
+  Response r;
+  std::string band_names;
+  for (const auto& b : block.bands) band_names += (band_names.empty() ? "" : ",") + b.name;
+  r.content_type = detail::content_type_of(format);
+  if (format == "npy") {
+    r.body = std::make_shared<const std::string>(encode_npy(block));
+  } else if (format == "tif") {
+    r.body = std::make_shared<const std::string>(encode_geotiff(block, m.projection()));
+  } else {
+    const auto png = encode_data_png(block);
+    r.body = std::make_shared<const std::string>(png.begin(), png.end());
+  }
+  r.headers.emplace_back("Cache-Control", "public, max-age=" + std::to_string(max_age_s));
+  r.headers.emplace_back("X-Seqloc-Region", region_id);
+  r.headers.emplace_back("X-Seqloc-Crop-X", detail::fixed(block.centre_x_m(), 3));
+  r.headers.emplace_back("X-Seqloc-Crop-Y", detail::fixed(block.centre_y_m(), 3));
+  r.headers.emplace_back("X-Seqloc-Cell-M", detail::fixed(raster::kCellM, 3));
+  r.headers.emplace_back("X-Seqloc-Shape", std::to_string(block.height) + "," + std::to_string(block.width) + "," +
+                                               std::to_string(block.bands.size()));
+  r.headers.emplace_back("X-Seqloc-Bands", band_names);
+  r.headers.emplace_back("X-Seqloc-Geotransform",
+                         detail::fixed(block.west_m, 3) + ",0.5,0," + detail::fixed(block.north_m, 3) + ",0,-0.5");
+  r.headers.emplace_back("X-Seqloc-Crs", m.projection().proj_string());
+  r.headers.emplace_back("X-Seqloc-Outside-Cells", std::to_string(block.outside_cells));
+  return r;
+}
+
+}  // namespace
+
 Response Service::crop(Region& region, const Request& request, bool sidecar_only) {
   const double lat = detail::number_param(request, "lat");
   const double lon = detail::number_param(request, "lon");
@@ -125,61 +193,8 @@ Response Service::crop(Region& region, const Request& request, bool sidecar_only
   std::string canonical;
   for (const auto& [k, v] : request.query) canonical.append(k).append("=").append(v).append("&");
   const std::string etag = "\"" + region.build_tag + "-" + detail::hex(detail::fnv1a(canonical + (sidecar_only ? "json" : ""))) + "\"";
-  Response r;
-  if (sidecar_only) {
-    double gamma = 0;
-    const osm::GeoPoint centre = m.projection().reverse({block.centre_x_m(), block.centre_y_m()}, gamma);
-    ordered_json bands = ordered_json::array();
-    for (const auto& b : block.bands) bands.push_back(b.name);
-    const bool u8 = block.all_uint8();
-    const std::string dtype = format == "png" ? (block.layers[0] == MapLayer::classes ? "uint8" : "uint16")
-                                              : (u8 ? "uint8" : "float32");
-    r = detail::json_response({
-        {"region", region.id},
-        {"crs", "region"},
-        {"crs_wkt", m.projection().wkt()},
-        {"crs_proj", m.projection().proj_string()},
-        {"crop_x", block.centre_x_m()},
-        {"crop_y", block.centre_y_m()},
-        {"crop_lat", centre.lat_deg},
-        {"crop_lon", centre.lon_deg},
-        {"meridian_convergence_deg", gamma},
-        {"cell_m", raster::kCellM},
-        {"width", block.width},
-        {"height", block.height},
-        {"west_m", block.west_m},
-        {"north_m", block.north_m},
-        {"geotransform", {block.west_m, raster::kCellM, 0, block.north_m, 0, -raster::kCellM}},
-        {"bands", bands},
-        {"dtype", dtype},
-        {"outside_cells", block.outside_cells},
-        {"road_distance_max_m", m.max_distance_m},
-        {"road_prior_sigma_m", options_.layers.prior_sigma_m},
-    });
-  } else {
-    std::string band_names;
-    for (const auto& b : block.bands) band_names += (band_names.empty() ? "" : ",") + b.name;
-    r.content_type = detail::content_type_of(format);
-    if (format == "npy") {
-      r.body = std::make_shared<const std::string>(encode_npy(block));
-    } else if (format == "tif") {
-      r.body = std::make_shared<const std::string>(encode_geotiff(block, m.projection()));
-    } else {
-      const auto png = encode_data_png(block);
-      r.body = std::make_shared<const std::string>(png.begin(), png.end());
-    }
-    r.headers.emplace_back("Cache-Control", "public, max-age=" + std::to_string(options_.tile_max_age_s));
-    r.headers.emplace_back("X-Seqloc-Region", region.id);
-    r.headers.emplace_back("X-Seqloc-Crop-X", detail::fixed(block.centre_x_m(), 3));
-    r.headers.emplace_back("X-Seqloc-Crop-Y", detail::fixed(block.centre_y_m(), 3));
-    r.headers.emplace_back("X-Seqloc-Cell-M", detail::fixed(raster::kCellM, 3));
-    r.headers.emplace_back("X-Seqloc-Shape", std::to_string(block.height) + "," + std::to_string(block.width) + "," +
-                                                 std::to_string(block.bands.size()));
-    r.headers.emplace_back("X-Seqloc-Bands", band_names);
-    r.headers.emplace_back("X-Seqloc-Geotransform", detail::fixed(block.west_m, 3) + ",0.5,0," + detail::fixed(block.north_m, 3) + ",0,-0.5");
-    r.headers.emplace_back("X-Seqloc-Crs", m.projection().proj_string());
-    r.headers.emplace_back("X-Seqloc-Outside-Cells", std::to_string(block.outside_cells));
-  }
+  Response r = sidecar_only ? crop_sidecar(region.id, m, block, format, options_.layers.prior_sigma_m)
+                            : crop_data(region.id, m, block, format, options_.tile_max_age_s);
   r.headers.emplace_back("ETag", etag);
   return r;
 }

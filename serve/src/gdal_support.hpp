@@ -4,6 +4,7 @@
 
 #include <mutex>
 #include <string>
+#include <utility>
 
 #include <cpl_error.h>
 #include <cpl_string.h>
@@ -45,6 +46,8 @@ class Dataset {
   ~Dataset() { close(); }
   Dataset(const Dataset&) = delete;
   Dataset& operator=(const Dataset&) = delete;
+  Dataset(Dataset&& other) noexcept : h_(std::exchange(other.h_, nullptr)) {}
+  Dataset& operator=(Dataset&&) = delete;
   [[nodiscard]] GDALDatasetH get() const { return h_; }
   explicit operator bool() const { return h_ != nullptr; }
   /// Closes now; false when GDAL reported a failure while flushing.

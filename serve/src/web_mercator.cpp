@@ -100,29 +100,12 @@ WebBounds web_tile_bounds(int z, std::int64_t x, std::int64_t y) {
   return b;
 }
 
-WebTile read_web_tile(raster::CacheReader& cache, MapLayer layer, int z, std::int64_t x, std::int64_t y, int tile_px,
-                      const LayerOptions& options) {
-  const WebZooms zooms = web_zooms(cache.metadata());
-  if (z < zooms.min_zoom || z > zooms.max_zoom) {
-    throw not_found("zoom " + std::to_string(z) + " is outside this region's zooms " + std::to_string(zooms.min_zoom) +
-                    ".." + std::to_string(zooms.max_zoom));
-  }
-  const std::int64_t tiles = std::int64_t{1} << z;
-  if (x < 0 || y < 0 || x >= tiles || y >= tiles) {
-    throw not_found("tile " + std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y) +
-                    " does not exist (x and y are in 0.." + std::to_string(tiles - 1) + " at zoom " + std::to_string(z) + ")");
-  }
-  const WebBounds bounds = web_tile_bounds(z, x, y);
-  const PixelWindow w = region_pixels_under(cache, bounds);
-  if (w.empty()) {
-    throw not_found("tile " + std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y) +
-                    " does not meet the region (see bounds in tilejson.json)");
-  }
-  const int width = static_cast<int>(w.u1 - w.u0), height = static_cast<int>(w.v1 - w.v0);
-  const MapBlock source = read_block(cache, w.u0, w.v0, width, height, {layer}, options);
+namespace {
 
-  // The source as an in-memory GDAL dataset in the region CRS, warped by gdalwarp's own code.
+// `source`, the region pixels `w` of the cache, as an in-memory GDAL dataset in the region CRS.
+detail::Dataset region_dataset(raster::CacheReader& cache, const PixelWindow& w, const MapBlock& source) {
   detail::register_gdal();
+  const int width = static_cast<int>(w.u1 - w.u0), height = static_cast<int>(w.v1 - w.v0);
   const bool bytes = source.all_uint8();
   const GDALDataType type = bytes ? GDT_Byte : GDT_Float32;
   const int band_count = static_cast<int>(source.bands.size());
@@ -142,18 +125,14 @@ WebTile read_web_tile(raster::CacheReader& cache, MapLayer layer, int z, std::in
       throw std::runtime_error("GDAL cannot fill an in-memory raster: " + detail::gdal_message());
     }
   }
-  const WarpOptions warp({"-of", "MEM", "-t_srs", "EPSG:3857", "-te", number(bounds.west), number(bounds.south),
-                          number(bounds.east), number(bounds.north), "-ts", std::to_string(tile_px),
-                          std::to_string(tile_px), "-r", layer == MapLayer::classes ? "near" : "bilinear",
-                          "-dstalpha", "-q"});
-  if (!warp.options) throw std::runtime_error("GDAL refused the warp options: " + detail::gdal_message());
-  GDALDatasetH sources[] = {src.get()};
-  int usage_error = 0;
-  CPLErrorReset();
-  detail::Dataset dst(GDALWarp("", nullptr, 1, sources, warp.options, &usage_error));
-  if (!dst) throw std::runtime_error("GDAL could not warp tile " + std::to_string(z) + "/" + std::to_string(x) + "/" +
-                                     std::to_string(y) + ": " + detail::gdal_message());
+  return src;
+}
 
+// The warped dataset's bands (named as `source`'s) and its alpha band as a tile.
+WebTile warped_tile(GDALDatasetH dst, const MapBlock& source, MapLayer layer, const WebBounds& bounds, int tile_px) {
+  const bool bytes = source.all_uint8();
+  const GDALDataType type = bytes ? GDT_Byte : GDT_Float32;
+  const int band_count = static_cast<int>(source.bands.size());
   WebTile tile;
   tile.block.width = tile.block.height = tile_px;
   tile.block.west_m = bounds.west;
@@ -172,18 +151,59 @@ WebTile read_web_tile(raster::CacheReader& cache, MapLayer layer, int z, std::in
       band.f32.resize(n);
       data = band.f32.data();
     }
-    if (GDALRasterIO(GDALGetRasterBand(dst.get(), b + 1), GF_Read, 0, 0, tile_px, tile_px, data, tile_px, tile_px, type,
-                     0, 0) != CE_None) {
+    if (GDALRasterIO(GDALGetRasterBand(dst, b + 1), GF_Read, 0, 0, tile_px, tile_px, data, tile_px, tile_px, type, 0,
+                     0) != CE_None) {
       throw std::runtime_error("GDAL cannot read a warped tile: " + detail::gdal_message());
     }
     tile.block.bands.push_back(std::move(band));
   }
   tile.covered.resize(n);
-  if (GDALRasterIO(GDALGetRasterBand(dst.get(), band_count + 1), GF_Read, 0, 0, tile_px, tile_px, tile.covered.data(),
+  if (GDALRasterIO(GDALGetRasterBand(dst, band_count + 1), GF_Read, 0, 0, tile_px, tile_px, tile.covered.data(),
                    tile_px, tile_px, GDT_Byte, 0, 0) != CE_None) {
     throw std::runtime_error("GDAL cannot read a warped tile's alpha: " + detail::gdal_message());
   }
   return tile;
+}
+
+}  // namespace
+
+WebTile read_web_tile(raster::CacheReader& cache, MapLayer layer, int z, std::int64_t x, std::int64_t y, int tile_px,
+                      const LayerOptions& options) {
+  const WebZooms zooms = web_zooms(cache.metadata());
+  if (z < zooms.min_zoom || z > zooms.max_zoom) {
+    throw not_found("zoom " + std::to_string(z) + " is outside this region's zooms " + std::to_string(zooms.min_zoom) +
+                    ".." + std::to_string(zooms.max_zoom));
+  }
+  const std::int64_t tiles = std::int64_t{1} << z;
+  if (x < 0 || y < 0 || x >= tiles || y >= tiles) {
+    throw not_found("tile " + std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y) +
+                    " does not exist (x and y are in 0.." + std::to_string(tiles - 1) + " at zoom " +
+                    std::to_string(z) + ")");
+  }
+  const WebBounds bounds = web_tile_bounds(z, x, y);
+  const PixelWindow w = region_pixels_under(cache, bounds);
+  if (w.empty()) {
+    throw not_found("tile " + std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y) +
+                    " does not meet the region (see bounds in tilejson.json)");
+  }
+  const int width = static_cast<int>(w.u1 - w.u0), height = static_cast<int>(w.v1 - w.v0);
+  const MapBlock source = read_block(cache, w.u0, w.v0, width, height, {layer}, options);
+
+  // The source as an in-memory GDAL dataset in the region CRS, warped by gdalwarp's own code.
+  const detail::Dataset src = region_dataset(cache, w, source);
+  const WarpOptions warp({"-of", "MEM", "-t_srs", "EPSG:3857", "-te", number(bounds.west), number(bounds.south),
+                          number(bounds.east), number(bounds.north), "-ts", std::to_string(tile_px),
+                          std::to_string(tile_px), "-r", layer == MapLayer::classes ? "near" : "bilinear", "-dstalpha",
+                          "-q"});
+  if (!warp.options) throw std::runtime_error("GDAL refused the warp options: " + detail::gdal_message());
+  GDALDatasetH sources[] = {src.get()};
+  int usage_error = 0;
+  CPLErrorReset();
+  detail::Dataset dst(GDALWarp("", nullptr, 1, sources, warp.options, &usage_error));
+  if (!dst)
+    throw std::runtime_error("GDAL could not warp tile " + std::to_string(z) + "/" + std::to_string(x) + "/" +
+                             std::to_string(y) + ": " + detail::gdal_message());
+  return warped_tile(dst.get(), source, layer, bounds, tile_px);
 }
 
 }  // namespace seqloc::serve
