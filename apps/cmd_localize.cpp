@@ -1,17 +1,14 @@
-#include <atomic>
-#include <mutex>
-
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "command.hpp"
 #include "seqloc/core/error.hpp"
 #include "seqloc/io/run_folder.hpp"
-#include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
-#include "seqloc/pipeline/region_catalog.hpp"
+#include "seqloc/pipeline/localize_run.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -116,47 +113,28 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
   }
 
   int run() override {
-    // Everything is read and checked before any work, the other shards' routes too (a shard's
-    // route names and errors do not depend on which shard runs); localize_routes checks the
-    // crops of this shard's routes before its first job.
-    if (!calibration_.empty()) pipeline::apply_calibration_file(calibration_, options_);
-    std::vector<fs::path> region_paths{cache_path_};
-    region_paths.insert(region_paths.end(), extra_regions_.begin(), extra_regions_.end());
-    const pipeline::RegionCatalog catalog(region_paths, 256);
-    if (catalog.size() > 1) log("%zu regions", catalog.size());
-    auto routes = io::read_routes(route_dirs_, limits_, shard_,
-                                  [&](const io::Route& other) { pipeline::check_route(other, catalog, options_); });
-    if (noise_t_ > 0 || noise_r_ > 0) {
-      for (auto& route : routes) pipeline::perturb_odometry(route, noise_t_, noise_r_, seed_);
-    }
-    const auto route_frames = static_cast<long long>(io::frame_count(routes));
-    const long long total_frames = route_frames * static_cast<long long>(modes_.size());  // frames times modes
-    if (shard_.count > 1) {
-      log("shard %d/%d: %zu of %zu routes", shard_.index, shard_.count, routes.size(), route_dirs_.size());
-    }
-    log("localize %zu routes, %lld frames in all", routes.size(), total_frames);
-
-    io::RunFolderWriter out(out_);  // staged beside out_, in place only when complete
+    pipeline::LocalizeRun job;
+    job.regions = {cache_path_};
+    job.regions.insert(job.regions.end(), extra_regions_.begin(), extra_regions_.end());
+    job.routes = route_dirs_;
+    job.output = out_;
+    job.modes = modes_;
+    job.options = options_;
+    job.calibration = calibration_;
+    job.limits = limits_;
+    job.shard = shard_;
+    job.noise = {noise_t_, noise_r_, seed_};
     ProgressBar bar(show_progress(), "frames");
-    std::atomic<long long> done{0};
-    std::mutex progress_mutex;
-    const auto batch = pipeline::localize_routes(routes, catalog, options_, modes_, [&] {
-      const long long d = ++done;
-      std::lock_guard lock(progress_mutex);
-      bar.update(d, total_frames);
-    });
+    const auto report =
+        pipeline::run_localize(std::move(job), {[&](const std::string& line) { log("%s", line.c_str()); },
+                                                [&](long long done, long long total) { bar.update(done, total); }});
     bar.done();
     log("%zu volumes scored or read for %lld frames and %zu modes; %zu spilled to a temporary file; at most %.0f MB "
         "per route",
-        batch.frames_made, route_frames, modes_.size(), batch.frames_spilled,
-        static_cast<double>(batch.peak_frame_memory_bytes) / (1 << 20));
-    for (const auto& result : batch.results) out.add(result);
-    std::vector<std::string> route_names;
-    route_names.reserve(routes.size());
-    for (const auto& route : routes) route_names.push_back(route.name);
-    const io::MetricsByMode metrics = out.commit(route_names);
-    std::fputs(io::format_table(metrics).c_str(), stdout);
-    std::printf("wrote %s (%zu routes)\n", out_.c_str(), routes.size());
+        report.frames_made, report.frames, modes_.size(), report.frames_spilled,
+        static_cast<double>(report.peak_frame_memory_bytes) / (1 << 20));
+    std::fputs(io::format_table(report.metrics).c_str(), stdout);
+    std::printf("wrote %s (%zu routes)\n", out_.c_str(), report.routes);
     return kExitOk;
   }
 

@@ -1,0 +1,65 @@
+#include "seqloc/pipeline/localize_run.hpp"
+
+#include <atomic>
+#include <mutex>
+
+#include "seqloc/pipeline/backbone_calibration.hpp"
+#include "seqloc/pipeline/region_catalog.hpp"
+
+namespace seqloc::pipeline {
+namespace {
+
+// One line for the log, when anyone listens.
+template <class... Parts>
+void note(const LocalizeRunEvents& events, const Parts&... parts) {
+  if (!events.note) return;
+  std::string line;
+  (line.append(parts), ...);
+  events.note(line);
+}
+
+}  // namespace
+
+LocalizeRunReport run_localize(LocalizeRun run, const LocalizeRunEvents& events) {
+  if (!run.calibration.empty()) apply_calibration_file(run.calibration, run.options);
+  const RegionCatalog catalog(run.regions, 256);
+  if (catalog.size() > 1) note(events, std::to_string(catalog.size()), " regions");
+  auto routes = io::read_routes(run.routes, run.limits, run.shard,
+                                [&](const io::Route& other) { check_route(other, catalog, run.options); });
+  if (run.noise.any()) {
+    for (auto& route : routes) {
+      perturb_odometry(route, run.noise.translation_pct, run.noise.rotation_deg_per_m, run.noise.seed);
+    }
+  }
+  LocalizeRunReport report;
+  report.routes = routes.size();
+  report.regions = catalog.size();
+  report.frames = static_cast<long long>(io::frame_count(routes));
+  const long long total = report.frames * static_cast<long long>(run.modes.size());  // frames times modes
+  if (run.shard.count > 1) {
+    note(events, "shard ", std::to_string(run.shard.index), "/", std::to_string(run.shard.count), ": ",
+         std::to_string(routes.size()), " of ", std::to_string(run.routes.size()), " routes");
+  }
+  note(events, "localize ", std::to_string(routes.size()), " routes, ", std::to_string(total), " frames in all");
+
+  io::RunFolderWriter out(run.output);  // staged beside the output, in place only when complete
+  std::atomic<long long> done{0};
+  std::mutex progress;
+  const auto batch = localize_routes(routes, catalog, run.options, run.modes, [&] {
+    const long long d = ++done;
+    if (!events.frames) return;
+    std::lock_guard lock(progress);
+    events.frames(d, total);
+  });
+  report.frames_made = batch.frames_made;
+  report.frames_spilled = batch.frames_spilled;
+  report.peak_frame_memory_bytes = batch.peak_frame_memory_bytes;
+  for (const auto& result : batch.results) out.add(result);
+  std::vector<std::string> names;
+  names.reserve(routes.size());
+  for (const auto& route : routes) names.push_back(route.name);
+  report.metrics = out.commit(names);
+  return report;
+}
+
+}  // namespace seqloc::pipeline
