@@ -10,6 +10,7 @@
 #include <tuple>
 #include <type_traits>
 
+#include "seqloc/core/error.hpp"
 #include "seqloc/core/files.hpp"
 
 namespace seqloc::ingest::detail {
@@ -41,8 +42,8 @@ class Writer {
       const ssize_t n = ::write(fd, buffer_.data() + done, buffer_.size() - done);
       if (n < 0 && errno == EINTR) continue;
       if (n <= 0) {
-        throw std::runtime_error("cannot write the features' spill file in " + dir.string() + ": " +
-                                 std::strerror(n < 0 ? errno : ENOSPC));
+        throw IoError("cannot write the features' spill file in " + dir.string() + ": " +
+                      std::strerror(n < 0 ? errno : ENOSPC));
       }
       done += static_cast<std::size_t>(n);
     }
@@ -121,8 +122,7 @@ FeatureBlocks::FeatureBlocks(const raster::RegionFeatures& features, const Regio
 
   fd_ = core::open_unlinked_file(spill_dir, ".seqloc-features");
   if (fd_ < 0) {
-    throw std::runtime_error("cannot create the features' spill file in " + spill_dir.string() + ": " +
-                             std::strerror(errno));
+    throw IoError("cannot create the features' spill file in " + spill_dir.string() + ": " + std::strerror(errno));
   }
   try {
     spill(features, entries, block_count);
@@ -189,8 +189,8 @@ raster::RegionFeatures FeatureBlocks::load(std::int64_t bx, std::int64_t by) con
     const ssize_t n = ::pread(fd_, bytes.data() + done, size - done, static_cast<off_t>(begin + done));
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) {
-      throw std::runtime_error("cannot read back the features' spill file in " + dir_.string() + ": " +
-                               std::strerror(n < 0 ? errno : EIO));
+      throw IoError("cannot read back the features' spill file in " + dir_.string() + ": " +
+                    std::strerror(n < 0 ? errno : EIO));
     }
     done += static_cast<std::size_t>(n);
   }

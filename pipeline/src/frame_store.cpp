@@ -12,6 +12,7 @@
 #include <string>
 #include <system_error>
 
+#include "seqloc/core/error.hpp"
 #include "seqloc/core/files.hpp"
 
 namespace seqloc::pipeline {
@@ -67,8 +68,9 @@ class FrameStore::SpillFile {
 
  private:
   [[noreturn]] void fail(const std::string& what) const {
-    throw std::system_error(errno, std::generic_category(),
-                            "frame store: " + what + " in " + dir_.string() + " (spilling frames beyond the memory budget)");
+    const int error = errno;
+    throw IoError("frame store: " + what + " in " + dir_.string() +
+                  " (spilling frames beyond the memory budget): " + std::generic_category().message(error));
   }
 
   std::filesystem::path dir_;
@@ -163,7 +165,8 @@ void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
 std::shared_ptr<const filter::PreparedFrame> FrameStore::take(std::size_t i) {
   std::unique_lock lock(mutex_);
   if (i >= slots_.size()) {
-    throw std::out_of_range("frame store: frame " + std::to_string(i) + " of " + std::to_string(slots_.size()));
+    throw Error(ErrorCategory::internal,
+                "frame store: frame " + std::to_string(i) + " of " + std::to_string(slots_.size()));
   }
   Slot& slot = slots_[i];
   while (slot.state != State::ready) {

@@ -12,6 +12,8 @@
 
 #include "gdal_support.hpp"
 
+#include "seqloc/core/error.hpp"
+
 namespace seqloc::serve {
 namespace {
 
@@ -40,7 +42,9 @@ PixelWindow region_pixels_under(const raster::CacheReader& cache, const WebBound
   mercator.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
   region.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
   const std::unique_ptr<OGRCoordinateTransformation> to_region(OGRCreateCoordinateTransformation(&mercator, &region));
-  if (!to_region) throw std::runtime_error("GDAL cannot transform EPSG:3857 to the region CRS: " + detail::gdal_message());
+  if (!to_region)
+    throw Error(ErrorCategory::internal,
+                "GDAL cannot transform EPSG:3857 to the region CRS: " + detail::gdal_message());
   constexpr int kSteps = 16;
   double min_x = std::numeric_limits<double>::infinity(), max_x = -min_x, min_y = min_x, max_y = -min_x;
   for (int i = 0; i <= kSteps; ++i) {
@@ -110,7 +114,7 @@ detail::Dataset region_dataset(raster::CacheReader& cache, const PixelWindow& w,
   const GDALDataType type = bytes ? GDT_Byte : GDT_Float32;
   const int band_count = static_cast<int>(source.bands.size());
   detail::Dataset src(GDALCreate(GDALGetDriverByName("MEM"), "", width, height, band_count, type, nullptr));
-  if (!src) throw std::runtime_error("GDAL cannot create an in-memory raster: " + detail::gdal_message());
+  if (!src) throw Error(ErrorCategory::internal, "GDAL cannot create an in-memory raster: " + detail::gdal_message());
   const auto& g = cache.grid();
   double transform[6] = {g.min_x() + static_cast<double>(w.u0) * raster::kCellM, raster::kCellM, 0,
                          g.max_y() - static_cast<double>(w.v0) * raster::kCellM, 0, -raster::kCellM};
@@ -122,7 +126,7 @@ detail::Dataset region_dataset(raster::CacheReader& cache, const PixelWindow& w,
                        : static_cast<void*>(const_cast<float*>(band.f32.data()));
     if (GDALRasterIO(GDALGetRasterBand(src.get(), b + 1), GF_Write, 0, 0, width, height, data, width, height, type, 0,
                      0) != CE_None) {
-      throw std::runtime_error("GDAL cannot fill an in-memory raster: " + detail::gdal_message());
+      throw Error(ErrorCategory::internal, "GDAL cannot fill an in-memory raster: " + detail::gdal_message());
     }
   }
   return src;
@@ -153,14 +157,14 @@ WebTile warped_tile(GDALDatasetH dst, const MapBlock& source, MapLayer layer, co
     }
     if (GDALRasterIO(GDALGetRasterBand(dst, b + 1), GF_Read, 0, 0, tile_px, tile_px, data, tile_px, tile_px, type, 0,
                      0) != CE_None) {
-      throw std::runtime_error("GDAL cannot read a warped tile: " + detail::gdal_message());
+      throw Error(ErrorCategory::internal, "GDAL cannot read a warped tile: " + detail::gdal_message());
     }
     tile.block.bands.push_back(std::move(band));
   }
   tile.covered.resize(n);
   if (GDALRasterIO(GDALGetRasterBand(dst, band_count + 1), GF_Read, 0, 0, tile_px, tile_px, tile.covered.data(),
                    tile_px, tile_px, GDT_Byte, 0, 0) != CE_None) {
-    throw std::runtime_error("GDAL cannot read a warped tile's alpha: " + detail::gdal_message());
+    throw Error(ErrorCategory::internal, "GDAL cannot read a warped tile's alpha: " + detail::gdal_message());
   }
   return tile;
 }
@@ -195,14 +199,14 @@ WebTile read_web_tile(raster::CacheReader& cache, MapLayer layer, int z, std::in
                           number(bounds.east), number(bounds.north), "-ts", std::to_string(tile_px),
                           std::to_string(tile_px), "-r", layer == MapLayer::classes ? "near" : "bilinear", "-dstalpha",
                           "-q"});
-  if (!warp.options) throw std::runtime_error("GDAL refused the warp options: " + detail::gdal_message());
+  if (!warp.options) throw Error(ErrorCategory::internal, "GDAL refused the warp options: " + detail::gdal_message());
   GDALDatasetH sources[] = {src.get()};
   int usage_error = 0;
   CPLErrorReset();
   detail::Dataset dst(GDALWarp("", nullptr, 1, sources, warp.options, &usage_error));
   if (!dst)
-    throw std::runtime_error("GDAL could not warp tile " + std::to_string(z) + "/" + std::to_string(x) + "/" +
-                             std::to_string(y) + ": " + detail::gdal_message());
+    throw Error(ErrorCategory::internal, "GDAL could not warp tile " + std::to_string(z) + "/" + std::to_string(x) +
+                                             "/" + std::to_string(y) + ": " + detail::gdal_message());
   return warped_tile(dst.get(), source, layer, bounds, tile_px);
 }
 

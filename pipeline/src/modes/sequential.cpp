@@ -8,6 +8,7 @@
 #include <optional>
 
 #include "factories.hpp"
+#include "seqloc/core/error.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
 
 namespace seqloc::pipeline::modes {
@@ -23,7 +24,8 @@ class SequentialMode final : public LocalizationMode {
   FrameEstimate estimate(std::size_t i, const GridCrop&, FramePrefetcher& frames) override {
     const std::size_t n = context_.route.frames.size();
     while (final_.find(i) == final_.end()) {
-      if (next_ == n) throw std::logic_error("sequential mode: frame " + std::to_string(i) + " asked for twice");
+      if (next_ == n)
+        throw Error(ErrorCategory::internal, "sequential mode: frame " + std::to_string(i) + " asked for twice");
       step(next_++, frames);
       if (next_ == n) localizer_.finish();
       for (auto& [index, e] : localizer_.take_final()) final_.emplace(index, e);

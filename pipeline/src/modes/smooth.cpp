@@ -25,6 +25,7 @@
 #include <system_error>
 
 #include "factories.hpp"
+#include "seqloc/core/error.hpp"
 #include "seqloc/core/files.hpp"
 #include "seqloc/pipeline/backward_pass.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
@@ -70,8 +71,8 @@ class CheckpointFile {
   }
   [[noreturn]] void fail(const std::string& what) const {
     const int error = errno != 0 ? errno : EIO;
-    throw std::system_error(error, std::generic_category(),
-                            "smooth: " + what + " in " + dir_.string() + " (the forward pass's checkpoints)");
+    throw IoError("smooth: " + what + " in " + dir_.string() +
+                  " (the forward pass's checkpoints): " + std::generic_category().message(error));
   }
 
   std::filesystem::path dir_;
