@@ -21,8 +21,8 @@ namespace {
 using core::kCellM;
 using core::kDegToRad;
 
-using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
-using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+using detail::ArrayMap;
+using detail::ConstArrayMap;
 
 /// Log-softmax of f.log_prob in place (max: its largest value), with the normalized entropy and
 /// the argmax; `chunks` workers. With `shift` false the values stay as they are and only the

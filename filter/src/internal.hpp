@@ -12,6 +12,10 @@
 
 namespace seqloc::filter::detail {
 
+/// A float buffer as an Eigen array, in place (the filter's loops work on these).
+using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
+using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+
 /// out = exp(scale * (x - shift)) where x > kLogZero, exactly 0 where x is kLogZero or -inf.
 /// Eigen 3.4 evaluates select() one coefficient at a time, with scalar expf (a third of a step's
 /// time): this keeps the exp in SIMD and blends the zeros in after. The exp is taken in an aligned

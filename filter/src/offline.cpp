@@ -36,8 +36,8 @@ Odometry invert(const Odometry& m) {
 
 namespace {
 
-using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
-using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+using detail::ArrayMap;
+using detail::ConstArrayMap;
 
 using core::kCellM;
 

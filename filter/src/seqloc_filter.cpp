@@ -19,8 +19,8 @@ namespace {
 using core::kCellM;
 using core::kDegToRad;
 
-using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
-using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+using detail::ArrayMap;
+using detail::ConstArrayMap;
 
 }  // namespace
 
@@ -141,7 +141,7 @@ void collect_evidence(const float* belief, float* sample, std::size_t n, double 
   // The log in SIMD over the whole slice (NaN outside the crop), then in a loop that vectorizes
   // (restrict: the arrays do not overlap) the underflowed cells' depth, each cell's mass in the
   // crop (0 outside) and the outside fill.
-  Eigen::Map<Eigen::ArrayXf>(depth.data(), count) = Eigen::Map<const Eigen::ArrayXf>(sample, count).log() * inverse;
+  ArrayMap(depth.data(), count) = ConstArrayMap(sample, count).log() * inverse;
   float* __restrict d = depth.data();
   float* __restrict m = mass.data();
   float* __restrict s = sample;
@@ -155,7 +155,7 @@ void collect_evidence(const float* belief, float* sample, std::size_t n, double 
     s[i] = in ? s[i] : outside;
   }
   // b - m is b outside the crop and exactly 0 inside.
-  const double outside_mass = (Eigen::Map<const Eigen::ArrayXf>(belief, count) - Eigen::Map<const Eigen::ArrayXf>(m, count)).sum();
+  const double outside_mass = (ConstArrayMap(belief, count) - ConstArrayMap(m, count)).sum();
   in_crop.add_each({depth.data(), n}, {mass.data(), n});
   belief_outside += outside_mass;
   outside_cells += static_cast<double>(outside_count);

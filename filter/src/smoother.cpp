@@ -6,13 +6,15 @@
 
 #include <Eigen/Core>
 
+#include "internal.hpp"
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/filter/offline.hpp"
 
 namespace seqloc::filter {
 namespace {
 
-using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+using detail::ArrayMap;
+using detail::ConstArrayMap;
 
 // The backward filter's own configuration: the forward one's, without self-calibration's buffers
 // (it is given every frame's weighting).
@@ -94,7 +96,7 @@ SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& ba
   if (posterior != nullptr) {
     const auto scale = static_cast<float>(1.0 / p.total);
     for (int k = 0; k < R; ++k) {
-      Eigen::Map<Eigen::ArrayXf>(posterior->slice(k), N) *= scale;
+      ArrayMap(posterior->slice(k), N) *= scale;
     }
   }
   return p;
