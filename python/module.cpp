@@ -529,8 +529,8 @@ class PyLocalizer {
     const auto odometry = three_numbers(odometry_in, "odometry", "(forward_m, left_m, yaw_deg)");
     // The frame as a route row would hold it: its crop, lat/lon or region metres.
     io::RouteFrame f;
-    f.frame = std::to_string(frames_.size() + taken_);
-    f.timestamp_s = static_cast<double>(frames_.size() + taken_);
+    f.frame = std::to_string(stepped());
+    f.timestamp_s = static_cast<double>(stepped());
     f.odometry = {odometry[0], odometry[1], odometry[2]};
     const PointArgument centre =
         point_argument(crop_lat, crop_lon, crop_x, crop_y,
@@ -544,21 +544,17 @@ class PyLocalizer {
       const auto g = three_numbers(gps, "gps", "(lat, lon, sigma_m)");
       f.gps = io::GpsPrior{{g[0], g[1]}, g[2]};
     }
-    return step_view(view, std::move(f));
+    py::gil_scoped_release release;
+    return step_volume(view, std::move(f));
   }
 
   /// A route's frame as localize steps it: its volume file, crop, odometry and GPS fix.
   Pose step_frame(const RouteFrame& frame) {
     const io::RouteFrame& f = frame.volume_row();
-    {
-      py::gil_scoped_release release;
-      const io::NpyVolume npy(f.volume);
-      std::vector<unsigned char> transposed;
-      const filter::FrameVolume view = io::frame_volume(*frame.route, f, npy, transposed);
-      auto prepared = std::make_shared<filter::PreparedFrame>(pipeline::prepare_volume(view, options_));
-      pipeline::round_like_frame_store(*prepared);
-      return step_prepared(std::move(prepared), f);
-    }
+    py::gil_scoped_release release;
+    const io::NpyVolume npy(f.volume);
+    std::vector<unsigned char> transposed;
+    return step_volume(io::frame_volume(*frame.route, f, npy, transposed), f);
   }
 
   /// The poses that became final since the last call, in frame order: with a lag L, after frame
@@ -595,26 +591,20 @@ class PyLocalizer {
   [[nodiscard]] int lag() const { return localizer_->lag(); }
 
  private:
-  Pose step_view(const filter::FrameVolume& view, io::RouteFrame f) {
-    py::gil_scoped_release release;
+  // Frames stepped so far (the next one's index).
+  [[nodiscard]] std::size_t stepped() const { return taken_ + frames_.size(); }
+
+  // The localizer's step on a volume, prepared and rounded as localize prepares a route's; `f` is
+  // the frame's row (crop, odometry, GPS, and the id, time and truth its poses carry). Called
+  // without the GIL.
+  Pose step_volume(const filter::FrameVolume& view, io::RouteFrame f) {
     auto prepared = std::make_shared<filter::PreparedFrame>(pipeline::prepare_volume(view, options_));
     pipeline::round_like_frame_store(*prepared);
-    return step_prepared(std::move(prepared), std::move(f));
-  }
-
-  // The localizer's step on a prepared frame; `f` is the frame's row (crop, odometry, GPS, and
-  // the id, time and truth its poses carry). Called without the GIL.
-  Pose step_prepared(std::shared_ptr<filter::PreparedFrame> prepared, io::RouteFrame f) {
     const auto& projection = cache_->metadata().projection();
     const pipeline::GridCrop crop = pipeline::frame_crop(f, cache_->grid(), projection);
-    std::optional<pipeline::GridFix> fix;
-    if (f.gps) {
-      const auto g = projection.forward(f.gps->where);
-      fix = pipeline::GridFix{g.x_m, g.y_m, f.gps->sigma_m};
-    }
-    const pipeline::FrameEstimate e = localizer_->step(std::move(prepared), crop, f.odometry, fix);
-    const auto index = static_cast<long>(taken_ + frames_.size());
-    Pose pose = make_pose(index, e, f, projection);
+    const pipeline::FrameEstimate e =
+        localizer_->step(std::move(prepared), crop, f.odometry, pipeline::frame_gps_fix(f, projection));
+    Pose pose = make_pose(static_cast<long>(stepped()), e, f, projection);
     frames_.push_back(std::move(f));
     take_final();
     return pose;

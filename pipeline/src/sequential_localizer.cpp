@@ -15,6 +15,12 @@ filter::FilterConfig mode_config(const filter::FilterConfig& config, bool online
 
 }  // namespace
 
+std::optional<GridFix> frame_gps_fix(const io::RouteFrame& f, const osm::RegionProjection& projection) {
+  if (!f.gps) return std::nullopt;
+  const auto g = projection.forward(f.gps->where);
+  return GridFix{g.x_m, g.y_m, f.gps->sigma_m};
+}
+
 SequentialLocalizer::SequentialLocalizer(raster::CacheReader& cache, const filter::FilterConfig& config, bool online,
                                          double recentre_margin, int lag)
     : config_(mode_config(config, online)),

@@ -54,11 +54,7 @@ class SequentialMode final : public LocalizationMode {
     const auto& projection = projection_of(j);
     const GridCrop crop = frame_crop(f, cache_of(j).grid(), projection);
     const auto frame = frames.get_shared(j);
-    std::optional<GridFix> gps;
-    if (f.gps) {
-      const auto g = projection.forward(f.gps->where);
-      gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
-    }
+    const std::optional<GridFix> gps = frame_gps_fix(f, projection);
     const auto t0 = Clock::now();
     (void)localizer_.step(frame, crop, f.odometry, gps);
     filter_seconds_ += seconds_since(t0);

@@ -130,11 +130,7 @@ void SmoothMode::run(FramePrefetcher& frames) {
     for (std::size_t t = 0; t < n; ++t) {
       const io::RouteFrame& f = route.frames[t];
       if (t > 0 && region_of(t) != region_of(t - 1)) forward.hand_over(cache_of(t));
-      std::optional<GridFix> gps;
-      if (f.gps) {
-        const auto g = projection_of(t).forward(f.gps->where);
-        gps = GridFix{g.x_m, g.y_m, f.gps->sigma_m};
-      }
+      const std::optional<GridFix> gps = frame_gps_fix(f, projection_of(t));
       const auto& frame = frames.get(t);
       const auto t0 = Clock::now();
       (void)forward.step(frame, crop_in_region_of(t, t), f.odometry, gps);

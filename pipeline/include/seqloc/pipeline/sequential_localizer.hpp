@@ -24,6 +24,9 @@ struct GridFix {
   double x_m = 0, y_m = 0, sigma_m = 10;
 };
 
+/// Frame `f`'s GPS prior in the grid of `projection`'s region; nothing when it has none.
+[[nodiscard]] std::optional<GridFix> frame_gps_fix(const io::RouteFrame& f, const osm::RegionProjection& projection);
+
 class SequentialLocalizer {
  public:
   /// `online`: the filter with ETU, MGR, PAS and self-calibration off (naive fusion); else as
