@@ -1,9 +1,10 @@
 #pragma once
-// One pool of worker threads for every parallel loop of the process: the filter's per-step
-// chunks, localize's (route, mode) jobs, the matcher's headings, preprocessing's tiles. Threads
-// are started when first needed and kept; a loop hands its tasks to idle workers and takes part
-// itself, so that nothing starts a thread per call and a loop inside a loop cannot deadlock (the
-// caller always works its own tasks off).
+// The process's parallel loops. ThreadPool (run_jobs: localize's (route, mode) jobs, render's
+// modes) starts its threads when first needed and keeps them; a loop hands its tasks to idle
+// workers and takes part itself, so that a loop inside a loop cannot deadlock (the caller always
+// works its own tasks off). parallel_chunks (the filter's, the matcher's and the calibration's
+// short loops) starts a thread per part instead: measured faster there (docs/development.md,
+// "Threads").
 
 #include <algorithm>
 #include <atomic>
