@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 
 #include "seqloc/filter/belief.hpp"
+#include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 
 namespace seqloc::filter::detail {
@@ -54,5 +55,28 @@ void warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odometry& odom
 /// Window displacement (cells, u east / v south) of the odometry for a heading (clockwise from
 /// north): forward is (sin h, cos h) east/north, left is (-cos h, sin h).
 void displacement_cells(const Odometry& odometry, double heading_deg, double& du, double& dv);
+
+/// Self-calibration's coarse grid: window heading bins per coarse bin (4, or fewer where the
+/// window's bins are not a multiple of 4 or would leave fewer than 4 coarse bins).
+[[nodiscard]] int calibration_bins(int headings);
+
+/// Whether window bin k is one that coarse bins are made of, b window bins per coarse bin: every
+/// bin for b = 1, else every other bin (the even ones for b = 4, the odd for b = 2).
+[[nodiscard]] inline bool pooled_bin(int k, int b) { return b == 1 || k % 2 == (b / 2) % 2; }
+
+/// The coarse belief from `pooled` ([bin][v][u] at the coarse grid's cells, one slice per window
+/// bin, filled for the bins pooled_bin() names): coarse bin j is centred on window bin j b and
+/// sums the named bins among j b - b/2 .. j b + b/2 (circular), each standing for itself and its
+/// neighbours, those at the ends for half as many: weights 1, 2, 1 for b = 4, 1, 1 for b = 2.
+void pool_headings(const float* pooled, int headings, BeliefVolume& coarse, int threads);
+
+/// Self-calibration's evidence of a frame against a belief on another grid: the belief's mass
+/// binned by the frame's depth below its peak at each cell (the frame's log-probabilities sampled
+/// at the cell's centre, `frame_cell_m` being the frame's cell size in the belief's cells times
+/// 0.5 m, `crop` the crop in the belief's cells), its mass outside the crop, and its cells in all
+/// and outside the crop, each counted as `cells_per_cell` window cells. The same sums for any
+/// number of threads.
+void judge_frame(const BeliefVolume& belief, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
+                 double cells_per_cell, int threads, CalibrationEvidence& evidence);
 
 }  // namespace seqloc::filter::detail

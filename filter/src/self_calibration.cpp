@@ -78,8 +78,9 @@ double DepthHistogram::total() const {
 }
 
 std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) const {
-  // The non-empty bins as (log weight, mean depth), summed stably (shifted by the largest term).
-  std::vector<std::pair<double, double>> bins;
+  // The non-empty bins as (log weight, mean depth), summed stably (shifted by the largest term),
+  // each kappa's terms in SIMD.
+  std::vector<double> log_w, depth;
   for (std::size_t i = 0; i < weight_.size(); i += kLanes) {
     std::int64_t weight = 0, depth_sum = 0;
     for (std::size_t lane = 0; lane < kLanes; ++lane) {
@@ -88,24 +89,25 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
     }
     if (weight > 0) {
       const double w = static_cast<double>(weight) / scale_.weight;
-      bins.emplace_back(std::log(w), static_cast<double>(depth_sum) / scale_.depth / w);
+      log_w.push_back(std::log(w));
+      depth.push_back(static_cast<double>(depth_sum) / scale_.depth / w);
     }
   }
   std::vector<double> out(kappas.size(), kNegInf);
-  if (bins.empty()) return out;
+  if (log_w.empty()) return out;
+  const auto n = static_cast<Eigen::Index>(log_w.size());
+  const Eigen::Map<const Eigen::ArrayXd> lw(log_w.data(), n), d(depth.data(), n);
+  Eigen::ArrayXd terms(n);
   for (std::size_t k = 0; k < kappas.size(); ++k) {
-    const double kappa = kappas[k];
-    double shift = kNegInf;
-    for (const auto& [log_w, d] : bins) shift = std::max(shift, log_w - kappa * d);
-    double sum = 0;
-    for (const auto& [log_w, d] : bins) sum += std::exp(log_w - kappa * d - shift);
-    out[k] = shift + std::log(sum);
+    terms = lw - kappas[k] * d;
+    const double shift = terms.maxCoeff();
+    out[k] = shift + std::log((terms - shift).exp().sum());
   }
   return out;
 }
 
-PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share)
-    : prior_sigma_log2_(prior_sigma_log2), outlier_share_(outlier_share) {
+PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Hold hold)
+    : prior_sigma_log2_(prior_sigma_log2), outlier_share_(outlier_share), hold_(hold) {
   if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
     throw FilterError(
         "self-calibration: the prior's sigma must be finite and > 0, not " + std::to_string(prior_sigma_log2),
@@ -114,6 +116,13 @@ PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share)
   if (!(outlier_share >= 0 && outlier_share < 1)) {
     throw FilterError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share),
                       ErrorCategory::usage);
+  }
+  if (!(hold.below >= 0 && hold.below <= 4) || !(hold.above >= 0 && hold.above <= 4) ||
+      !(hold.follow_below >= 0 && hold.follow_below <= 10) || !(hold.share >= 0 && hold.share <= 1)) {
+    throw FilterError(
+        "self-calibration: the hold's band must reach 0 to 4 octaves each way and its share be in [0, 1], not " +
+            std::to_string(hold.below) + ", " + std::to_string(hold.above) + " and " + std::to_string(hold.share),
+        ErrorCategory::usage);
   }
   const auto steps = static_cast<int>(std::lround((kLog2MaxPower - kLog2MinPower) / kLog2Step));
   for (int k = 0; k <= steps; ++k) {
@@ -126,7 +135,8 @@ PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share)
 
 void PowerEstimator::reset() {
   score_ = log_prior_;
-  power_ = 1;
+  power_ = mode_ = 1;
+  held_ = hold_.share > 0;
   frames_ = 0;
 }
 
@@ -164,7 +174,25 @@ void PowerEstimator::add(const CalibrationEvidence& evidence) {
     const double curvature = a - 2 * b + c;
     if (curvature < 0) log2_power += 0.5 * kLog2Step * (a - c) / curvature;
   }
-  power_ = std::exp2(log2_power);
+  // The hold: power 1 as long as the posterior keeps at least hold_.share of its mass on powers
+  // from hold_.below octaves under 1 to hold_.above over it; once released, released for the
+  // rest of the route (the posterior hovering at the threshold would otherwise switch the power
+  // back and forth).
+  if (held_) {
+    double inside = 0, all = 0;
+    for (std::size_t k = 0; k < score_.size(); ++k) {
+      const double p = std::exp(score_[k] - score_[best]);
+      all += p;
+      const double l = std::log2(kappas_[k]);
+      if (l >= -hold_.below - 1e-9 && l <= hold_.above + 1e-9) inside += p;
+    }
+    held_ = hold_.share > 0 && inside >= hold_.share * all;
+  }
+  // Held, a mode far below 1 is still followed: frames that much too sharp lock the belief onto a
+  // wrong place within a few frames, before the evidence can be decisive, and trusting a backbone
+  // less than it asks costs the recursion little.
+  mode_ = std::exp2(log2_power);
+  power_ = held_ && log2_power >= -hold_.follow_below ? 1.0 : mode_;
 }
 
 }  // namespace seqloc::filter

@@ -58,37 +58,48 @@ struct SeqLocFilter::Impl {
   BeliefVolume scratch;          // the other buffer of predict
   AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
   PowerEstimator estimator;
+  bool shape_pending = false;  // weigh() left the powered frame's peak and entropy to temper()
+  bool was_held = true;        // the estimator's hold at the last frame
+  double last_power = 1;       // and its power
+  // Self-calibration's view of the predicted belief: each slice summed over 2 x 2 cells as the
+  // update reads it, then `pooling` slices into one coarse bin (detail::pool_headings).
+  std::optional<BeliefVolume> coarse;
+  int pooling = 1;              // window bins per coarse bin
+  AlignedVector<float> pooled;  // [bin][v / 2][u / 2], the bins pooled_bin() names
   struct Worker {
-    std::vector<float> sample, blend;
-    AlignedVector<float> depth, mass;  // aligned: Eigen's SIMD log covers the same cells wherever they lie
-    DepthHistogram frame_cells{DepthHistogram::kCount}, belief_in_crop;  // self-calibration's evidence, this worker's share
-    double belief_outside = 0, outside_cells = 0;
+    std::vector<float> sample, blend, blend_rows;
+    DepthHistogram frame_cells{DepthHistogram::kCount};  // self-calibration's evidence, this worker's share
   };
   std::vector<Worker> workers;
 
   explicit Impl(const FilterConfig& c)
       : scratch(c.width, c.height, c.headings),
-        estimator(c.self_calibration_prior_octaves, c.self_calibration_outlier_share),
+        estimator(c.self_calibration_prior_octaves, c.self_calibration_outlier_share,
+                  {c.self_calibration_hold_below_octaves, c.self_calibration_hold_above_octaves,
+                   c.self_calibration_hold_share, c.self_calibration_hold_follow_octaves}),
         workers(static_cast<std::size_t>(c.threads)) {
-    for (auto& w : workers) {
-      w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
-      if (c.self_calibrate) {
-        w.depth.resize(w.sample.size());
-        w.mass.resize(w.sample.size());
-      }
+    for (auto& w : workers) w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
+    if (c.self_calibrate) {
+      pooling = detail::calibration_bins(c.headings);
+      coarse.emplace((c.width + 1) / 2, (c.height + 1) / 2, c.headings / pooling);
+      pooled.resize(coarse->slice_cells() * static_cast<std::size_t>(c.headings));
     }
   }
 
   // One pass over the given frame for self-calibration: its cells binned by depth below the peak
-  // (each worker's share in its frame_cells) and, for power k != 1, the peak and entropy of
+  // (each worker's share in its frame_cells; the bins the coarse belief is judged at, each
+  // counting for the bins around it) and, for power k != 1, the peak and entropy of
   // q = p^k / Z: with r = log p - log p_max, log q_max = -log Z, Z = sum e^{k r} and
   // H = log Z - k sum(e^{k r} r) / Z. The sums are kept per heading bin and added in bin order,
-  // so that they do not depend on the number of threads.
-  FrameShape scan_frame(const PreparedFrame& f, double power, int threads) {
+  // so that they do not depend on the number of threads. `raised`, when given, already holds
+  // e^{k r} for every cell (the update's tempered frame where ETU's weight is 1): no exp then.
+  FrameShape scan_frame(const PreparedFrame& f, double power, int threads, const float* raised_given = nullptr) {
     const std::size_t slice = static_cast<std::size_t>(f.width) * f.height;
     std::vector<double> bin_z(static_cast<std::size_t>(f.bins)), bin_zr(static_cast<std::size_t>(f.bins));
     const bool raised = power != 1.0;
     const auto k = static_cast<float>(power);
+    const int stride = detail::calibration_bins(f.bins);
+    const auto count = static_cast<float>(stride);
     core::parallel_chunks(f.bins, threads, [&](int j0, int j1, int t) {
       constexpr std::size_t kBlock = 4096;
       Eigen::ArrayXf r(kBlock), one(kBlock), e(kBlock);  // aligned: sums that do not depend on the heap
@@ -100,12 +111,17 @@ struct SeqLocFilter::Impl {
           const float* x = f.log_prob.data() + static_cast<std::size_t>(j) * slice + start;
           for (Eigen::Index i = 0; i < static_cast<Eigen::Index>(len); ++i) {  // vectorizes
             r[i] = std::max(x[i], kLogZero) - f.max_log_prob;
-            one[i] = x[i] > kLogZero ? 1.0f : 0.0f;
+            one[i] = x[i] > kLogZero ? count : 0.0f;
           }
-          cells.add_each({r.data(), len}, {one.data(), len});
+          if (j % stride == 0) cells.add_each({r.data(), len}, {one.data(), len});
           if (raised) {
-            detail::exp_or_zero(x, len, k, f.max_log_prob, e.data());
-            ConstArrayMap eb(e.data(), static_cast<Eigen::Index>(len));
+            const float* eb_data = e.data();
+            if (raised_given != nullptr) {
+              eb_data = raised_given + static_cast<std::size_t>(j) * slice + start;
+            } else {
+              detail::exp_or_zero(x, len, k, f.max_log_prob, e.data());
+            }
+            ConstArrayMap eb(eb_data, static_cast<Eigen::Index>(len));
             z += eb.sum();
             zr += (eb * ConstArrayMap(r.data(), static_cast<Eigen::Index>(len))).sum();  // 0 * kLogZero at a zero cell
           }
@@ -127,38 +143,24 @@ struct SeqLocFilter::Impl {
 
 namespace {
 
-// Self-calibration's evidence from one window slice, before the update multiplies it in: the
-// predicted belief's mass binned by the frame's depth r = log(s) / exponent at each cell of the
-// crop (`sample` holds s = exp(exponent * r), or a negative value outside the crop, which is then
-// replaced by `outside`). A cell whose s underflowed to 0 is counted at the deepest depth float
-// can show, so that smaller powers are not credited with less mass than they would see.
-void collect_evidence(const float* belief, float* sample, std::size_t n, double exponent, float outside,
-                      AlignedVector<float>& depth, AlignedVector<float>& mass, DepthHistogram& in_crop,
-                      double& belief_outside, double& outside_cells) {
-  const auto count = static_cast<Eigen::Index>(n);
-  const auto inverse = static_cast<float>(1.0 / exponent);
-  const auto underflow = static_cast<float>(std::log(std::numeric_limits<float>::denorm_min()) / exponent);
-  // The log in SIMD over the whole slice (NaN outside the crop), then in a loop that vectorizes
-  // (restrict: the arrays do not overlap) the underflowed cells' depth, each cell's mass in the
-  // crop (0 outside) and the outside fill.
-  ArrayMap(depth.data(), count) = ConstArrayMap(sample, count).log() * inverse;
-  float* __restrict d = depth.data();
-  float* __restrict m = mass.data();
-  float* __restrict s = sample;
-  const float* __restrict b = belief;
-  std::size_t outside_count = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const bool in = s[i] >= 0;
-    outside_count += in ? 0 : 1;
-    d[i] = s[i] > 0 ? d[i] : underflow;
-    m[i] = in ? b[i] : 0.0f;
-    s[i] = in ? s[i] : outside;
+// One slice of the predicted belief summed over 2 x 2 cells into `out` ((width + 1) / 2 wide): the
+// rows in pairs, then their columns in pairs (loops that vectorize).
+void pool_slice(const float* slice, int width, int height, std::vector<float>& row_pair, float* out) {
+  const int cw = (width + 1) / 2, pairs = width / 2;
+  row_pair.resize(static_cast<std::size_t>(width));
+  for (int cv = 0; cv < (height + 1) / 2; ++cv) {
+    const float* __restrict a = slice + static_cast<std::size_t>(2 * cv) * width;
+    float* __restrict r = row_pair.data();
+    if (2 * cv + 1 < height) {
+      const float* __restrict b = a + width;
+      for (int u = 0; u < width; ++u) r[u] = a[u] + b[u];
+    } else {
+      std::copy(a, a + width, r);
+    }
+    float* __restrict o = out + static_cast<std::size_t>(cv) * cw;
+    for (int i = 0; i < pairs; ++i) o[i] = r[2 * i] + r[2 * i + 1];
+    if (cw > pairs) o[pairs] = r[width - 1];
   }
-  // b - m is b outside the crop and exactly 0 inside.
-  const double outside_mass = (ConstArrayMap(belief, count) - ConstArrayMap(m, count)).sum();
-  in_crop.add_each({depth.data(), n}, {mass.data(), n});
-  belief_outside += outside_mass;
-  outside_cells += static_cast<double>(outside_count);
 }
 
 }  // namespace
@@ -176,6 +178,8 @@ void SeqLocFilter::reset_uniform() {
   first_ = true;
   last_estimate_.reset();
   impl_->estimator.reset();
+  impl_->was_held = true;
+  impl_->last_power = 1;
   entropies_.clear();
 }
 
@@ -185,6 +189,8 @@ void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
   first_ = true;
   last_estimate_.reset();
   impl_->estimator.reset();
+  impl_->was_held = true;
+  impl_->last_power = 1;
   entropies_.clear();
 }
 
@@ -306,8 +312,9 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   // Self-calibration estimates from this frame unless a weighting repeats an earlier pass.
   const bool calibrating = config_.self_calibrate && weighting == nullptr;
   FrameResult result = weigh(given, weighting, calibrating);
+  if (calibrating) retemper(impl_->estimator.held());
   const float outside = temper(given, result);
-  const double total = multiply_in(given, crop, outside, gps, result, calibrating);
+  const double total = multiply_in(given, crop, outside, gps, calibrating);
   const Peak peak = normalize(total, road_distance_m);
   result.peak_log_belief = std::log(peak.value);
   result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), belief_.bin_heading_deg(peak.k)};
@@ -327,13 +334,13 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting
     result.volume_power = calibrating ? impl_->estimator.power() : 1.0;
   }
   if (calibrating) {
-    for (auto& worker : impl_->workers) {
-      worker.frame_cells.clear();
-      worker.belief_in_crop.clear();
-      worker.belief_outside = worker.outside_cells = 0;
-    }
+    for (auto& worker : impl_->workers) worker.frame_cells.clear();
   }
-  const FrameShape used = calibrating ? impl_->scan_frame(given, result.volume_power, config_.threads)
+  // Where ETU's weight does not read the powered frame's entropy, the pass over the frame waits
+  // for temper(), which may hand it the powered frame it computes anyway.
+  impl_->shape_pending = calibrating && (!config_.etu || config_.etu_route_reference);
+  const FrameShape used = calibrating && !impl_->shape_pending
+                              ? impl_->scan_frame(given, result.volume_power, config_.threads)
                           : weighting != nullptr ? FrameShape{weighting->peak_log_prob, given.entropy}
                                                  : FrameShape{given.max_log_prob, given.entropy};
   result.frame_entropy = used.entropy;
@@ -350,11 +357,10 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting
   return result;
 }
 
-float SeqLocFilter::temper(const PreparedFrame& frame, const FrameResult& result) {
+float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result) {
   // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
   // normalization): exp(w kappa (log p - log p_max)); log(1/M) - outside_crop_nats outside the crop.
   const auto w = static_cast<float>(result.etu_weight);
-  const float log_p_max = result.weighting.peak_log_prob;
   impl_->tempered.resize(frame.log_prob.size());
   const auto exponent_f = static_cast<float>(w * result.volume_power);
   core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
@@ -365,8 +371,51 @@ float SeqLocFilter::temper(const PreparedFrame& frame, const FrameResult& result
                           impl_->tempered.data() + begin);
     }
   });
+  if (impl_->shape_pending) {
+    // Self-calibration's pass over the frame (weigh()): with w = 1 the tempered frame is q's
+    // numerator e^{kappa r} itself.
+    const FrameShape shape =
+        impl_->scan_frame(frame, result.volume_power, config_.threads, w == 1.0f ? impl_->tempered.data() : nullptr);
+    result.frame_entropy = shape.entropy;
+    result.weighting.peak_log_prob = shape.max_log_prob;
+    impl_->shape_pending = false;
+  }
   // The value of a window cell outside the crop.
+  const float log_p_max = result.weighting.peak_log_prob;
   return static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
+}
+
+void SeqLocFilter::retemper(bool held) {
+  // The hold released (or taken again): the frames before went in at power 1 (or at the power
+  // now dropped), so the belief is raised to the ratio of the new power to the old, as if they
+  // had gone in at the new one (exact for a belief that is their product; motion and MGR between
+  // them make it an approximation).
+  const double now = impl_->estimator.power();
+  if (held == impl_->was_held) {
+    impl_->last_power = now;
+    return;
+  }
+  const auto ratio = static_cast<float>(now / impl_->last_power);
+  impl_->was_held = held;
+  impl_->last_power = now;
+  if (first_ || ratio == 1.0f) return;
+  std::vector<double> sums(static_cast<std::size_t>(config_.headings));
+  const auto n = static_cast<Eigen::Index>(belief_.slice_cells());
+  core::parallel_chunks(config_.headings, config_.threads, [&](int k0, int k1, int) {
+    for (int k = k0; k < k1; ++k) {
+      ArrayMap b(belief_.slice(k), n);
+      b = b.pow(ratio);
+      sums[static_cast<std::size_t>(k)] = static_cast<double>(b.sum());
+    }
+  });
+  double total = 0;
+  for (const double x : sums) total += x;
+  if (!(total > 0) || !std::isfinite(total)) return;
+  const auto scale = static_cast<float>(1 / total);
+  core::parallel_chunks(config_.headings, config_.threads, [&](int k0, int k1, int) {
+    for (int k = k0; k < k1; ++k) ArrayMap(belief_.slice(k), n) *= scale;
+  });
+  cached_min_.reset();
 }
 
 std::vector<float> SeqLocFilter::gps_factor(const GpsFix* gps) const {
@@ -385,27 +434,24 @@ std::vector<float> SeqLocFilter::gps_factor(const GpsFix* gps) const {
 }
 
 double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
-                                 const FrameResult& result, bool calibrating) {
+                                 bool calibrating) {
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);
   const std::vector<float> gps_factor = this->gps_factor(gps);
   // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum. The first
-  // pass also collects self-calibration's evidence from the predicted belief.
+  // pass also pools the predicted belief for self-calibration, each slice while it is at hand.
   std::vector<double> slice_sum(static_cast<std::size_t>(R));
-  const auto w = static_cast<float>(result.etu_weight);
-  const double exponent = static_cast<double>(w) * result.volume_power;  // s = exp(exponent * r)
   auto update_slices = [&](bool with_prior) {
     const bool collect = calibrating && with_prior;
     core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
       auto& worker = impl_->workers[static_cast<std::size_t>(t)];
       for (int k = k0; k < k1; ++k) {
         detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
-                             belief_.bin_heading_deg(k), W, H, collect ? -1.0f : outside, worker.blend,
-                             worker.sample.data());
-        if (collect) {
-          collect_evidence(belief_.slice(k), worker.sample.data(), n, exponent, outside, worker.depth, worker.mass,
-                           worker.belief_in_crop, worker.belief_outside, worker.outside_cells);
+                             belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
+        if (collect && detail::pooled_bin(k, impl_->pooling)) {
+          pool_slice(belief_.slice(k), W, H, worker.blend_rows,
+                     impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->coarse->slice_cells());
         }
         ArrayMap b(belief_.slice(k), N);
         ConstArrayMap sample(worker.sample.data(), N);
@@ -420,7 +466,7 @@ double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& cro
     });
   };
   update_slices(true);
-  if (calibrating) feed_estimator(frame);
+  if (calibrating) feed_estimator(frame, crop);
   double total = 0;
   for (double x : slice_sum) total += x;
   if (!(total > 0) || !std::isfinite(total)) {
@@ -433,16 +479,18 @@ double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& cro
   return total;
 }
 
-void SeqLocFilter::feed_estimator(const PreparedFrame& frame) {
+void SeqLocFilter::feed_estimator(const PreparedFrame& frame, const CropPose& crop) {
+  // The predicted belief on the coarse grid (1 m cells, a few heading bins in each), judged by
+  // the frame at each power: a sixteenth of the cells, and the same estimate to within the
+  // frame-to-frame noise of the estimate itself (docs/filter.md, "Self-calibration").
+  BeliefVolume& coarse = *impl_->coarse;
+  detail::pool_headings(impl_->pooled.data(), config_.headings, coarse, config_.threads);
   CalibrationEvidence evidence;
   evidence.log_outside = -frame.log_cells - config_.outside_crop_nats;
-  evidence.window_cells = static_cast<double>(belief_.size());
-  for (const auto& worker : impl_->workers) {
-    evidence.frame_cells.merge(worker.frame_cells);
-    evidence.belief_in_crop.merge(worker.belief_in_crop);
-    evidence.belief_outside += worker.belief_outside;
-    evidence.outside_cells += worker.outside_cells;
-  }
+  for (const auto& worker : impl_->workers) evidence.frame_cells.merge(worker.frame_cells);
+  const CropPose at{(crop.centre_u - 0.5) / 2, (crop.centre_v - 0.5) / 2, crop.rotation_deg};
+  const double cells_per_cell = 4.0 * config_.headings / coarse.headings();
+  detail::judge_frame(coarse, frame, frame.cell_m / 2, at, cells_per_cell, config_.threads, evidence);
   impl_->estimator.add(evidence);
 }
 

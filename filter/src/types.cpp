@@ -97,6 +97,14 @@ std::span<const FilterConfigField> filter_config_fields() {
        "Self-calibration: sigma of the prior on log2 of the power (octaves)"},
       {"self_calibration_outlier_share", &C::self_calibration_outlier_share,
        "Self-calibration: share of a uniform belief each frame is also judged against"},
+      {"self_calibration_hold_below_octaves", &C::self_calibration_hold_below_octaves,
+       "Self-calibration: powers down to this many octaves under 1 count as calibrated"},
+      {"self_calibration_hold_above_octaves", &C::self_calibration_hold_above_octaves,
+       "Self-calibration: powers up to this many octaves over 1 count as calibrated"},
+      {"self_calibration_hold_follow_octaves", &C::self_calibration_hold_follow_octaves,
+       "Self-calibration: held, an estimate this many octaves under 1 is followed all the same"},
+      {"self_calibration_hold_share", &C::self_calibration_hold_share,
+       "Self-calibration: the power stays 1 while the posterior keeps this share on calibrated powers"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},
@@ -147,6 +155,18 @@ void FilterConfig::validate() const {
   }
   if (!(self_calibration_outlier_share >= 0 && self_calibration_outlier_share < 1)) {
     fail("self_calibration_outlier_share", self_calibration_outlier_share, "must be in [0, 1)");
+  }
+  if (!(self_calibration_hold_below_octaves >= 0 && self_calibration_hold_below_octaves <= 4)) {
+    fail("self_calibration_hold_below_octaves", self_calibration_hold_below_octaves, "must be in [0, 4]");
+  }
+  if (!(self_calibration_hold_above_octaves >= 0 && self_calibration_hold_above_octaves <= 4)) {
+    fail("self_calibration_hold_above_octaves", self_calibration_hold_above_octaves, "must be in [0, 4]");
+  }
+  if (!(self_calibration_hold_follow_octaves >= 0 && self_calibration_hold_follow_octaves <= 10)) {
+    fail("self_calibration_hold_follow_octaves", self_calibration_hold_follow_octaves, "must be in [0, 10]");
+  }
+  if (!(self_calibration_hold_share >= 0 && self_calibration_hold_share <= 1)) {
+    fail("self_calibration_hold_share", self_calibration_hold_share, "must be in [0, 1]");
   }
   if (threads < 1 || threads > 256) fail("threads", threads, "must be in [1, 256]");
 }

@@ -91,10 +91,21 @@ class PowerEstimator {
   /// each frame is judged against (1 - rho) b_hat + rho u, u uniform over the window, so that a
   /// belief that has locked onto the wrong place (against which every good frame looks
   /// overconfident) cannot drive the power down without bound.
-  PowerEstimator(double prior_sigma_log2, double outlier_share);
+  /// The hold: kappa stays exactly 1 while the posterior keeps at least `share` of its mass on
+  /// powers from `below` octaves under 1 to `above` octaves over it, and is the posterior's mode
+  /// once it does not, for the rest of the route (share 0: no hold). While held, a mode more than
+  /// `follow_below` octaves under 1 is followed all the same.
+  struct Hold {
+    double below, above, share, follow_below;
+  };
+  PowerEstimator(double prior_sigma_log2, double outlier_share, Hold hold = Hold{0, 0, 0, 0});
 
   /// kappa for the next frame: from the frames added so far and the prior (1 before any).
   [[nodiscard]] double power() const { return power_; }
+  /// Whether the hold holds power() at 1 (the frames have not shown the backbone miscalibrated).
+  [[nodiscard]] bool held() const { return held_; }
+  /// The posterior's mode: power() without the hold.
+  [[nodiscard]] double mode() const { return mode_; }
   [[nodiscard]] int frames() const { return frames_; }
   /// Adds log P_t(kappa) at every grid kappa and updates power().
   void add(const CalibrationEvidence& evidence);
@@ -109,8 +120,10 @@ class PowerEstimator {
 
  private:
   double prior_sigma_log2_, outlier_share_;
+  Hold hold_;
   std::vector<double> kappas_, log_prior_, score_;
-  double power_ = 1;
+  double power_ = 1, mode_ = 1;
+  bool held_ = true;
   int frames_ = 0;
 };
 

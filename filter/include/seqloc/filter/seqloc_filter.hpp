@@ -183,11 +183,12 @@ class SeqLocFilter {
   // normalization and MGR's blend with the road prior, and the largest cell (normalize); PAS and
   // the sub-bin heading around it (refine).
   FrameResult weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating);
-  float temper(const PreparedFrame& frame, const FrameResult& result);
+  void retemper(bool held);
+  float temper(const PreparedFrame& frame, FrameResult& result);
   [[nodiscard]] std::vector<float> gps_factor(const GpsFix* gps) const;
   double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
-                     const FrameResult& result, bool calibrating);
-  void feed_estimator(const PreparedFrame& frame);
+                     bool calibrating);
+  void feed_estimator(const PreparedFrame& frame, const CropPose& crop);
   Peak normalize(double total, std::span<const float> road_distance_m);
   [[nodiscard]] Pose refine(const Peak& peak) const;
 

@@ -1,0 +1,81 @@
+// Self-calibration's evidence on the coarse grid (internal.hpp).
+
+#include <algorithm>
+#include <vector>
+
+#include "internal.hpp"
+#include "seqloc/core/thread_pool.hpp"
+
+namespace seqloc::filter::detail {
+
+int calibration_bins(int headings) {
+  for (int b = 4; b > 1; b /= 2)
+    if (headings % b == 0 && headings / b >= 4) return b;
+  return 1;
+}
+
+void pool_headings(const float* pooled, int headings, BeliefVolume& coarse, int threads) {
+  const int b = headings / coarse.headings(), half = b / 2;
+  const std::size_t n = coarse.slice_cells();
+  core::parallel_chunks(coarse.headings(), threads, [&](int j0, int j1, int) {
+    for (int j = j0; j < j1; ++j) {
+      float* out = coarse.slice(j);
+      std::fill(out, out + n, 0.0f);
+      for (int d = -half; d <= half; ++d) {
+        const int k = ((b * j + d) % headings + headings) % headings;
+        if (!pooled_bin(k, b)) continue;
+        const float weight = b == 1 ? 1.0f : (d == -half || d == half) ? 1.0f : 2.0f;
+        const float* in = pooled + static_cast<std::size_t>(k) * n;
+        for (std::size_t i = 0; i < n; ++i) out[i] += weight * in[i];
+      }
+    }
+  });
+}
+
+void judge_frame(const BeliefVolume& belief, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
+                 double cells_per_cell, int threads, CalibrationEvidence& evidence) {
+  const int w = belief.width(), h = belief.height(), r = belief.headings();
+  const std::size_t n = belief.slice_cells();
+  constexpr float kOutside = 1.0f;  // no log-probability is positive
+  struct Share {
+    DepthHistogram in_crop;
+    std::vector<float> blend, sample, depth;
+  };
+  std::vector<Share> shares(static_cast<std::size_t>(std::max(1, threads)));
+  // Per bin, added in bin order: the same sums for any number of threads.
+  std::vector<double> outside(static_cast<std::size_t>(r));
+  std::vector<std::size_t> outside_cells(static_cast<std::size_t>(r));
+  core::parallel_chunks(r, threads, [&](int k0, int k1, int t) {
+    Share& s = shares[static_cast<std::size_t>(t)];
+    s.sample.resize(n);
+    s.depth.resize(n);
+    for (int k = k0; k < k1; ++k) {
+      sample_slice(frame.log_prob.data(), frame.bins, frame.height, frame.width, frame_cell_m, crop,
+                   belief.bin_heading_deg(k), w, h, kOutside, s.blend, s.sample.data());
+      const float* mass = belief.slice(k);
+      double out = 0;
+      std::size_t out_cells = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const float x = s.sample[i];
+        const bool in = x <= 0.5f;
+        out += in ? 0.0 : mass[i];
+        out_cells += in ? 0 : 1;
+        s.depth[i] = in ? std::max(x, kLogZero) - frame.max_log_prob : 0.0f;
+        // The weight: the mass in the crop (none below 1e-12, which no sum here can see: fewer
+        // cells for the histogram to bin).
+        s.sample[i] = in && mass[i] >= 1e-12f ? mass[i] : 0.0f;
+      }
+      s.in_crop.add_each(s.depth, s.sample);
+      outside[static_cast<std::size_t>(k)] = out;
+      outside_cells[static_cast<std::size_t>(k)] = out_cells;
+    }
+  });
+  for (const Share& s : shares) evidence.belief_in_crop.merge(s.in_crop);
+  for (int k = 0; k < r; ++k) {
+    evidence.belief_outside += outside[static_cast<std::size_t>(k)];
+    evidence.outside_cells += static_cast<double>(outside_cells[static_cast<std::size_t>(k)]) * cells_per_cell;
+  }
+  evidence.window_cells = static_cast<double>(belief.size()) * cells_per_cell;
+}
+
+}  // namespace seqloc::filter::detail
