@@ -120,8 +120,10 @@ PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Ho
   if (!(hold.below >= 0 && hold.below <= 4) || !(hold.above >= 0 && hold.above <= 4) ||
       !(hold.follow_below >= 0 && hold.follow_below <= 10) || !(hold.share >= 0 && hold.share <= 1)) {
     throw FilterError(
-        "self-calibration: the hold's band must reach 0 to 4 octaves each way and its share be in [0, 1], not " +
-            std::to_string(hold.below) + ", " + std::to_string(hold.above) + " and " + std::to_string(hold.share),
+        "self-calibration: the hold's band must reach 0 to 4 octaves each way, its share be in [0, 1] and its "
+        "following reach 0 to 10 octaves, not " +
+            std::to_string(hold.below) + ", " + std::to_string(hold.above) + ", " + std::to_string(hold.share) +
+            " and " + std::to_string(hold.follow_below),
         ErrorCategory::usage);
   }
   const auto steps = static_cast<int>(std::lround((kLog2MaxPower - kLog2MinPower) / kLog2Step));

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <sstream>
 #include <string>
 
@@ -106,6 +105,8 @@ struct SeqLocFilter::Impl {
       auto& cells = workers[static_cast<std::size_t>(t)].frame_cells;
       for (int j = j0; j < j1; ++j) {
         double z = 0, zr = 0;
+        const bool binned = j % stride == 0;
+        if (!binned && !raised) continue;  // nothing to read in this bin (z, zr stay 0, unused)
         for (std::size_t start = 0; start < slice; start += kBlock) {
           const std::size_t len = std::min(kBlock, slice - start);
           const float* x = f.log_prob.data() + static_cast<std::size_t>(j) * slice + start;
@@ -113,7 +114,7 @@ struct SeqLocFilter::Impl {
             r[i] = std::max(x[i], kLogZero) - f.max_log_prob;
             one[i] = x[i] > kLogZero ? count : 0.0f;
           }
-          if (j % stride == 0) cells.add_each({r.data(), len}, {one.data(), len});
+          if (binned) cells.add_each({r.data(), len}, {one.data(), len});
           if (raised) {
             const float* eb_data = e.data();
             if (raised_given != nullptr) {
@@ -386,12 +387,13 @@ float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result) {
 }
 
 void SeqLocFilter::retemper(bool held) {
-  // The hold released (or taken again): the frames before went in at power 1 (or at the power
-  // now dropped), so the belief is raised to the ratio of the new power to the old, as if they
-  // had gone in at the new one (exact for a belief that is their product; motion and MGR between
-  // them make it an approximation).
+  // The hold released (for the rest of the route: it is not taken again): the frames before went
+  // in at the power held until now (1, or an estimate followed far under 1), so the belief is
+  // raised to the ratio of the new power to that one, as if they had gone in at the new one
+  // (exact for a belief that is their product; motion and MGR between them make it an
+  // approximation).
   const double now = impl_->estimator.power();
-  if (held == impl_->was_held) {
+  if (held || !impl_->was_held) {
     impl_->last_power = now;
     return;
   }
