@@ -3,9 +3,9 @@ cmake_minimum_required(VERSION 3.20)
 # Fails when a module's sources or headers include a header of a module it may not depend on
 # (one above it, or beside it): the layering of docs/development.md's layout table, kept by a test.
 #   core (the base: errors, angles, the cell size, CSV, atomic files, the thread pool) under all;
-#   osm <- raster <- ingest; filter (Eigen and core only); osm + raster + filter <- io <- matcher;
-#   io + raster <- sim; io + matcher <- pipeline (the driver) <- render; raster + filter <- serve;
-#   pipeline <- python; everything <- apps.
+#   osm <- raster <- ingest; filter (Eigen and core only) <- gpu (its CUDA backend);
+#   osm + raster + filter <- io <- matcher; io + raster <- sim; io + matcher + gpu <- pipeline (the
+#   driver) <- render; raster + filter <- serve; pipeline <- python; everything <- apps.
 if(NOT ROOT)
   message(FATAL_ERROR "CheckLayers: set -DROOT=<source tree>")
 endif()
@@ -13,17 +13,18 @@ set(allowed_core core)
 set(allowed_osm core osm)
 set(allowed_raster core osm raster)
 set(allowed_filter core filter)
+set(allowed_gpu core filter gpu)
 set(allowed_ingest core osm raster ingest)
 set(allowed_io core osm raster filter io)
 set(allowed_matcher core osm filter io matcher)
 set(allowed_sim core osm raster filter io sim)
-set(allowed_pipeline core osm raster filter io matcher pipeline)
-set(allowed_render core osm raster filter io matcher pipeline render)
+set(allowed_pipeline core osm raster filter gpu io matcher pipeline)
+set(allowed_render core osm raster filter gpu io matcher pipeline render)
 set(allowed_serve core osm raster filter serve)
-set(allowed_python core osm raster filter io matcher pipeline)
+set(allowed_python core osm raster filter gpu io matcher pipeline)
 set(violations 0)
-foreach(module core osm raster filter ingest io matcher sim pipeline render serve python)
-  file(GLOB_RECURSE files "${ROOT}/${module}/*.cpp" "${ROOT}/${module}/*.hpp")
+foreach(module core osm raster filter gpu ingest io matcher sim pipeline render serve python)
+  file(GLOB_RECURSE files "${ROOT}/${module}/*.cpp" "${ROOT}/${module}/*.hpp" "${ROOT}/${module}/*.cu")
   foreach(file IN LISTS files)
     file(STRINGS "${file}" includes REGEX "^[ \t]*#[ \t]*include[ \t]*[<\"]seqloc/[a-z_]+/")
     foreach(line IN LISTS includes)

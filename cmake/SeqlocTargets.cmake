@@ -1,11 +1,12 @@
 # Compiler settings shared by every seqloc target.
 add_library(seqloc_compile_options INTERFACE)
-target_compile_options(seqloc_compile_options INTERFACE -Wall -Wextra -Wpedantic -Wshadow -Wconversion
-                                                        -Wno-sign-conversion)
+# C++ only: nvcc (the CUDA backend's .cu files) takes its own flags.
+target_compile_options(seqloc_compile_options INTERFACE $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow
+                                                        -Wconversion -Wno-sign-conversion>)
 if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU" AND CMAKE_CXX_COMPILER_VERSION VERSION_LESS 13)
   # GCC 12 false positives inside libstdc++ and libosmium headers at -O2 (GCC bugs 105329 and
   # 105651: std::string concatenation "may overlap"; strlen "reading from a region of size 0").
-  target_compile_options(seqloc_compile_options INTERFACE -Wno-restrict -Wno-stringop-overread)
+  target_compile_options(seqloc_compile_options INTERFACE $<$<COMPILE_LANGUAGE:CXX>:-Wno-restrict -Wno-stringop-overread>)
 endif()
 # The filter's inner loops want AVX2 and FMA. Default: x86-64-v3 when the build machine has them
 # (not -march=native: Valgrind cannot run AVX-512 code). Set SEQLOC_ARCH to "" for a portable build.
@@ -20,10 +21,10 @@ if(NOT DEFINED SEQLOC_ARCH)
   set(SEQLOC_ARCH "${SEQLOC_ARCH}" CACHE STRING "Value of -march (empty: the compiler's default)")
 endif()
 if(SEQLOC_ARCH)
-  target_compile_options(seqloc_compile_options INTERFACE -march=${SEQLOC_ARCH})
+  target_compile_options(seqloc_compile_options INTERFACE $<$<COMPILE_LANGUAGE:CXX>:-march=${SEQLOC_ARCH}>)
 endif()
 if(SEQLOC_WERROR)
-  target_compile_options(seqloc_compile_options INTERFACE -Werror)
+  target_compile_options(seqloc_compile_options INTERFACE $<$<COMPILE_LANGUAGE:CXX>:-Werror>)
 endif()
 if(SEQLOC_FUZZ)
   if(NOT CMAKE_CXX_COMPILER_ID STREQUAL "Clang")

@@ -8,12 +8,6 @@
 
 namespace seqloc::filter::detail {
 
-int calibration_bins(int headings) {
-  for (int b = 4; b > 1; b /= 2)
-    if (headings % b == 0 && headings / b >= 4) return b;
-  return 1;
-}
-
 void pool_headings(const float* pooled, int headings, BeliefVolume& coarse, int threads) {
   const int b = headings / coarse.headings(), half = b / 2;
   const std::size_t n = coarse.slice_cells();
@@ -24,7 +18,7 @@ void pool_headings(const float* pooled, int headings, BeliefVolume& coarse, int 
       for (int d = -half; d <= half; ++d) {
         const int k = ((b * j + d) % headings + headings) % headings;
         if (!pooled_bin(k, b)) continue;
-        const float weight = b == 1 ? 1.0f : (d == -half || d == half) ? 1.0f : 2.0f;
+        const float weight = math::pooled_weight(d, b);
         const float* in = pooled + static_cast<std::size_t>(k) * n;
         for (std::size_t i = 0; i < n; ++i) out[i] += weight * in[i];
       }
@@ -79,3 +73,37 @@ void judge_frame(const BeliefVolume& belief, const PreparedFrame& frame, double 
 }
 
 }  // namespace seqloc::filter::detail
+
+namespace seqloc::filter {
+
+BeliefVolume coarse_belief_for(const FilterConfig& config) {
+  return {(config.width + 1) / 2, (config.height + 1) / 2, config.headings / detail::calibration_bins(config.headings)};
+}
+
+void add_frame_cells(const PreparedFrame& frame, DepthHistogram& cells) {
+  const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
+  const int stride = detail::calibration_bins(frame.bins);
+  const auto count = static_cast<float>(stride);
+  std::vector<float> r(slice), one(slice);
+  for (int j = 0; j < frame.bins; j += stride) {
+    const float* x = frame.log_prob.data() + static_cast<std::size_t>(j) * slice;
+    for (std::size_t i = 0; i < slice; ++i) {
+      r[i] = std::max(x[i], kLogZero) - frame.max_log_prob;
+      one[i] = x[i] > kLogZero ? count : 0.0f;
+    }
+    cells.add_each(r, one);
+  }
+}
+
+CalibrationEvidence coarse_evidence(const BeliefVolume& coarse, const PreparedFrame& frame, const CropPose& crop,
+                                    const FilterConfig& config, const DepthHistogram& frame_cells) {
+  CalibrationEvidence evidence;
+  evidence.log_outside = -frame.log_cells - config.outside_crop_nats;
+  evidence.frame_cells.merge(frame_cells);
+  const CropPose at{(crop.centre_u - 0.5) / 2, (crop.centre_v - 0.5) / 2, crop.rotation_deg};
+  const double cells_per_cell = 4.0 * config.headings / coarse.headings();
+  detail::judge_frame(coarse, frame, frame.cell_m / 2, at, cells_per_cell, config.threads, evidence);
+  return evidence;
+}
+
+}  // namespace seqloc::filter

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 
 #include "seqloc/filter/belief.hpp"
+#include "seqloc/filter/device_math.hpp"
 #include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 
@@ -56,13 +57,9 @@ void warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odometry& odom
 /// north): forward is (sin h, cos h) east/north, left is (-cos h, sin h).
 void displacement_cells(const Odometry& odometry, double heading_deg, double& du, double& dv);
 
-/// Self-calibration's coarse grid: window heading bins per coarse bin (4, or fewer where the
-/// window's bins are not a multiple of 4 or would leave fewer than 4 coarse bins).
-[[nodiscard]] int calibration_bins(int headings);
-
-/// Whether window bin k is one that coarse bins are made of, b window bins per coarse bin: every
-/// bin for b = 1, else every other bin (the even ones for b = 4, the odd for b = 2).
-[[nodiscard]] inline bool pooled_bin(int k, int b) { return b == 1 || k % 2 == (b / 2) % 2; }
+/// Self-calibration's coarse grid (device_math.hpp).
+using math::calibration_bins;
+using math::pooled_bin;
 
 /// The coarse belief from `pooled` ([bin][v][u] at the coarse grid's cells, one slice per window
 /// bin, filled for the bins pooled_bin() names): coarse bin j is centred on window bin j b and

@@ -23,40 +23,27 @@ using core::kDegToRad;
 namespace detail {
 
 void displacement_cells(const Odometry& o, double heading_deg, double& du, double& dv) {
-  const double h = heading_deg * kDegToRad;
-  const double east = o.forward_m * std::sin(h) - o.left_m * std::cos(h);
-  const double north = o.forward_m * std::cos(h) + o.left_m * std::sin(h);
-  du = east / kCellM;
-  dv = -north / kCellM;
-  // sin and cos of multiples of 90 degrees are not exactly 0 in floating point; a move that is
-  // a whole number of cells up to 1e-9 is taken as one, so that it translates without blurring.
-  if (std::abs(du - std::round(du)) < 1e-9) du = std::round(du);
-  if (std::abs(dv - std::round(dv)) < 1e-9) dv = std::round(dv);
+  math::displacement_cells(o.forward_m, o.left_m, heading_deg, kCellM, du, dv);
 }
 
 }  // namespace detail
 
 void detail::translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill) {
-  const double fu = std::floor(ou), fv = std::floor(ov);
-  const auto au = static_cast<float>(ou - fu), av = static_cast<float>(ov - fv);
-  const int iu = static_cast<int>(fu), iv = static_cast<int>(fv);
-  // Valid u: 0 <= u + ou <= sw - 1.
-  const int u_lo = std::max(0, static_cast<int>(std::ceil(-ou)));
-  const int u_hi = std::min(dw - 1, static_cast<int>(std::floor(sw - 1 - ou)));
-  const int v_lo = std::max(0, static_cast<int>(std::ceil(-ov)));
-  const int v_hi = std::min(dh - 1, static_cast<int>(std::floor(sh - 1 - ov)));
-  const float w00 = (1 - au) * (1 - av), w01 = au * (1 - av), w10 = (1 - au) * av, w11 = au * av;
+  const math::Translation t = math::make_translation(sw, sh, dw, dh, ou, ov);
+  const int iu = t.iu, u_lo = t.u_lo, u_hi = t.u_hi;
+  const float w00 = (1 - t.au) * (1 - t.av), w01 = t.au * (1 - t.av), w10 = (1 - t.au) * t.av, w11 = t.au * t.av;
   for (int v = 0; v < dh; ++v) {
     float* out = dst + static_cast<std::size_t>(v) * dw;
-    if (v < v_lo || v > v_hi || u_lo > u_hi) {
+    if (v < t.v_lo || v > t.v_hi || u_lo > u_hi) {
       std::fill(out, out + dw, fill);
       continue;
     }
-    const int r0 = v + iv, r1 = std::min(r0 + 1, sh - 1);
+    const int r0 = v + t.iv, r1 = std::min(r0 + 1, sh - 1);
     const float* a = src + static_cast<std::size_t>(r0) * sw + iu;
     const float* b = src + static_cast<std::size_t>(r1) * sw + iu;
     std::fill(out, out + u_lo, fill);
-    // Columns whose right neighbour exists; the last valid one may need the clamp.
+    // Columns whose right neighbour exists (math::translate_at, unrolled so that it vectorizes);
+    // the last valid one may need the clamp.
     const int u_inner = std::min(u_hi, sw - 2 - iu);
     for (int u = u_lo; u <= u_inner; ++u) out[u] = w00 * a[u] + w01 * a[u + 1] + w10 * b[u] + w11 * b[u + 1];
     for (int u = std::max(u_lo, u_inner + 1); u <= u_hi; ++u)
@@ -89,26 +76,13 @@ void detail::sample_slice(const float* values, int bins, int vh, int vw, double 
               fill);
     return;
   }
-  // General affine map from window cells to volume cells: the crop's axes are the window's
-  // turned clockwise by the rotation.
-  const double r = crop.rotation_deg * kDegToRad, c = std::cos(r), s = std::sin(r);
-  const double cu = (vw - 1) / 2.0, cv = (vh - 1) / 2.0;
+  // General affine map from window cells to volume cells.
+  const double r = crop.rotation_deg * kDegToRad;
+  const math::CropMap map{crop.centre_u, crop.centre_v, std::cos(r), std::sin(r), scale, vw, vh};
+  const auto read = [blended](std::size_t i) { return blended[i]; };
   for (int v = 0; v < height; ++v) {
-    for (int u = 0; u < width; ++u) {
-      const double du = u - crop.centre_u, dv = v - crop.centre_v;
-      const double x = cu + scale * (du * c + dv * s);
-      const double y = cv + scale * (-du * s + dv * c);
-      float value = fill;
-      if (x >= 0 && y >= 0 && x <= vw - 1 && y <= vh - 1) {
-        const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-        const int x1 = std::min(x0 + 1, vw - 1), y1 = std::min(y0 + 1, vh - 1);
-        const auto ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
-        const float* r0 = blended + static_cast<std::size_t>(y0) * vw;
-        const float* r1 = blended + static_cast<std::size_t>(y1) * vw;
-        value = (1 - ay) * ((1 - ax) * r0[x0] + ax * r0[x1]) + ay * ((1 - ax) * r1[x0] + ax * r1[x1]);
-      }
-      out[static_cast<std::size_t>(v) * width + u] = value;
-    }
+    for (int u = 0; u < width; ++u)
+      out[static_cast<std::size_t>(v) * width + u] = math::crop_sample_at(map, u, v, fill, read);
   }
 }
 

@@ -11,6 +11,7 @@
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
+#include "seqloc/filter/calibration_evidence.hpp"
 
 namespace seqloc::filter {
 namespace {
@@ -80,7 +81,7 @@ struct SeqLocFilter::Impl {
     for (auto& w : workers) w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
     if (c.self_calibrate) {
       pooling = detail::calibration_bins(c.headings);
-      coarse.emplace((c.width + 1) / 2, (c.height + 1) / 2, c.headings / pooling);
+      coarse.emplace(coarse_belief_for(c));
       pooled.resize(coarse->slice_cells() * static_cast<std::size_t>(c.headings));
     }
   }
@@ -487,12 +488,9 @@ void SeqLocFilter::feed_estimator(const PreparedFrame& frame, const CropPose& cr
   // frame-to-frame noise of the estimate itself (docs/filter.md, "Self-calibration").
   BeliefVolume& coarse = *impl_->coarse;
   detail::pool_headings(impl_->pooled.data(), config_.headings, coarse, config_.threads);
-  CalibrationEvidence evidence;
-  evidence.log_outside = -frame.log_cells - config_.outside_crop_nats;
-  for (const auto& worker : impl_->workers) evidence.frame_cells.merge(worker.frame_cells);
-  const CropPose at{(crop.centre_u - 0.5) / 2, (crop.centre_v - 0.5) / 2, crop.rotation_deg};
-  const double cells_per_cell = 4.0 * config_.headings / coarse.headings();
-  detail::judge_frame(coarse, frame, frame.cell_m / 2, at, cells_per_cell, config_.threads, evidence);
+  DepthHistogram frame_cells{DepthHistogram::kCount};
+  for (const auto& worker : impl_->workers) frame_cells.merge(worker.frame_cells);
+  const CalibrationEvidence evidence = coarse_evidence(coarse, frame, crop, config_, frame_cells);
   impl_->estimator.add(evidence);
 }
 

@@ -1,0 +1,139 @@
+#pragma once
+// The filter's per-cell arithmetic, written once for the CPU filter and the CUDA backend (gpu/):
+// under nvcc these functions are __host__ __device__, elsewhere plain inline functions. The CPU
+// filter calls them in its loops, so the test suite checks the arithmetic the kernels run even on
+// machines without a GPU. Nothing here allocates, throws or reads a global.
+
+#include <cmath>
+#include <cstddef>
+
+#if defined(__CUDACC__)
+#define SEQLOC_HD __host__ __device__
+#else
+#define SEQLOC_HD
+#endif
+
+namespace seqloc::filter::math {
+
+/// log(0) inside the filter (seqloc_filter.hpp's kLogZero, repeated here for device code).
+inline constexpr float kLogZeroValue = -1e30f;
+
+/// exp(scale * (x - shift)) where x > log(0), exactly 0 where x is log(0) or -inf.
+SEQLOC_HD inline float exp_or_zero(float x, float scale, float shift) {
+  return x > kLogZeroValue ? ::expf(scale * (x - shift)) : 0.0f;
+}
+
+/// The window displacement (cells, u east / v south, `cell_m` metres a cell) of a move of
+/// `forward_m` and `left_m` for a heading clockwise from north: forward is (sin h, cos h)
+/// east/north, left is (-cos h, sin h). sin and cos of multiples of 90 degrees are not exactly 0
+/// in floating point: a move that is a whole number of cells up to 1e-9 is taken as one, so that
+/// it translates without blurring.
+SEQLOC_HD inline void displacement_cells(double forward_m, double left_m, double heading_deg, double cell_m, double& du,
+                                         double& dv) {
+  const double h = heading_deg * (3.14159265358979323846 / 180.0);
+  const double east = forward_m * ::sin(h) - left_m * ::cos(h);
+  const double north = forward_m * ::cos(h) + left_m * ::sin(h);
+  du = east / cell_m;
+  dv = -north / cell_m;
+  if (::fabs(du - ::round(du)) < 1e-9) du = ::round(du);
+  if (::fabs(dv - ::round(dv)) < 1e-9) dv = ::round(dv);
+}
+
+/// A bilinear translation dst(u, v) = src(u + ou, v + ov) of a sw x sh source into a dw x dh
+/// destination: the integer and fractional parts of the offset and the destination cells whose
+/// source point lies in [0, sw - 1] x [0, sh - 1] (the others take a fill value).
+struct Translation {
+  int iu = 0, iv = 0;
+  float au = 0, av = 0;
+  int u_lo = 0, u_hi = -1, v_lo = 0, v_hi = -1;
+  int sw = 0, sh = 0;
+};
+
+SEQLOC_HD inline Translation make_translation(int sw, int sh, int dw, int dh, double ou, double ov) {
+  Translation t;
+  const double fu = ::floor(ou), fv = ::floor(ov);
+  t.au = static_cast<float>(ou - fu);
+  t.av = static_cast<float>(ov - fv);
+  t.iu = static_cast<int>(fu);
+  t.iv = static_cast<int>(fv);
+  const int u_lo = static_cast<int>(::ceil(-ou)), u_hi = static_cast<int>(::floor(sw - 1 - ou));
+  const int v_lo = static_cast<int>(::ceil(-ov)), v_hi = static_cast<int>(::floor(sh - 1 - ov));
+  t.u_lo = u_lo > 0 ? u_lo : 0;
+  t.u_hi = u_hi < dw - 1 ? u_hi : dw - 1;
+  t.v_lo = v_lo > 0 ? v_lo : 0;
+  t.v_hi = v_hi < dh - 1 ? v_hi : dh - 1;
+  t.sw = sw;
+  t.sh = sh;
+  return t;
+}
+
+/// The translated value at destination cell (u, v), reading source cell i through `read(i)`
+/// (i = row * sw + column). At the last column or row the missing neighbour has weight 0 and is
+/// read clamped, as the CPU loop does.
+template <class Read>
+SEQLOC_HD inline float translate_at(const Translation& t, int u, int v, float fill, const Read& read) {
+  if (v < t.v_lo || v > t.v_hi || u < t.u_lo || u > t.u_hi) return fill;
+  const int r0 = v + t.iv, r1 = r0 + 1 < t.sh ? r0 + 1 : t.sh - 1;
+  const int c0 = u + t.iu, c1 = c0 + 1 < t.sw ? c0 + 1 : c0;
+  const float w00 = (1 - t.au) * (1 - t.av), w01 = t.au * (1 - t.av), w10 = (1 - t.au) * t.av, w11 = t.au * t.av;
+  const std::size_t a = static_cast<std::size_t>(r0) * t.sw, b = static_cast<std::size_t>(r1) * t.sw;
+  return w00 * read(a + c0) + w01 * read(a + c1) + w10 * read(b + c0) + w11 * read(b + c1);
+}
+
+/// The affine map from window cells to a frame's cells: the crop's axes are the window's turned
+/// clockwise by its rotation, and one window cell is `scale` frame cells.
+struct CropMap {
+  double centre_u = 0, centre_v = 0;  ///< the crop's centre in window cells
+  double cos_r = 1, sin_r = 0;        ///< of the crop's rotation
+  double scale = 1;                   ///< frame cells per window cell
+  int vw = 0, vh = 0;                 ///< the frame's size
+};
+
+/// The frame value at window cell (u, v): bilinear in the frame's cells, read through `read(i)`
+/// (i = row * vw + column); `fill` where the cell's centre lies outside the frame.
+template <class Read>
+SEQLOC_HD inline float crop_sample_at(const CropMap& m, int u, int v, float fill, const Read& read) {
+  const double du = u - m.centre_u, dv = v - m.centre_v;
+  const double x = (m.vw - 1) / 2.0 + m.scale * (du * m.cos_r + dv * m.sin_r);
+  const double y = (m.vh - 1) / 2.0 + m.scale * (-du * m.sin_r + dv * m.cos_r);
+  if (!(x >= 0 && y >= 0 && x <= m.vw - 1 && y <= m.vh - 1)) return fill;
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const int x1 = x0 + 1 < m.vw ? x0 + 1 : m.vw - 1, y1 = y0 + 1 < m.vh ? y0 + 1 : m.vh - 1;
+  const auto ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
+  const std::size_t r0 = static_cast<std::size_t>(y0) * m.vw, r1 = static_cast<std::size_t>(y1) * m.vw;
+  return (1 - ay) * ((1 - ax) * read(r0 + x0) + ax * read(r0 + x1)) +
+         ay * ((1 - ax) * read(r1 + x0) + ax * read(r1 + x1));
+}
+
+/// Self-calibration's coarse grid: window heading bins per coarse bin (4, or fewer where the
+/// window's bins are not a multiple of 4 or would leave fewer than 4 coarse bins).
+SEQLOC_HD inline int calibration_bins(int headings) {
+  for (int b = 4; b > 1; b /= 2)
+    if (headings % b == 0 && headings / b >= 4) return b;
+  return 1;
+}
+
+/// Whether window bin k is one that coarse bins are made of, b window bins per coarse bin: every
+/// bin for b = 1, else every other bin (the even ones for b = 4, the odd for b = 2).
+SEQLOC_HD inline bool pooled_bin(int k, int b) { return b == 1 || k % 2 == (b / 2) % 2; }
+
+/// The weight of window bin j b + d in coarse bin j (|d| <= b / 2): 1 at the ends, 2 between, 1
+/// for b = 1 (each pooled bin standing for itself and its unpooled neighbours).
+SEQLOC_HD inline float pooled_weight(int d, int b) {
+  const int half = b / 2;
+  return b == 1 ? 1.0f : (d == -half || d == half) ? 1.0f : 2.0f;
+}
+
+/// One slice of a belief summed over the 2 x 2 cells of coarse cell (cu, cv) (the last row or
+/// column alone where the size is odd), in the order the CPU filter adds them.
+SEQLOC_HD inline float pool_2x2(const float* slice, int width, int height, int cu, int cv) {
+  const int u = 2 * cu, v = 2 * cv;
+  const float* a = slice + static_cast<std::size_t>(v) * width;
+  const bool down = v + 1 < height, right = u + 1 < width;
+  const float left = down ? a[u] + a[u + width] : a[u];
+  if (!right) return left;
+  const float next = down ? a[u + 1] + a[u + 1 + width] : a[u + 1];
+  return left + next;
+}
+
+}  // namespace seqloc::filter::math

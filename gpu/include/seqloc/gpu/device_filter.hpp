@@ -1,0 +1,111 @@
+#pragma once
+// The SeqLoc filter with its belief resident on a CUDA device (docs/gpu.md).
+//
+// DeviceFilter runs the step SeqLocFilter runs (seqloc_filter.hpp), with the same FilterConfig
+// and the same results up to float rounding: motion, crop intake, ETU, self-calibration, MGR,
+// normalization, PAS and the sub-bin heading. The belief never leaves the device during a step;
+// what crosses to the host is a handful of scalars, the pose's neighbourhood for PAS, and (with
+// self-calibration on) the predicted belief pooled onto self-calibration's coarse grid, which
+// the host judges as the CPU filter does (1/32 of the belief at 256 headings).
+//
+// The kernels are written once over an execution space: Backend::cuda runs them on the GPU,
+// Backend::host runs the very same kernels one element at a time on the CPU. The host backend is
+// what the test suite checks against SeqLocFilter on machines without a GPU (CI's); it is not a
+// fast path.
+//
+// Not on the device yet: motion noise (FilterConfig::motion_noise; refused), the smoother's
+// backward step, and frames handed over as device arrays (frames are PreparedFrame, uploaded).
+
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+
+#include "seqloc/filter/belief.hpp"
+#include "seqloc/filter/config.hpp"
+#include "seqloc/filter/self_calibration.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/filter/types.hpp"
+
+namespace seqloc::gpu {
+
+/// Whether this build and this machine can run the CUDA backend.
+struct CudaStatus {
+  bool usable = false;
+  /// Why not, in one line (a build without CUDA, no driver, a driver older than the runtime, no
+  /// device); empty when usable.
+  std::string reason;
+  std::string device_name;       ///< device 0's name, when usable
+  int compute_capability = 0;    ///< major * 10 + minor
+  std::size_t memory_bytes = 0;  ///< device 0's global memory
+};
+
+/// Whether the library was compiled with CUDA (nvcc found at configure time).
+[[nodiscard]] bool built_with_cuda();
+
+/// Asks the CUDA runtime (once per process; the answer is cached).
+[[nodiscard]] CudaStatus cuda_status();
+
+enum class Backend {
+  cuda,  ///< the GPU (device 0)
+  host,  ///< the same kernels on the CPU, one element at a time: for tests
+};
+
+/// "cuda" or "host".
+[[nodiscard]] const char* backend_name(Backend backend);
+
+class DeviceFilter {
+ public:
+  /// Allocates the belief and its buffers on the backend. Throws filter::FilterError: io when the
+  /// backend cannot run (naming cuda_status().reason) or device memory runs out, usage for a
+  /// configuration it does not support (motion noise).
+  DeviceFilter(const filter::FilterConfig& config, Backend backend);
+  ~DeviceFilter();
+  DeviceFilter(const DeviceFilter&) = delete;
+  DeviceFilter& operator=(const DeviceFilter&) = delete;
+
+  [[nodiscard]] const filter::FilterConfig& config() const { return config_; }
+  [[nodiscard]] Backend backend() const { return backend_; }
+
+  /// As SeqLocFilter's.
+  void reset_uniform();
+  void reset_gaussian(double u, double v, double sigma_m);
+  filter::FrameResult step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
+                           const filter::Odometry& odometry, std::span<const float> road_distance_m,
+                           const filter::GpsFix* gps = nullptr);
+  void predict(const filter::Odometry& odometry);
+  filter::FrameResult update(const filter::PreparedFrame& frame, const filter::CropPose& crop,
+                             std::span<const float> road_distance_m, const filter::GpsFix* gps = nullptr,
+                             const filter::FrameWeighting* weighting = nullptr);
+  void recentre(int du, int dv);
+  void rebase(const filter::BeliefVolume& belief, const std::optional<filter::Pose>& last_estimate);
+  [[nodiscard]] const std::optional<filter::Pose>& last_estimate() const { return last_estimate_; }
+  [[nodiscard]] const filter::PowerEstimator& calibration() const { return estimator_; }
+
+  /// The belief, copied to the host (a whole window: for tests, pictures and the smoother, not
+  /// for every frame).
+  [[nodiscard]] filter::BeliefVolume belief() const;
+  /// Replaces the belief (same size as the window; filter::FilterError otherwise).
+  void set_belief(const filter::BeliefVolume& belief);
+
+  class Engine;  ///< the kernels over one execution space (src/engine.hpp)
+
+ private:
+  filter::FrameResult weigh(const filter::PreparedFrame& frame, const filter::FrameWeighting* weighting,
+                            bool calibrating);
+  void retemper(bool held);
+  [[nodiscard]] filter::Pose refine(int u, int v, int k) const;
+
+  filter::FilterConfig config_;
+  Backend backend_;
+  std::unique_ptr<Engine> engine_;
+  filter::PowerEstimator estimator_;
+  bool first_ = true;
+  bool was_held_ = true;
+  double last_power_ = 1;
+  std::optional<filter::Pose> last_estimate_;
+  std::optional<float> cached_min_;
+  std::vector<double> entropies_;
+};
+
+}  // namespace seqloc::gpu

@@ -1,0 +1,331 @@
+// DeviceFilter: SeqLocFilter's step (seqloc_filter.cpp) with the belief in an engine's memory.
+// The order of the stages, and every scalar decided between them (the power, ETU's weight, the
+// value outside the crop, the hold's release, the relocalization flag), is the CPU filter's; the
+// engine runs the passes over the belief and the frame.
+
+#include "seqloc/gpu/device_filter.hpp"
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "engine.hpp"
+#include "seqloc/core/angles.hpp"
+#include "seqloc/core/units.hpp"
+#include "seqloc/filter/calibration_evidence.hpp"
+
+namespace seqloc::gpu {
+namespace {
+
+using core::kCellM;
+using core::kDegToRad;
+using filter::FilterError;
+using filter::FrameResult;
+using filter::Pose;
+
+double bin_heading_deg(int k, int headings) { return k * 360.0 / headings; }
+
+/// The window bins' reading of a frame's bins (filter/resample.cpp's sample_slice).
+std::vector<HeadingBlend> heading_blends(int headings, int frame_bins, double rotation_deg) {
+  std::vector<HeadingBlend> blends(static_cast<std::size_t>(headings));
+  for (int k = 0; k < headings; ++k) {
+    const double p = core::wrap360(bin_heading_deg(k, headings) - rotation_deg) * frame_bins / 360.0;
+    const int j0 = static_cast<int>(std::floor(p)) % frame_bins;
+    blends[static_cast<std::size_t>(k)] = {j0, (j0 + 1) % frame_bins, static_cast<float>(p - std::floor(p))};
+  }
+  return blends;
+}
+
+CropGeometry crop_geometry(const filter::PreparedFrame& frame, const filter::CropPose& crop, int width, int height) {
+  CropGeometry g;
+  const double scale = kCellM / frame.cell_m;
+  g.translate = crop.rotation_deg == 0.0 && scale == 1.0;
+  if (g.translate) {
+    g.translation = filter::math::make_translation(frame.width, frame.height, width, height,
+                                                   (frame.width - 1) / 2.0 - crop.centre_u,
+                                                   (frame.height - 1) / 2.0 - crop.centre_v);
+  } else {
+    const double r = crop.rotation_deg * kDegToRad;
+    g.map = {crop.centre_u, crop.centre_v, std::cos(r), std::sin(r), scale, frame.width, frame.height};
+  }
+  return g;
+}
+
+std::vector<float> gps_factor(const filter::FilterConfig& config, const filter::GpsFix* gps) {
+  std::vector<float> factor;
+  if (!config.gps_prior || gps == nullptr) return factor;
+  factor.resize(static_cast<std::size_t>(config.width) * config.height);
+  const double sigma_cells = gps->sigma_m / kCellM;
+  for (int v = 0; v < config.height; ++v)
+    for (int u = 0; u < config.width; ++u) {
+      const double du = u - gps->u, dv = v - gps->v;
+      factor[static_cast<std::size_t>(v) * config.width + u] =
+          static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
+    }
+  return factor;
+}
+
+filter::FilterConfig checked(const filter::FilterConfig& config) {
+  config.validate();
+  if (config.motion_noise) {
+    throw FilterError("the CUDA backend has no motion noise yet: run without --motion-noise or on the CPU",
+                      ErrorCategory::usage);
+  }
+  return config;
+}
+
+}  // namespace
+
+const char* backend_name(Backend backend) { return backend == Backend::cuda ? "cuda" : "host"; }
+
+DeviceFilter::DeviceFilter(const filter::FilterConfig& config, Backend backend)
+    : config_(checked(config)),
+      backend_(backend),
+      engine_(make_engine(config_, backend)),
+      estimator_(config_.self_calibration_prior_octaves, config_.self_calibration_outlier_share,
+                 {config_.self_calibration_hold_below_octaves, config_.self_calibration_hold_above_octaves,
+                  config_.self_calibration_hold_share, config_.self_calibration_hold_follow_octaves}) {
+  reset_uniform();
+}
+
+DeviceFilter::~DeviceFilter() = default;
+
+void DeviceFilter::reset_uniform() {
+  const std::size_t cells = static_cast<std::size_t>(config_.width) * config_.height * config_.headings;
+  engine_->fill_belief(static_cast<float>(1.0 / static_cast<double>(cells)));
+  cached_min_.reset();
+  first_ = true;
+  last_estimate_.reset();
+  estimator_.reset();
+  was_held_ = true;
+  last_power_ = 1;
+  entropies_.clear();
+}
+
+void DeviceFilter::reset_gaussian(double u, double v, double sigma_m) {
+  filter::BeliefVolume prior(config_.width, config_.height, config_.headings);
+  prior.set_gaussian(u, v, sigma_m / kCellM);
+  engine_->upload_belief(prior.data());
+  cached_min_.reset();
+  first_ = true;
+  last_estimate_.reset();
+  estimator_.reset();
+  was_held_ = true;
+  last_power_ = 1;
+  entropies_.clear();
+}
+
+filter::BeliefVolume DeviceFilter::belief() const {
+  filter::BeliefVolume out(config_.width, config_.height, config_.headings);
+  engine_->download_belief(out.data());
+  return out;
+}
+
+void DeviceFilter::set_belief(const filter::BeliefVolume& belief) {
+  if (belief.width() != config_.width || belief.height() != config_.height || belief.headings() != config_.headings) {
+    throw FilterError("set_belief: the belief is " + std::to_string(belief.width()) + " x " +
+                          std::to_string(belief.height()) + " x " + std::to_string(belief.headings()) +
+                          ", the filter's window " + std::to_string(config_.width) + " x " +
+                          std::to_string(config_.height) + " x " + std::to_string(config_.headings),
+                      ErrorCategory::usage);
+  }
+  engine_->upload_belief(belief.data());
+  cached_min_.reset();
+}
+
+void DeviceFilter::rebase(const filter::BeliefVolume& belief, const std::optional<Pose>& last_estimate) {
+  set_belief(belief);
+  last_estimate_ = last_estimate;
+}
+
+void DeviceFilter::recentre(int du, int dv) {
+  engine_->recentre(du, dv);
+  cached_min_.reset();
+  if (last_estimate_) {
+    last_estimate_->u -= du;
+    last_estimate_->v -= dv;
+  }
+}
+
+void DeviceFilter::predict(const filter::Odometry& odometry) {
+  const int R = config_.headings;
+  const float fill = cached_min_ ? *cached_min_ : engine_->least();
+  // filter/resample.cpp's warp_volume: new bin k takes source bins k + s and k + s + 1.
+  const double p = odometry.yaw_deg * R / 360.0;
+  const double floor_p = std::floor(p);
+  const auto a = static_cast<float>(p - floor_p);
+  const int s = static_cast<int>(((static_cast<long long>(floor_p) % R) + R) % R);
+  std::vector<filter::math::Translation> by_bin(static_cast<std::size_t>(R));
+  for (int j = 0; j < R; ++j) {
+    double du = 0, dv = 0;
+    filter::math::displacement_cells(odometry.forward_m, odometry.left_m, bin_heading_deg(j, R), kCellM, du, dv);
+    by_bin[static_cast<std::size_t>(j)] =
+        filter::math::make_translation(config_.width, config_.height, config_.width, config_.height, -du, -dv);
+  }
+  engine_->predict(by_bin, s, a, fill);
+  cached_min_.reset();
+}
+
+FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
+                               const filter::Odometry& odometry, std::span<const float> road_distance_m,
+                               const filter::GpsFix* gps) {
+  if (!first_) predict(odometry);
+  FrameResult result = update(frame, crop, road_distance_m, gps);
+  if (last_estimate_ && !first_) {
+    double du = 0, dv = 0;
+    filter::math::displacement_cells(odometry.forward_m, odometry.left_m, last_estimate_->heading_deg, kCellM, du, dv);
+    const double pu = last_estimate_->u + du, pv = last_estimate_->v + dv;
+    result.relocalized =
+        std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
+  }
+  last_estimate_ = result.pose;
+  first_ = false;
+  return result;
+}
+
+FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame, const filter::FrameWeighting* weighting,
+                                bool calibrating) {
+  FrameResult result;
+  if (weighting != nullptr) {
+    result.volume_power = weighting->volume_power;
+    result.etu_weight = weighting->etu_weight;
+  } else {
+    result.volume_power = calibrating ? estimator_.power() : 1.0;
+  }
+  // The powered frame's peak and entropy (SeqLocFilter's scan_frame): -log Z and
+  // log Z - k sum(e^{k r} r) / Z.
+  float peak = weighting != nullptr ? weighting->peak_log_prob : frame.max_log_prob;
+  double entropy = frame.entropy;
+  if (calibrating && result.volume_power != 1.0) {
+    const FrameSums sums = engine_->frame_sums(static_cast<float>(result.volume_power), frame.max_log_prob);
+    const double log_z = std::log(sums.z);
+    peak = static_cast<float>(-log_z);
+    entropy = std::clamp((log_z - result.volume_power * sums.zr / sums.z) / frame.log_cells, 0.0, 1.0);
+  }
+  result.frame_entropy = entropy;
+  if (weighting != nullptr) {
+    // As weighed before.
+  } else if (config_.etu && config_.etu_route_reference) {
+    entropies_.push_back(frame.entropy);
+    if (entropies_.size() > 2 * filter::kEtuRouteFrames) {
+      entropies_.erase(entropies_.begin(), entropies_.end() - filter::kEtuRouteFrames);
+    }
+    result.etu_weight = filter::etu_weight(frame.entropy, filter::route_reference_entropy(entropies_));
+  } else {
+    result.etu_weight = config_.etu ? filter::etu_weight(entropy, config_.etu_reference_entropy) : 1.0;
+  }
+  result.weighting = {result.volume_power, result.etu_weight, peak};
+  return result;
+}
+
+void DeviceFilter::retemper(bool held) {
+  // SeqLocFilter::retemper: once the hold releases, the belief is raised to the ratio of the new
+  // power to the one its frames went in at.
+  const double now = estimator_.power();
+  if (held || !was_held_) {
+    last_power_ = now;
+    return;
+  }
+  const auto ratio = static_cast<float>(now / last_power_);
+  was_held_ = held;
+  last_power_ = now;
+  if (first_ || ratio == 1.0f) return;
+  if (engine_->raise(ratio)) cached_min_.reset();
+}
+
+FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filter::CropPose& crop,
+                                 std::span<const float> road_distance_m, const filter::GpsFix* gps,
+                                 const filter::FrameWeighting* weighting) {
+  const std::size_t slice = static_cast<std::size_t>(config_.width) * config_.height;
+  if (config_.mgr && road_distance_m.empty())
+    throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
+  if (config_.mgr && road_distance_m.size() != slice) {
+    throw FilterError("the road-distance window holds " + std::to_string(road_distance_m.size()) + " values, not " +
+                          std::to_string(config_.width) + " x " + std::to_string(config_.height),
+                      ErrorCategory::usage);
+  }
+  const bool calibrating = config_.self_calibrate && weighting == nullptr;
+  engine_->load_frame(frame);
+  FrameResult result = weigh(frame, weighting, calibrating);
+  if (calibrating) retemper(estimator_.held());
+
+  // The tempered likelihood q^w, scaled by its peak, and the value of a cell outside the crop.
+  const auto w = static_cast<float>(result.etu_weight);
+  engine_->temper(static_cast<float>(w * result.volume_power), frame.max_log_prob);
+  const float outside =
+      static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - result.weighting.peak_log_prob)));
+
+  std::optional<filter::BeliefVolume> coarse;
+  filter::DepthHistogram frame_cells{filter::DepthHistogram::kCount};
+  if (calibrating) {
+    coarse.emplace(filter::coarse_belief_for(config_));
+    engine_->pool_coarse(*coarse);  // the predicted belief, before the frame goes in
+    filter::add_frame_cells(frame, frame_cells);
+  }
+  const std::vector<HeadingBlend> blends = heading_blends(config_.headings, frame.bins, crop.rotation_deg);
+  const CropGeometry geometry = crop_geometry(frame, crop, config_.width, config_.height);
+  const std::vector<float> gps_term = gps_factor(config_, gps);
+  double total = engine_->multiply(blends, geometry, outside, gps_term, true);
+  if (calibrating) estimator_.add(filter::coarse_evidence(*coarse, frame, crop, config_, frame_cells));
+  if (!(total > 0) || !std::isfinite(total)) {
+    // Belief and frame share no support that float can represent: the frame alone decides.
+    total = engine_->multiply(blends, geometry, outside, gps_term, false);
+    if (!(total > 0)) throw FilterError("the frame volume has no mass inside the window");
+  }
+
+  // Normalization and MGR's blend with the road prior (SeqLocFilter::normalize).
+  std::vector<float> eps_q;
+  if (config_.mgr) {
+    eps_q =
+        filter::road_prior_log_q(road_distance_m, config_.width, config_.height, config_.headings, config_.mgr_sigma_m);
+    const auto eps = static_cast<float>(config_.mgr_epsilon);
+    for (float& l : eps_q) l = eps * std::exp(l);
+  }
+  const auto keep = static_cast<float>((config_.mgr ? 1.0 - config_.mgr_epsilon : 1.0) / total);
+  const PeakCell peak = engine_->normalize(keep, eps_q);
+  cached_min_ = peak.least;
+  result.peak_log_belief = std::log(peak.value);
+  result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), bin_heading_deg(peak.k, config_.headings)};
+  result.pose = refine(peak.u, peak.v, peak.k);
+  return result;
+}
+
+Pose DeviceFilter::refine(int u_star, int v_star, int k_star) const {
+  const int R = config_.headings;
+  Pose pose{static_cast<double>(u_star), static_cast<double>(v_star), bin_heading_deg(k_star, R)};
+  if (config_.pas) {
+    // filter::peak_anchored_position over the cells around x* that lie in the window.
+    const int r = config_.pas_radius;
+    const int u0 = std::max(0, u_star - r), u1 = std::min(config_.width - 1, u_star + r);
+    const int v0 = std::max(0, v_star - r), v1 = std::min(config_.height - 1, v_star + r);
+    std::vector<double> mass(static_cast<std::size_t>(u1 - u0 + 1) * static_cast<std::size_t>(v1 - v0 + 1));
+    engine_->position_masses(u0, v0, u1, v1, mass);
+    double sm = 0, su = 0, sv = 0;
+    std::size_t i = 0;
+    for (int v = v0; v <= v1; ++v) {
+      for (int u = u0; u <= u1; ++u, ++i) {
+        sm += mass[i];
+        su += mass[i] * u;
+        sv += mass[i] * v;
+      }
+    }
+    if (sm > 0) {
+      pose.u = su / sm;
+      pose.v = sv / sm;
+    }
+  }
+  if (config_.subbin_heading) {
+    double sx = 0, sy = 0;
+    for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
+      const int k = (k_star + i + R) % R;
+      const double weight = engine_->value(u_star, v_star, k);
+      const double h = bin_heading_deg(k, R) * kDegToRad;
+      sx += weight * std::sin(h);
+      sy += weight * std::cos(h);
+    }
+    pose.heading_deg = core::wrap360(std::atan2(sx, sy) / kDegToRad);
+  }
+  return pose;
+}
+
+}  // namespace seqloc::gpu
