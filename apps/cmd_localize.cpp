@@ -67,6 +67,11 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     app.add_option("--frame-memory", options_.frame_memory_mb,
                    "Memory for the frames a route's modes share, MB (float16; beyond it they go to a temporary file)")
         ->capture_default_str();
+    app.add_option("--device", device_,
+                   "The forward filter of online, seqloc and smooth on: cpu; cuda (the GPU, docs/gpu.md);\n"
+                   "cuda-host (the CUDA kernels on the CPU: slow, checks them without a GPU)")
+        ->check(CLI::IsMember({"cpu", "cuda", "cuda-host"}))
+        ->capture_default_str();
     app.add_flag("--beliefs", options_.keep_beliefs,
                  "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings) and beliefs.csv "
                  "(their windows), which seqloc render then draws without running the filter again");
@@ -84,6 +89,9 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
       options_.validate();
       limits_.validate();
     });
+    options_.device = pipeline::device_from_name(device_).value();  // CLI::IsMember checked it
+    // Before any work, with one line saying why (no GPU, no driver, a build without CUDA).
+    pipeline::check_device(options_.device, options_.filter);
     check_overwrite(out_);
     std::error_code ec;
     const auto parent = out_.has_parent_path() ? out_.parent_path() : fs::path(".");
@@ -145,6 +153,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
   fs::path out_;
   fs::path calibration_;
   std::string mode_ = "seqloc";
+  std::string device_ = "cpu";
   pipeline::LocalizeOptions options_;
   int window_ = filter::FilterConfig{}.width;
   std::string noise_;

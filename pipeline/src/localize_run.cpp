@@ -22,6 +22,7 @@ void note(const LocalizeRunEvents& events, const Parts&... parts) {
 
 LocalizeRunReport run_localize(LocalizeRun run, const LocalizeRunEvents& events) {
   if (!run.calibration.empty()) apply_calibration_file(run.calibration, run.options);
+  check_device(run.options.device, run.options.filter);  // before any work: one line if it cannot run here
   const RegionCatalog catalog(run.regions, 256);
   if (catalog.size() > 1) note(events, std::to_string(catalog.size()), " regions");
   auto routes = io::read_routes(run.routes, run.limits, run.shard,

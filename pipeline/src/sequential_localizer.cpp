@@ -22,10 +22,11 @@ std::optional<GridFix> frame_gps_fix(const io::RouteFrame& f, const osm::RegionP
 }
 
 SequentialLocalizer::SequentialLocalizer(raster::CacheReader& cache, const filter::FilterConfig& config, bool online,
-                                         double recentre_margin, int lag)
+                                         double recentre_margin, int lag, Device device)
     : config_(mode_config(config, online)),
       recentre_margin_(recentre_margin),
       lag_(lag),
+      device_(device),
       window_(cache, config_.width, config_.height) {
   if (lag < 0) throw filter::FilterError("lag = " + std::to_string(lag) + ": must be >= 0 frames");
   if (lag > 0) backward_.emplace(cache, config_);
@@ -46,7 +47,7 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
   if (!filter_) {
     // The first frame: centred on its GPS fix when it has one (the fix's Gaussian is the prior),
     // else on its crop with a uniform prior.
-    filter_.emplace(config_);
+    filter_.emplace(config_, device_);
     window_.centre_on(gps ? gps->x_m : crop.x, gps ? gps->y_m : crop.y);
     if (gps) {
       filter_->reset_gaussian(window_.u_of(gps->x_m), window_.v_of(gps->y_m), gps->sigma_m);

@@ -18,8 +18,8 @@ class SequentialMode final : public LocalizationMode {
  public:
   SequentialMode(const RouteContext& context, bool online)
       : LocalizationMode(context),
-        localizer_(context.cache, context.options.filter, online, context.options.recentre_margin,
-                   context.options.lag) {}
+        localizer_(context.cache, context.options.filter, online, context.options.recentre_margin, context.options.lag,
+                   context.options.device) {}
 
   FrameEstimate estimate(std::size_t i, const GridCrop&, FramePrefetcher& frames) override {
     const std::size_t n = context_.route.frames.size();

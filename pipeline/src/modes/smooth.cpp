@@ -125,7 +125,8 @@ void SmoothMode::run(FramePrefetcher& frames) {
 
   // Forward, as the seqloc mode runs (the belief handed over where the route enters a region).
   {
-    SequentialLocalizer forward(cache_of(0), options.filter, /*online=*/false, options.recentre_margin);
+    SequentialLocalizer forward(cache_of(0), options.filter, /*online=*/false, options.recentre_margin, /*lag=*/0,
+                                options.device);
     std::size_t stretch = 0;
     for (std::size_t t = 0; t < n; ++t) {
       const io::RouteFrame& f = route.frames[t];

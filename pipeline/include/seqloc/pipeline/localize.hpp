@@ -19,6 +19,7 @@
 #include "seqloc/io/route.hpp"
 #include "seqloc/matcher/calibration.hpp"
 #include "seqloc/matcher/matcher.hpp"
+#include "seqloc/pipeline/forward_filter.hpp"
 #include "seqloc/pipeline/frame_prefetcher.hpp"
 #include "seqloc/pipeline/region_window.hpp"
 #include "seqloc/raster/cache.hpp"
@@ -59,6 +60,9 @@ struct LocalizeOptions {
   /// (frames x window cells x 4 bytes per route and mode), for pictures drawn later.
   bool keep_beliefs = false;
   std::filesystem::path spill_dir;  ///< empty: the system's temporary directory
+  /// Where the forward filter of the online, seqloc and smooth modes runs (docs/gpu.md); single
+  /// and offline, and the backward passes of smooth and of a lag, run on the CPU.
+  Device device = Device::cpu;
 
   [[nodiscard]] double crop_jump_limit_m() const {
     return max_crop_jump_m > 0 ? max_crop_jump_m : std::max(filter.width, filter.height) * raster::kCellM;

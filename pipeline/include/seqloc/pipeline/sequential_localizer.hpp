@@ -14,6 +14,7 @@
 
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/pipeline/backward_pass.hpp"
+#include "seqloc/pipeline/forward_filter.hpp"
 #include "seqloc/pipeline/modes.hpp"
 #include "seqloc/pipeline/region_window.hpp"
 
@@ -36,8 +37,9 @@ class SequentialLocalizer {
   /// `lag` L > 0: fixed-lag smoothing; the localizer keeps the last L + 1 frames and forward
   /// beliefs (L + 1 windows of memory) and after frame t runs the backward filter over frames
   /// t .. t - L + 1 (L backward steps a frame).
+  /// `device`: where the forward filter runs (the backward filter of a lag runs on the CPU).
   SequentialLocalizer(raster::CacheReader& cache, const filter::FilterConfig& config, bool online,
-                      double recentre_margin, int lag = 0);
+                      double recentre_margin, int lag = 0, Device device = Device::cpu);
 
   /// One frame: its prepared volume, its crop in region grid metres, the odometry since the
   /// previous frame, and a GPS fix if there is one. The first frame places the window on the fix
@@ -68,7 +70,7 @@ class SequentialLocalizer {
   [[nodiscard]] int lag() const { return lag_; }
   [[nodiscard]] const RegionWindow& window() const { return window_; }
   /// The filter, once the first frame started it.
-  [[nodiscard]] const filter::SeqLocFilter* filter() const { return filter_ ? &*filter_ : nullptr; }
+  [[nodiscard]] const ForwardFilter* filter() const { return filter_ ? &*filter_ : nullptr; }
   /// What the last step did (for a second pass over the route).
   [[nodiscard]] const StepRecord& last_step() const { return last_; }
   /// How often the window moved.
@@ -89,8 +91,9 @@ class SequentialLocalizer {
   filter::FilterConfig config_;
   double recentre_margin_;
   int lag_;
+  Device device_;
   RegionWindow window_;
-  std::optional<filter::SeqLocFilter> filter_;
+  std::optional<ForwardFilter> filter_;
   int recentres_ = 0;
   std::size_t stepped_ = 0;
   StepRecord last_;
