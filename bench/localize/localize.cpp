@@ -7,13 +7,17 @@
 // Then routes of observations (the demo's path): 2 simulated routes x 20 frames of the sample
 // region, scored by the built-in matcher, window 192; each mode alone, then all four at once
 // (which score each observation once), with frames/s and peak memory for each run.
+//
+// With --device cuda (or cuda-host) the 1,000-frame route alone, on that device (device_run).
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <random>
 #include <string>
 #include <thread>
@@ -138,7 +142,67 @@ double hand_over_ms(const seqloc::ingest::PreprocessOptions& pre, const seqloc::
 
 }  // namespace
 
-int main() {
+// --device cuda|cuda-host: the 1,000-frame route in seqloc and smooth with the forward filter on
+// that device, and seqloc once more on the CPU for the share of frames whose poses agree (within
+// a cell, 0.5 m, and a heading bin). Returns the JSON line.
+std::string device_run(const seqloc::io::Route& route, seqloc::raster::CacheReader& cache,
+                       const seqloc::pipeline::LocalizeOptions& cpu_options, seqloc::pipeline::Device device) {
+  namespace pl = seqloc::pipeline;
+  auto options = cpu_options;
+  options.device = device;
+  pl::check_device(device, options.filter);
+  const double frames = static_cast<double>(route.frames.size());
+  auto timed = [&](const pl::LocalizeOptions& o, seqloc::io::Mode mode, double& seconds) {
+    const auto t0 = Clock::now();
+    auto result = pl::localize_route(route, cache, o, mode);
+    seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    return result;
+  };
+  double seqloc_s = 0, smooth_s = 0, cpu_s = 0;
+  const auto on_device = timed(options, seqloc::io::Mode::seqloc, seqloc_s);
+  const auto smooth = timed(options, seqloc::io::Mode::smooth, smooth_s);
+  const auto on_cpu = timed(cpu_options, seqloc::io::Mode::seqloc, cpu_s);
+  std::size_t agree = 0;
+  const double bin_deg = 360.0 / options.filter.headings;
+  for (std::size_t i = 0; i < on_cpu.poses.size(); ++i) {
+    const auto& a = on_cpu.poses[i];
+    const auto& b = on_device.poses[i];
+    const double d = std::hypot(a.x_m - b.x_m, a.y_m - b.y_m);
+    const double dh = std::abs(std::remainder(a.grid_heading_deg - b.grid_heading_deg, 360.0));
+    agree += d <= 0.5 && dh <= bin_deg ? 1 : 0;
+  }
+  const double share = 100.0 * static_cast<double>(agree) / frames;
+  std::printf(
+      "--device %s: seqloc %.1f frames/s (filter %.1f s, read+prepare %.1f s, waiting for volumes %.1f s); "
+      "smooth %.1f frames/s; the CPU's seqloc %.1f frames/s; poses within a cell and a bin of the CPU's: "
+      "%.2f %% of %zu frames\n",
+      pl::device_name(device), frames / seqloc_s, on_device.filter_seconds, on_device.prepare_seconds,
+      on_device.wait_seconds, frames / smooth_s, frames / cpu_s, share, on_cpu.poses.size());
+  char json[512];
+  std::snprintf(json, sizeof json,
+                "{\"benchmark\": \"localize_device\", \"device\": \"%s\", \"frames\": %.0f, \"frames_per_s\": %.2f, "
+                "\"filter_s\": %.2f, \"prepare_s\": %.2f, \"wait_s\": %.2f, \"smooth_frames_per_s\": %.2f, "
+                "\"cpu_frames_per_s\": %.2f, \"poses_agreeing_pct\": %.2f}",
+                pl::device_name(device), frames, frames / seqloc_s, on_device.filter_seconds, on_device.prepare_seconds,
+                on_device.wait_seconds, frames / smooth_s, frames / cpu_s, share);
+  return json;
+}
+
+int main(int argc, char** argv) {
+  std::optional<seqloc::pipeline::Device> device;
+  if (argc == 3 && std::string(argv[1]) == "--device") device = seqloc::pipeline::device_from_name(argv[2]);
+  if (argc != 1 && (!device || *device == seqloc::pipeline::Device::cpu)) {
+    std::fprintf(stderr, "usage: bench_localize [--device cuda|cuda-host]\n");
+    return 2;
+  }
+  if (device) {
+    try {
+      seqloc::pipeline::check_device(*device, {});
+    } catch (const std::exception& e) {
+      std::printf("bench localize: %s\n{\"benchmark\": \"localize_device\", \"measured\": false}\n", e.what());
+      return 1;
+    }
+  }
   const fs::path work = "/tmp/seqloc-bench-localize";
   fs::remove_all(work);
   fs::create_directories(work / "route");
@@ -179,6 +243,12 @@ int main() {
   seqloc::raster::CacheReader cache(pre.output, 256);
   seqloc::pipeline::LocalizeOptions options;
   options.filter.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (device) {
+    std::printf("1000 frames, 128x128x256 float16 volumes, 256x256x256 window, %d threads\n", options.filter.threads);
+    std::printf("%s\n", device_run(route, cache, options, *device).c_str());
+    fs::remove_all(work);
+    return 0;
+  }
   const auto t0 = Clock::now();
   const auto result = seqloc::pipeline::localize_route(route, cache, options, seqloc::io::Mode::seqloc);
   const double run_s = std::chrono::duration<double>(Clock::now() - t0).count();

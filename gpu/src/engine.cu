@@ -11,9 +11,12 @@
 #include <thrust/pair.h>
 #include <thrust/transform_reduce.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <new>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -457,9 +460,33 @@ CudaStatus probe_cuda() {
   return status;
 }
 
+template <class Space>
+double time_copies(std::size_t bytes, int repeats) {
+  Buffer<unsigned char, Space> a(bytes), b(bytes);
+  Space::copy(a.data(), b.data(), bytes);  // first touch
+  if constexpr (std::is_same_v<Space, CudaSpace>) check(cudaDeviceSynchronize(), "synchronize");
+  std::vector<double> ms;
+  for (int i = 0; i < repeats; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    Space::copy(a.data(), b.data(), bytes);
+    if constexpr (std::is_same_v<Space, CudaSpace>) check(cudaDeviceSynchronize(), "synchronize");
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms[ms.size() / 2];
+}
+
 }  // namespace
 
 bool built_with_cuda() { return true; }
+
+double copy_ms(Backend backend, std::size_t bytes, int repeats) {
+  if (repeats < 1) throw FilterError("copy_ms: repeats must be >= 1", ErrorCategory::usage);
+  if (backend == Backend::host) return time_copies<HostSpace>(bytes, repeats);
+  const CudaStatus status = cuda_status();
+  if (!status.usable) throw FilterError("the CUDA backend cannot run: " + status.reason, ErrorCategory::io);
+  return time_copies<CudaSpace>(bytes, repeats);
+}
 
 CudaStatus cuda_status() {
   static const CudaStatus status = probe_cuda();

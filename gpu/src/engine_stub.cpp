@@ -20,6 +20,10 @@ CudaStatus cuda_status() {
   return status;
 }
 
+double copy_ms(Backend, std::size_t, int) {
+  throw filter::FilterError(std::string("the CUDA backend cannot run: ") + kNoCuda, ErrorCategory::io);
+}
+
 std::unique_ptr<DeviceFilter::Engine> make_engine(const filter::FilterConfig&, Backend) {
   throw filter::FilterError(std::string("the CUDA backend cannot run: ") + kNoCuda, ErrorCategory::io);
 }

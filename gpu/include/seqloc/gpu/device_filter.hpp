@@ -54,6 +54,10 @@ enum class Backend {
 /// "cuda" or "host".
 [[nodiscard]] const char* backend_name(Backend backend);
 
+/// The median time (ms) of `repeats` copies of `bytes` within the backend's memory (device to
+/// device on the GPU): the peer that benchmarks measure a step against. Throws as DeviceFilter.
+[[nodiscard]] double copy_ms(Backend backend, std::size_t bytes, int repeats);
+
 class DeviceFilter {
  public:
   /// Allocates the belief and its buffers on the backend. Throws filter::FilterError: io when the
