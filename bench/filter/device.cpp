@@ -40,9 +40,9 @@ struct Row {
 };
 
 // The PyTorch peer's ms per step (its JSON line's "ms_per_step"), or -1 with the reason printed.
-double torch_peer_ms(const std::string& python, int size, bool cuda) {
-  const std::string command = python + " " + SEQLOC_SOURCE_DIR + "/bench/filter/torch_step.py --size " +
-                              std::to_string(size) + " --device " + (cuda ? "cuda" : "cpu") + " 2>&1";
+double torch_peer_ms(const std::string& python, const std::string& peer, int size, bool cuda) {
+  const std::string command =
+      python + " " + peer + " --size " + std::to_string(size) + " --device " + (cuda ? "cuda" : "cpu") + " 2>&1";
   std::unique_ptr<FILE, int (*)(FILE*)> pipe(popen(command.c_str(), "r"), pclose);
   if (!pipe) return -1;
   std::string output, line;
@@ -68,6 +68,7 @@ std::vector<int> parse_sizes(const std::string& text) {
 
 int main(int argc, char** argv) {
   std::string device = "cuda", python = "python3", sizes_text = "128,256";
+  std::string peer = std::string(SEQLOC_SOURCE_DIR) + "/bench/filter/torch_step.py";
   int repeats = 20;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -75,6 +76,8 @@ int main(int argc, char** argv) {
       device = argv[++i];
     } else if (a == "--python" && i + 1 < argc) {
       python = argv[++i];
+    } else if (a == "--peer" && i + 1 < argc) {
+      peer = argv[++i];
     } else if (a == "--sizes" && i + 1 < argc) {
       sizes_text = argv[++i];
     } else if (a == "--repeats" && i + 1 < argc) {
@@ -82,7 +85,7 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr,
                    "usage: bench_filter_device [--device cuda|cuda-host] [--sizes 128,256] [--repeats 20] "
-                   "[--python python3]\n");
+                   "[--python python3] [--peer torch_step.py]\n");
       return 2;
     }
   }
@@ -112,7 +115,7 @@ int main(int argc, char** argv) {
   const filter::PreparedFrame frame = filter::prepare_frame(view, 256, 4);
   std::vector<Row> rows;
   for (const int size : parse_sizes(sizes_text)) {
-    const double peer = torch_peer_ms(python, size, backend == gpu::Backend::cuda);
+    const double peer_ms = torch_peer_ms(python, peer, size, backend == gpu::Backend::cuda);
     for (const bool calibrate : {false, true}) {
       filter::FilterConfig c;
       c.width = c.height = size;
@@ -131,14 +134,14 @@ int main(int argc, char** argv) {
         if (r.pose.u < -1e9) std::puts("");  // keep the result alive
       }
       const std::size_t bytes = static_cast<std::size_t>(size) * size * 256 * sizeof(float);
-      Row row{size, calibrate, median(ms), gpu::copy_ms(backend, bytes, repeats), peer};
+      Row row{size, calibrate, median(ms), gpu::copy_ms(backend, bytes, repeats), peer_ms};
       rows.push_back(row);
       std::printf(
           "%dx%dx256, self-calibration %s: %.3f ms/step (%.0f frames/s); copy of the belief (%.0f MB) %.4f ms, "
           "step / copy = %.1f",
           size, size, calibrate ? "on " : "off", row.step_ms, 1000.0 / row.step_ms, static_cast<double>(bytes) / 1e6,
           row.copy_ms, row.step_ms / row.copy_ms);
-      if (peer > 0) std::printf("; PyTorch peer %.3f ms, peer / step = %.1fx", peer, peer / row.step_ms);
+      if (peer_ms > 0) std::printf("; PyTorch peer %.3f ms, peer / step = %.1fx", peer_ms, peer_ms / row.step_ms);
       std::printf("\n");
     }
   }
