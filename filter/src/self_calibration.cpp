@@ -55,12 +55,24 @@ void DepthHistogram::add_each(std::span<const float> r, std::span<const float> w
       if (ws[i] > 0) {
         const double wi = ws[i];
         const auto b = static_cast<std::size_t>(bin[i]) * kLanes + static_cast<std::size_t>(i % kLanes);
-        // wi, depth >= 0: the cast of x + 0.5 rounds half up, without a call per cell.
+        // math::depth_term's fixed point (the depth and bin came from SIMD above, equal to its own).
         weight_[b] += static_cast<std::int64_t>(wi * scale_.weight + 0.5);  // NOLINT(bugprone-incorrect-roundings)
         depth_sum_[b] +=
             static_cast<std::int64_t>(wi * depth[i] * scale_.depth + 0.5);  // NOLINT(bugprone-incorrect-roundings)
       }
     }
+  }
+}
+
+void DepthHistogram::add_bins(std::span<const std::int64_t> weight, std::span<const std::int64_t> depth_sum) {
+  if (weight.size() != bins() || depth_sum.size() != bins()) {
+    throw FilterError("DepthHistogram::add_bins: " + std::to_string(weight.size()) + " and " +
+                          std::to_string(depth_sum.size()) + " bins given, not " + std::to_string(bins()),
+                      ErrorCategory::internal);
+  }
+  for (std::size_t i = 0; i < bins(); ++i) {
+    weight_[i * kLanes] += weight[i];
+    depth_sum_[i * kLanes] += depth_sum[i];
   }
 }
 

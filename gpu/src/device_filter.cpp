@@ -12,7 +12,6 @@
 #include "engine.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/units.hpp"
-#include "seqloc/filter/calibration_evidence.hpp"
 
 namespace seqloc::gpu {
 namespace {
@@ -36,9 +35,12 @@ std::vector<HeadingBlend> heading_blends(int headings, int frame_bins, double ro
   return blends;
 }
 
-CropGeometry crop_geometry(const filter::PreparedFrame& frame, const filter::CropPose& crop, int width, int height) {
+/// Where window cells (`width` x `height`) read a frame whose cells are `cell_m` window-cell
+/// metres (filter/resample.cpp's sample_slice).
+CropGeometry crop_geometry(const filter::PreparedFrame& frame, double cell_m, const filter::CropPose& crop, int width,
+                           int height) {
   CropGeometry g;
-  const double scale = kCellM / frame.cell_m;
+  const double scale = kCellM / cell_m;
   g.translate = crop.rotation_deg == 0.0 && scale == 1.0;
   if (g.translate) {
     g.translation = filter::math::make_translation(frame.width, frame.height, width, height,
@@ -255,18 +257,12 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   const float outside =
       static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - result.weighting.peak_log_prob)));
 
-  std::optional<filter::BeliefVolume> coarse;
-  filter::DepthHistogram frame_cells{filter::DepthHistogram::kCount};
-  if (calibrating) {
-    coarse.emplace(filter::coarse_belief_for(config_));
-    engine_->pool_coarse(*coarse);  // the predicted belief, before the frame goes in
-    filter::add_frame_cells(frame, frame_cells);
-  }
+  if (calibrating) engine_->pool_coarse();  // the predicted belief, before the frame goes in
   const std::vector<HeadingBlend> blends = heading_blends(config_.headings, frame.bins, crop.rotation_deg);
-  const CropGeometry geometry = crop_geometry(frame, crop, config_.width, config_.height);
+  const CropGeometry geometry = crop_geometry(frame, frame.cell_m, crop, config_.width, config_.height);
   const std::vector<float> gps_term = gps_factor(config_, gps);
   double total = engine_->multiply(blends, geometry, outside, gps_term, true);
-  if (calibrating) estimator_.add(filter::coarse_evidence(*coarse, frame, crop, config_, frame_cells));
+  if (calibrating) estimator_.add(judge(frame, crop));
   if (!(total > 0) || !std::isfinite(total)) {
     // Belief and frame share no support that float can represent: the frame alone decides.
     total = engine_->multiply(blends, geometry, outside, gps_term, false);
@@ -288,6 +284,34 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), bin_heading_deg(peak.k, config_.headings)};
   result.pose = refine(peak.u, peak.v, peak.k);
   return result;
+}
+
+filter::CalibrationEvidence DeviceFilter::judge(const filter::PreparedFrame& frame, const filter::CropPose& crop) {
+  // filter::coarse_evidence with its sums made by the engine: the coarse grid's cells are 2 x 2
+  // window cells, so the frame's cells are half as large in them and the crop's centre moves.
+  const int coarse_r = config_.headings / filter::math::calibration_bins(config_.headings);
+  const int coarse_w = (config_.width + 1) / 2, coarse_h = (config_.height + 1) / 2;
+  const filter::CropPose at{(crop.centre_u - 0.5) / 2, (crop.centre_v - 0.5) / 2, crop.rotation_deg};
+  JudgeSetup setup;
+  setup.blend = heading_blends(coarse_r, frame.bins, crop.rotation_deg);
+  setup.geometry = crop_geometry(frame, frame.cell_m / 2, at, coarse_w, coarse_h);
+  setup.frame_stride = filter::math::calibration_bins(frame.bins);
+  setup.peak = frame.max_log_prob;
+  setup.max_depth = static_cast<float>(filter::DepthHistogram::kMaxDepthNats);
+  setup.per_nat = static_cast<float>(1 / filter::DepthHistogram::kBinNats);
+  setup.last_bin = static_cast<int>(filter::DepthHistogram::bins()) - 1;
+  setup.count_scale = filter::DepthHistogram::kCount;
+  setup.mass_scale = filter::DepthHistogram::kMass;
+  const JudgeSums sums = engine_->judge(setup);
+  filter::CalibrationEvidence evidence;
+  evidence.frame_cells.add_bins(sums.frame_weight, sums.frame_depth);
+  evidence.belief_in_crop.add_bins(sums.mass_weight, sums.mass_depth);
+  evidence.belief_outside = sums.outside_mass;
+  evidence.log_outside = -frame.log_cells - config_.outside_crop_nats;
+  const double cells_per_cell = 4.0 * config_.headings / coarse_r;
+  evidence.window_cells = static_cast<double>(coarse_w) * coarse_h * coarse_r * cells_per_cell;
+  evidence.outside_cells = static_cast<double>(sums.outside_cells) * cells_per_cell;
+  return evidence;
 }
 
 Pose DeviceFilter::refine(int u_star, int v_star, int k_star) const {

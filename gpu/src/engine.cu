@@ -239,6 +239,86 @@ struct PoolKernel {
   }
 };
 
+// Adds to a sum that many cells add to: atomically on the GPU; the host system runs a kernel one
+// element at a time.
+SEQLOC_HD inline void add_to(unsigned long long* sum, unsigned long long x) {
+#if defined(__CUDA_ARCH__)
+  atomicAdd(sum, x);
+#else
+  *sum += x;
+#endif
+}
+
+SEQLOC_HD inline void add_to(double* sum, double x) {
+#if defined(__CUDA_ARCH__)
+  atomicAdd(sum, x);
+#else
+  *sum += x;
+#endif
+}
+
+/// DepthHistogram sums in the space's memory: weights then depth sums, `bins` each.
+struct HistogramView {
+  unsigned long long* weight;
+  unsigned long long* depth;
+  SEQLOC_HD void add(const filter::math::DepthTerm& t) const {
+    add_to(weight + t.bin, static_cast<unsigned long long>(t.weight));
+    add_to(depth + t.bin, static_cast<unsigned long long>(t.depth_sum));
+  }
+};
+
+// The frame's own cells by depth (filter::add_frame_cells): every stride-th bin, each cell
+// counting for `stride` cells.
+struct FrameCellsKernel {
+  const float* frame;
+  HistogramView cells;
+  std::size_t slice;
+  int stride, last_bin;
+  float peak, max_depth, per_nat;
+  filter::DepthHistogram::Scale scale;
+  SEQLOC_HD void operator()(std::size_t i) const {
+    const std::size_t j = i / slice * static_cast<std::size_t>(stride);
+    const float x = frame[j * slice + i % slice];
+    if (!(x > filter::math::kLogZeroValue)) return;
+    const float r = x - peak;  // x > log(0): max(x, log(0)) is x
+    cells.add(filter::math::depth_term(r, static_cast<float>(stride), max_depth, per_nat, last_bin, scale.weight,
+                                       scale.depth));
+  }
+};
+
+// The pooled belief judged by the frame (filter/calibration_evidence.cpp's judge_frame): each
+// coarse cell's mass by the frame's depth there, or outside the crop.
+struct JudgeKernel {
+  const float* frame;
+  const float* coarse;
+  const HeadingBlend* blend;
+  CropGeometry geometry;
+  HistogramView mass;
+  double* outside_mass;
+  unsigned long long* outside_cells;
+  int coarse_width, last_bin;
+  std::size_t coarse_slice, frame_slice;
+  float peak, max_depth, per_nat;
+  filter::DepthHistogram::Scale scale;
+  SEQLOC_HD void operator()(std::size_t i) const {
+    constexpr float kOutside = 1.0f;  // no log-probability is positive
+    const Cell at = cell_of(i, coarse_width, coarse_slice);
+    const HeadingBlend hb = blend[at.k];
+    const BlendReader read{frame + hb.j0 * frame_slice, frame + hb.j1 * frame_slice, hb.a};
+    const float x = geometry.translate ? filter::math::translate_at(geometry.translation, at.u, at.v, kOutside, read)
+                                       : filter::math::crop_sample_at(geometry.map, at.u, at.v, kOutside, read);
+    const float m = coarse[i];
+    if (!(x <= 0.5f)) {
+      add_to(outside_mass, static_cast<double>(m));
+      add_to(outside_cells, 1ull);
+      return;
+    }
+    if (!(m >= 1e-12f)) return;
+    const float r = (x > filter::math::kLogZeroValue ? x : filter::math::kLogZeroValue) - peak;
+    mass.add(filter::math::depth_term(r, m, max_depth, per_nat, last_bin, scale.weight, scale.depth));
+  }
+};
+
 struct MultiplyKernel {
   float* belief;
   const float* tempered;
@@ -292,6 +372,9 @@ class ThrustEngine final : public DeviceFilter::Engine {
         blend_(static_cast<std::size_t>(c.headings)) {
     if (c.self_calibrate) {
       const filter::BeliefVolume shape = filter::coarse_belief_for(c);
+      coarse_width_ = shape.width();
+      coarse_height_ = shape.height();
+      coarse_headings_ = shape.headings();
       coarse_.resize(shape.size());
     }
   }
@@ -337,6 +420,7 @@ class ThrustEngine final : public DeviceFilter::Engine {
 
   void load_frame(const filter::PreparedFrame& frame) override {
     frame_slice_ = static_cast<std::size_t>(frame.width) * frame.height;
+    frame_bins_ = frame.bins;
     frame_.upload(frame.log_prob.data(), frame.log_prob.size());
     tempered_.resize(frame.log_prob.size());
   }
@@ -354,12 +438,44 @@ class ThrustEngine final : public DeviceFilter::Engine {
                        TemperKernel{frame_.data(), tempered_.data(), exponent, peak});
   }
 
-  void pool_coarse(filter::BeliefVolume& coarse) const override {
-    const std::size_t coarse_slice = coarse.slice_cells();
-    thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), coarse.size(),
-                       PoolKernel{belief_.data(), coarse_.data(), width_, height_, headings_, coarse.width(),
-                                  headings_ / coarse.headings(), slice_, coarse_slice});
-    coarse_.download(coarse.data(), coarse.size());
+  void pool_coarse() override {
+    thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), coarse_cells(),
+                       PoolKernel{belief_.data(), coarse_.data(), width_, height_, headings_, coarse_width_,
+                                  headings_ / coarse_headings_, slice_, coarse_slice()});
+  }
+
+  void download_coarse(filter::BeliefVolume& coarse) const override { coarse_.download(coarse.data(), coarse.size()); }
+
+  [[nodiscard]] JudgeSums judge(const JudgeSetup& setup) override {
+    const std::size_t bins = filter::DepthHistogram::bins();
+    std::vector<unsigned long long> zeros(4 * bins + 1, 0);
+    sums_.upload(zeros.data(), zeros.size());  // four histograms and the outside cells' count
+    outside_.upload(std::vector<double>{0.0}.data(), 1);
+    const HistogramView frame_cells{sums_.data(), sums_.data() + bins},
+        mass{sums_.data() + 2 * bins, sums_.data() + 3 * bins};
+    const std::size_t binned = (static_cast<std::size_t>(frame_bins_) + setup.frame_stride - 1) / setup.frame_stride;
+    thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), binned * frame_slice_,
+                       FrameCellsKernel{frame_.data(), frame_cells, frame_slice_, setup.frame_stride, setup.last_bin,
+                                        setup.peak, setup.max_depth, setup.per_nat, setup.count_scale});
+    blend_.upload(setup.blend.data(), setup.blend.size());
+    thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), coarse_cells(),
+                       JudgeKernel{frame_.data(), coarse_.data(), blend_.data(), setup.geometry, mass, outside_.data(),
+                                   sums_.data() + 4 * bins, coarse_width_, setup.last_bin, coarse_slice(), frame_slice_,
+                                   setup.peak, setup.max_depth, setup.per_nat, setup.mass_scale});
+    std::vector<unsigned long long> host(zeros.size());
+    sums_.download(host.data(), host.size());
+    JudgeSums out;
+    auto part = [&](std::size_t k) {
+      return std::vector<std::int64_t>(host.begin() + static_cast<std::ptrdiff_t>(k * bins),
+                                       host.begin() + static_cast<std::ptrdiff_t>((k + 1) * bins));
+    };
+    out.frame_weight = part(0);
+    out.frame_depth = part(1);
+    out.mass_weight = part(2);
+    out.mass_depth = part(3);
+    out.outside_cells = host.back();
+    outside_.download(&out.outside_mass, 1);
+    return out;
   }
 
   double multiply(std::span<const HeadingBlend> blend, const CropGeometry& geometry, float outside,
@@ -414,15 +530,22 @@ class ThrustEngine final : public DeviceFilter::Engine {
   void run(const Kernel& kernel) {
     thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), cells_, kernel);
   }
+  [[nodiscard]] std::size_t coarse_slice() const {
+    return static_cast<std::size_t>(coarse_width_) * static_cast<std::size_t>(coarse_height_);
+  }
+  [[nodiscard]] std::size_t coarse_cells() const { return coarse_slice() * static_cast<std::size_t>(coarse_headings_); }
   [[nodiscard]] double sum() const {
     const float* p = belief_.data();
     return thrust::transform_reduce(Space::policy(), p, p + cells_, ToDouble{}, 0.0, thrust::plus<double>());
   }
 
   int width_, height_, headings_;
+  int coarse_width_ = 0, coarse_height_ = 0, coarse_headings_ = 1, frame_bins_ = 0;
   std::size_t slice_, cells_, frame_slice_ = 0;
   Buffer<float, Space> belief_, scratch_, frame_, tempered_, gps_, add_;
-  mutable Buffer<float, Space> coarse_;
+  Buffer<float, Space> coarse_;
+  Buffer<unsigned long long, Space> sums_;
+  Buffer<double, Space> outside_;
   mutable Buffer<double, Space> masses_;
   Buffer<Translation, Space> by_bin_;
   Buffer<HeadingBlend, Space> blend_;

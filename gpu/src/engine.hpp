@@ -5,11 +5,14 @@
 // filter.
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <span>
+#include <vector>
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/device_math.hpp"
+#include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/gpu/device_filter.hpp"
 
@@ -41,6 +44,27 @@ struct FrameSums {
   double z = 0, zr = 0;
 };
 
+/// How self-calibration judges the loaded frame against the pooled belief (what
+/// filter::add_frame_cells and filter::coarse_evidence do on the host): the coarse grid's bins'
+/// reading of the frame, where its cells lie in the frame, and the DepthHistogram's binning.
+struct JudgeSetup {
+  std::vector<HeadingBlend> blend;  ///< one per coarse bin
+  CropGeometry geometry;            ///< coarse cells to frame cells
+  int frame_stride = 1;             ///< the frame's bins binned: every frame_stride-th
+  float peak = 0;                   ///< the frame's largest log-probability
+  float max_depth = 0, per_nat = 0;
+  int last_bin = 0;
+  filter::DepthHistogram::Scale count_scale{}, mass_scale{};
+};
+
+/// The sums of a judgement: the frame's cells and the belief's mass in the crop by depth bin (in
+/// DepthHistogram's fixed point), and the belief's mass and coarse cells outside the crop.
+struct JudgeSums {
+  std::vector<std::int64_t> frame_weight, frame_depth, mass_weight, mass_depth;
+  double outside_mass = 0;
+  std::uint64_t outside_cells = 0;
+};
+
 class DeviceFilter::Engine {
  public:
   virtual ~Engine() = default;
@@ -64,9 +88,13 @@ class DeviceFilter::Engine {
   [[nodiscard]] virtual FrameSums frame_sums(float power, float peak) const = 0;
   /// The loaded frame's cells as exp(`exponent` (log p - `peak`)), 0 where p is.
   virtual void temper(float exponent, float peak) = 0;
-  /// The belief pooled onto self-calibration's coarse grid (`coarse` sized as
-  /// filter::coarse_belief_for says), copied to the host.
-  virtual void pool_coarse(filter::BeliefVolume& coarse) const = 0;
+  /// The belief pooled onto self-calibration's coarse grid (filter::coarse_belief_for's size;
+  /// math::pool_2x2 and math::pooled_weight), kept in the engine for judge().
+  virtual void pool_coarse() = 0;
+  /// The loaded frame's evidence against the pooled belief.
+  [[nodiscard]] virtual JudgeSums judge(const JudgeSetup& setup) = 0;
+  /// The pooled belief, copied to the host (for tests).
+  virtual void download_coarse(filter::BeliefVolume& coarse) const = 0;
   /// b *= (or, without `with_prior`, b =) the tempered frame sampled at each window cell and bin
   /// (`outside` where the cell lies outside the crop), times `gps_factor` (W x H; empty for none).
   /// Returns the belief's total.

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 
 #if defined(__CUDACC__)
 #define SEQLOC_HD __host__ __device__
@@ -134,6 +135,33 @@ SEQLOC_HD inline float pool_2x2(const float* slice, int width, int height, int c
   if (!right) return left;
   const float next = down ? a[u + 1] + a[u + 1 + width] : a[u + 1];
   return left + next;
+}
+
+/// A cell's terms in a DepthHistogram (self_calibration.hpp): its depth d = -r clamped to
+/// [0, max_depth], the bin d * per_nat (clamped to [0, last_bin]), and its weight w and w d in fixed
+/// point (w >= 0 and d >= 0, so adding 0.5 before the cast rounds half up).
+struct DepthTerm {
+  float depth;
+  int bin;
+  std::int64_t weight, depth_sum;
+};
+
+SEQLOC_HD inline float clamp_depth(float r, float max_depth) {
+  const float d = -r > 0.0f ? -r : 0.0f;
+  return d < max_depth ? d : max_depth;
+}
+
+SEQLOC_HD inline int depth_bin(float depth, float per_nat, int last_bin) {
+  const int b = static_cast<int>(depth * per_nat);
+  return b < 0 ? 0 : b > last_bin ? last_bin : b;
+}
+
+SEQLOC_HD inline DepthTerm depth_term(float r, float w, float max_depth, float per_nat, int last_bin,
+                                      double weight_scale, double depth_scale) {
+  const float d = clamp_depth(r, max_depth);
+  const double wd = w;
+  return {d, depth_bin(d, per_nat, last_bin), static_cast<std::int64_t>(wd * weight_scale + 0.5),
+          static_cast<std::int64_t>(wd * d * depth_scale + 0.5)};
 }
 
 }  // namespace seqloc::filter::math

@@ -60,6 +60,12 @@ class DepthHistogram {
   /// r[i] is, NaN included). The bins are found in SIMD, a block at a time: the filter's hot path.
   void add_each(std::span<const float> r, std::span<const float> w);
   void merge(const DepthHistogram& other);
+  /// The number of depth bins.
+  [[nodiscard]] static constexpr std::size_t bins() { return static_cast<std::size_t>(kMaxDepthNats / kBinNats) + 1; }
+  [[nodiscard]] Scale scale() const { return scale_; }
+  /// Adds per-bin sums made elsewhere (the CUDA backend's, with math::depth_term at this
+  /// histogram's scale): bins() weights and depth sums in fixed point.
+  void add_bins(std::span<const std::int64_t> weight, std::span<const std::int64_t> depth_sum);
   [[nodiscard]] double total() const;
   /// log sum_i w_i exp(kappa r_i) for each kappa (-inf where the histogram is empty).
   [[nodiscard]] std::vector<double> log_sum_exp(std::span<const double> kappas) const;

@@ -5,8 +5,8 @@
 // and the same results up to float rounding: motion, crop intake, ETU, self-calibration, MGR,
 // normalization, PAS and the sub-bin heading. The belief never leaves the device during a step;
 // what crosses to the host is a handful of scalars, the pose's neighbourhood for PAS, and (with
-// self-calibration on) the predicted belief pooled onto self-calibration's coarse grid, which
-// the host judges as the CPU filter does (1/32 of the belief at 256 headings).
+// self-calibration on) the evidence's depth histograms (4 x 4,001 fixed-point sums, made on the
+// device with the CPU filter's per-cell arithmetic), from which the host estimates the power.
 //
 // The kernels are written once over an execution space: Backend::cuda runs them on the GPU,
 // Backend::host runs the very same kernels one element at a time on the CPU. The host backend is
@@ -98,6 +98,8 @@ class DeviceFilter {
   filter::FrameResult weigh(const filter::PreparedFrame& frame, const filter::FrameWeighting* weighting,
                             bool calibrating);
   void retemper(bool held);
+  /// Self-calibration's evidence of the loaded frame against the pooled predicted belief.
+  [[nodiscard]] filter::CalibrationEvidence judge(const filter::PreparedFrame& frame, const filter::CropPose& crop);
   [[nodiscard]] filter::Pose refine(int u, int v, int k) const;
 
   filter::FilterConfig config_;
