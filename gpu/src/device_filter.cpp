@@ -5,6 +5,7 @@
 
 #include "seqloc/gpu/device_filter.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -270,15 +271,14 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   }
 
   // Normalization and MGR's blend with the road prior (SeqLocFilter::normalize).
-  std::vector<float> eps_q;
-  if (config_.mgr) {
-    eps_q =
-        filter::road_prior_log_q(road_distance_m, config_.width, config_.height, config_.headings, config_.mgr_sigma_m);
-    const auto eps = static_cast<float>(config_.mgr_epsilon);
-    for (float& l : eps_q) l = eps * std::exp(l);
+  if (config_.mgr && (road_.size() != road_distance_m.size() ||
+                      !std::equal(road_distance_m.begin(), road_distance_m.end(), road_.begin()))) {
+    // A window that has not moved keeps its road prior on the device.
+    engine_->set_road_prior(road_distance_m, config_.mgr_sigma_m, static_cast<float>(config_.mgr_epsilon));
+    road_.assign(road_distance_m.begin(), road_distance_m.end());
   }
   const auto keep = static_cast<float>((config_.mgr ? 1.0 - config_.mgr_epsilon : 1.0) / total);
-  const PeakCell peak = engine_->normalize(keep, eps_q);
+  const PeakCell peak = engine_->normalize(keep, config_.mgr);
   cached_min_ = peak.least;
   result.peak_log_belief = std::log(peak.value);
   result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), bin_heading_deg(peak.k, config_.headings)};

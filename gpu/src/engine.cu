@@ -9,6 +9,7 @@
 #include <thrust/functional.h>
 #include <thrust/iterator/counting_iterator.h>
 #include <thrust/pair.h>
+#include <thrust/reduce.h>
 #include <thrust/transform_reduce.h>
 
 #include <algorithm>
@@ -342,6 +343,24 @@ struct MultiplyKernel {
   }
 };
 
+struct RoadPriorGKernel {
+  const float* distance;
+  double* g;
+  double sigma;
+  SEQLOC_HD void operator()(std::size_t i) const { g[i] = filter::math::road_prior_g(distance[i], sigma); }
+};
+
+struct RoadPriorShareKernel {
+  const double* g;
+  float* share;
+  double z, n;
+  int headings;
+  float eps;
+  SEQLOC_HD void operator()(std::size_t i) const {
+    share[i] = filter::math::road_prior_share(g[i], z, n, headings, eps);
+  }
+};
+
 struct PositionMassKernel {
   const float* belief;
   double* out;
@@ -491,12 +510,20 @@ class ThrustEngine final : public DeviceFilter::Engine {
     return sum();
   }
 
-  PeakCell normalize(float keep, std::span<const float> add) override {
-    const float* plus = nullptr;
-    if (!add.empty()) {
-      add_.upload(add.data(), add.size());
-      plus = add_.data();
-    }
+  void set_road_prior(std::span<const float> distance_m, double sigma_m, float eps) override {
+    distance_.upload(distance_m.data(), distance_m.size());
+    road_g_.resize(slice_);
+    add_.resize(slice_);
+    thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), slice_,
+                       RoadPriorGKernel{distance_.data(), road_g_.data(), sigma_m});
+    const double* g = road_g_.data();
+    const double z = thrust::reduce(Space::policy(), g, g + slice_, 0.0, thrust::plus<double>());
+    thrust::for_each_n(Space::policy(), thrust::counting_iterator<std::size_t>(0), slice_,
+                       RoadPriorShareKernel{g, add_.data(), z, static_cast<double>(slice_), headings_, eps});
+  }
+
+  PeakCell normalize(float keep, bool mgr) override {
+    const float* plus = mgr ? add_.data() : nullptr;
     run(ScaleKernel{belief_.data(), plus, keep, slice_});
     const float* p = belief_.data();
     const auto best = static_cast<std::size_t>(thrust::max_element(Space::policy(), p, p + cells_) - p);
@@ -542,7 +569,8 @@ class ThrustEngine final : public DeviceFilter::Engine {
   int width_, height_, headings_;
   int coarse_width_ = 0, coarse_height_ = 0, coarse_headings_ = 1, frame_bins_ = 0;
   std::size_t slice_, cells_, frame_slice_ = 0;
-  Buffer<float, Space> belief_, scratch_, frame_, tempered_, gps_, add_;
+  Buffer<float, Space> belief_, scratch_, frame_, tempered_, gps_, add_, distance_;
+  Buffer<double, Space> road_g_;
   Buffer<float, Space> coarse_;
   Buffer<unsigned long long, Space> sums_;
   Buffer<double, Space> outside_;

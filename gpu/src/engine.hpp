@@ -100,8 +100,11 @@ class DeviceFilter::Engine {
   /// Returns the belief's total.
   virtual double multiply(std::span<const HeadingBlend> blend, const CropGeometry& geometry, float outside,
                           std::span<const float> gps_factor, bool with_prior) = 0;
-  /// b = b * keep + add[v][u] (add empty: b * keep); the largest cell and the least value.
-  virtual PeakCell normalize(float keep, std::span<const float> add) = 0;
+  /// MGR's share eps q of every window cell from the road distances (W x H): made on the device
+  /// (math::road_prior_share) and kept for normalize().
+  virtual void set_road_prior(std::span<const float> distance_m, double sigma_m, float eps) = 0;
+  /// b = b * keep, plus MGR's share with `mgr`; the largest cell and the least value.
+  virtual PeakCell normalize(float keep, bool mgr) = 0;
   /// sum over headings of each cell in [u0, u1] x [v0, v1], row-major, into `out`.
   virtual void position_masses(int u0, int v0, int u1, int v1, std::span<double> out) const = 0;
   [[nodiscard]] virtual float value(int u, int v, int k) const = 0;

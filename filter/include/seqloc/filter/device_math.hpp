@@ -40,6 +40,20 @@ SEQLOC_HD inline void displacement_cells(double forward_m, double left_m, double
   if (::fabs(dv - ::round(dv)) < 1e-9) dv = ::round(dv);
 }
 
+/// The road prior of MGR before normalization (conventions.md section 6, step 4):
+/// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road.
+SEQLOC_HD inline double road_prior_g(double distance_m, double sigma_m) {
+  return ::exp(-distance_m * distance_m / (2 * sigma_m * sigma_m));
+}
+
+/// MGR's share of a cell given g there, the sum z of g over the window's n cells and its R
+/// heading bins: eps q with q = (0.9 g / z + 0.1 / n) / R, through a float log as the CPU filter
+/// keeps it (road_prior_log_q).
+SEQLOC_HD inline float road_prior_share(double g, double z, double n, int headings, float eps) {
+  const double q = (0.9 * (z > 0 ? g / z : 0.0) + 0.1 / n) / headings;
+  return eps * ::expf(static_cast<float>(::log(q)));
+}
+
 /// A bilinear translation dst(u, v) = src(u + ou, v + ov) of a sw x sh source into a dw x dh
 /// destination: the integer and fractional parts of the offset and the destination cells whose
 /// source point lies in [0, sw - 1] x [0, sh - 1] (the others take a fill value).

@@ -24,6 +24,7 @@
 
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/config.hpp"
+#include "seqloc/filter/device_math.hpp"
 #include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/types.hpp"
 
@@ -84,7 +85,7 @@ inline constexpr std::size_t kEtuRouteFrames = 256;
 /// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road. The one definition the
 /// filter, the served road_prior layer and the Python module use.
 [[nodiscard]] inline double road_prior_g(double distance_m, double sigma_m) {
-  return std::exp(-distance_m * distance_m / (2 * sigma_m * sigma_m));
+  return math::road_prior_g(distance_m, sigma_m);
 }
 
 /// g of each distance, as float: the road_prior layer of a block of road distances (runs of equal

@@ -112,6 +112,7 @@ class DeviceFilter {
   std::optional<filter::Pose> last_estimate_;
   std::optional<float> cached_min_;
   std::vector<double> entropies_;
+  std::vector<float> road_;  ///< the road distances whose prior the engine holds
 };
 
 }  // namespace seqloc::gpu
