@@ -28,6 +28,7 @@
 #include "seqloc/core/error.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/gpu/device_filter.hpp"
 #include "seqloc/io/npy.hpp"
 #include "seqloc/io/results.hpp"
 #include "seqloc/io/route.hpp"
@@ -508,17 +509,20 @@ class PyRunFolder {
 class PyLocalizer {
  public:
   PyLocalizer(const std::string& cache, const py::dict& config, const std::string& mode, double volume_temperature,
-              double recentre_margin, const std::optional<std::string>& calibration, int lag)
+              double recentre_margin, const std::optional<std::string>& calibration, int lag, const std::string& device)
       : cache_(std::make_unique<raster::CacheReader>(cache)) {
     if (lag < 0) throw py::value_error("lag: must be >= 0 frames, got " + std::to_string(lag));
     if (mode != "seqloc" && mode != "online") throw py::value_error("mode: 'seqloc' or 'online', got '" + mode + "'");
+    const auto where = pipeline::device_from_name(device);
+    if (!where) throw py::value_error("device: 'cpu', 'cuda' or 'cuda-host', got '" + device + "'");
     options_.filter = config_from(config);
     options_.volume_temperature = volume_temperature;
     options_.recentre_margin = recentre_margin;
     if (calibration) pipeline::apply_calibration_file(*calibration, options_);
     options_.validate();
+    pipeline::check_device(*where, options_.filter);
     localizer_ = std::make_unique<pipeline::SequentialLocalizer>(*cache_, options_.filter, mode == "online",
-                                                                 recentre_margin, lag);
+                                                                 recentre_margin, lag, *where);
   }
 
   Pose step(const py::object& volume_in, const py::object& odometry_in, const py::object& crop_lat,
@@ -674,7 +678,11 @@ void register_errors(py::module_& m) {
     } catch (const raster::CropError& e) {
       PyErr_SetString(request.ptr(), e.what());
     } catch (const filter::FilterError& e) {
-      PyErr_SetString(e.category() == seqloc::ErrorCategory::usage ? usage.ptr() : filter_error.ptr(), e.what());
+      // A device that cannot run (io) is no frame's fault.
+      PyErr_SetString(e.category() == seqloc::ErrorCategory::usage ? usage.ptr()
+                      : e.category() == seqloc::ErrorCategory::io  ? io.ptr()
+                                                                   : filter_error.ptr(),
+                      e.what());
     } catch (const seqloc::Error& e) {
       switch (e.category()) {
         case seqloc::ErrorCategory::usage:
@@ -950,15 +958,17 @@ void bind_localizer(py::module_& m) {
                           "seqloc localize's seqloc (or online) mode one frame at a time over a region cache: it "
                           "owns the window, its road distances and re-centring (docs/python.md)")
       .def(py::init<const std::string&, const py::dict&, const std::string&, double, double,
-                    const std::optional<std::string>&, int>(),
+                    const std::optional<std::string>&, int, const std::string&>(),
            py::arg("cache"), py::arg("config") = py::dict(), py::arg("mode") = "seqloc",
            py::arg("volume_temperature") = pipeline::LocalizeOptions{}.volume_temperature,
            py::arg("recentre_margin") = pipeline::LocalizeOptions{}.recentre_margin,
-           py::arg("calibration") = py::none(), py::arg("lag") = 0,
+           py::arg("calibration") = py::none(), py::arg("lag") = 0, py::kw_only(), py::arg("device") = "cpu",
            "cache: a region cache; config: filter settings by name (Filter.settings()); mode: 'seqloc' or 'online'; "
            "calibration: a calibration.json from seqloc calibrate (its temperature replaces volume_temperature); "
            "lag: fixed-lag smoothing, each frame's final pose given the `lag` frames after it too "
-           "(final_poses(), then finish())")
+           "(final_poses(), then finish()); device: where the filter runs, 'cpu', 'cuda' (the GPU; seqloc.IOError "
+           "saying why where none is usable) or 'cuda-host' (the CUDA kernels on the CPU, for checking): "
+           "docs/gpu.md")
       .def("step", &PyLocalizer::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
            py::kw_only(), py::arg("crop_lat") = py::none(), py::arg("crop_lon") = py::none(),
            py::arg("crop_x") = py::none(), py::arg("crop_y") = py::none(), py::arg("gps") = py::none(),
@@ -998,4 +1008,17 @@ PYBIND11_MODULE(_seqloc, m) {
   bind_cache(m);
   bind_filter(m);
   bind_localizer(m);
+  m.def(
+      "cuda_status",
+      [] {
+        const seqloc::gpu::CudaStatus s = seqloc::gpu::cuda_status();
+        py::dict d;
+        d["built"] = seqloc::gpu::built_with_cuda();
+        d["usable"] = s.usable;
+        d["reason"] = s.reason;
+        d["device"] = s.device_name;
+        return d;
+      },
+      "Whether the filter's CUDA backend can run here (Localizer(device='cuda')): {'built': built with CUDA, "
+      "'usable': a GPU it can use, 'reason': why not, 'device': the GPU's name}");
 }

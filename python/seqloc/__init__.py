@@ -30,6 +30,7 @@ from ._seqloc import (
     UsageError as UsageError,
     WindowPose as WindowPose,
     __version__ as __version__,
+    cuda_status as cuda_status,
 )
 
 __all__ = [
@@ -53,4 +54,5 @@ __all__ = [
     "RunFolder",
     "UsageError",
     "WindowPose",
+    "cuda_status",
 ]

@@ -254,6 +254,8 @@ class Localizer:
         recentre_margin: float = ...,
         calibration: str | None = None,
         lag: int = 0,
+        *,
+        device: str = "cpu",
     ) -> None: ...
     def step(
         self,
@@ -278,3 +280,5 @@ class Localizer:
     def window_origin(self) -> tuple[int, int]: ...
     @property
     def config(self) -> dict[str, Any]: ...
+
+def cuda_status() -> dict[str, Any]: ...

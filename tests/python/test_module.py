@@ -336,6 +336,38 @@ class LocalizerAsLocalize(unittest.TestCase):
             with self.assertRaises(ValueError):
                 seqloc.Localizer(CACHE, lag=-1)
 
+    def test_the_cuda_backend_gives_the_cpu_poses_or_says_why_it_cannot_run(self):
+        status = seqloc.cuda_status()
+        self.assertEqual(set(status), {"built", "usable", "reason", "device"})
+        with self.assertRaises(ValueError):
+            seqloc.Localizer(CACHE, device="tpu")
+        if not status["usable"]:
+            self.assertTrue(status["reason"])
+            with self.assertRaises(seqloc.IOError) as refused:
+                seqloc.Localizer(CACHE, device="cuda")
+            self.assertIn(status["reason"], str(refused.exception))
+        if not status["built"]:
+            with self.assertRaises(seqloc.IOError):
+                seqloc.Localizer(CACHE, device="cuda-host")
+            return
+        # The CUDA kernels run on the CPU ("cuda-host"; "cuda" as well where a GPU is usable): the
+        # CPU filter's poses, frame for frame.
+        devices = ["cuda-host"] + (["cuda"] if status["usable"] else [])
+        with tempfile.TemporaryDirectory() as d:
+            route, rows = self.write_route(d, frames=8)
+            config = {"width": 96, "height": 96, "headings": 64}
+            localizers = {name: seqloc.Localizer(CACHE, config, device=name) for name in ["cpu"] + devices}
+            for row in rows:
+                vol = np.load(os.path.join(route, row[2]))
+                poses = {name: loc.step(vol, (row[5], row[6], row[7]), crop_lat=float(row[3]), crop_lon=float(row[4]))
+                         for name, loc in localizers.items()}
+                for name in devices:
+                    where = f"{name} frame {row[0]}"
+                    self.assertAlmostEqual(poses[name].x_m, poses["cpu"].x_m, delta=0.01, msg=where)
+                    self.assertAlmostEqual(poses[name].y_m, poses["cpu"].y_m, delta=0.01, msg=where)
+                    self.assertAlmostEqual(poses[name].heading_deg, poses["cpu"].heading_deg, delta=0.01, msg=where)
+                    self.assertAlmostEqual(poses[name].volume_power, poses["cpu"].volume_power, delta=1e-5, msg=where)
+
     @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
     def test_a_pytorch_loop_gives_the_poses_of_seqloc_localize(self):
         try:
@@ -508,7 +540,11 @@ class TypingStub(unittest.TestCase):
         module = seqloc._seqloc
         runtime_classes = {name for name, v in vars(module).items() if inspect.isclass(v)}
         self.assertEqual(set(stub_classes), runtime_classes)
-        self.assertEqual(set(seqloc.__all__), runtime_classes)
+        stub_functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+        runtime_functions = {name for name, v in vars(module).items()
+                             if inspect.isbuiltin(v) and not name.startswith("_")}
+        self.assertEqual(stub_functions, runtime_functions)
+        self.assertEqual(set(seqloc.__all__), runtime_classes | runtime_functions)
         for name, node in stub_classes.items():
             cls = getattr(module, name)
             if issubclass(cls, BaseException):
