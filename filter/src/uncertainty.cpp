@@ -1,0 +1,132 @@
+// A pose's uncertainty from its belief (uncertainty.hpp).
+
+#include "seqloc/filter/uncertainty.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "seqloc/core/angles.hpp"
+#include "seqloc/core/thread_pool.hpp"
+#include "seqloc/core/units.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+using core::kCellM;
+
+// The position marginal (W x H) and the heading marginal (R), in double.
+void marginals(const BeliefVolume& belief, int threads, std::vector<double>& position, std::vector<double>& heading) {
+  const int w = belief.width(), h = belief.height(), r = belief.headings();
+  position.assign(belief.slice_cells(), 0.0);
+  heading.assign(static_cast<std::size_t>(r), 0.0);
+  core::parallel_chunks(h, threads, [&](int v0, int v1, int) {
+    for (int k = 0; k < r; ++k) {
+      const float* slice = belief.slice(k);
+      for (std::size_t i = static_cast<std::size_t>(v0) * w; i < static_cast<std::size_t>(v1) * w; ++i) {
+        position[i] += slice[i];
+      }
+    }
+  });
+  core::parallel_chunks(r, threads, [&](int k0, int k1, int) {
+    for (int k = k0; k < k1; ++k) {
+      const float* slice = belief.slice(k);
+      double s = 0;
+      for (std::size_t i = 0; i < belief.slice_cells(); ++i) s += slice[i];
+      heading[static_cast<std::size_t>(k)] = s;
+    }
+  });
+}
+
+// The mass of `position` within `radius_m` of window cell (u0, v0).
+double mass_within(const std::vector<double>& position, int width, int height, double u0, double v0, double radius_m) {
+  const double radius_cells = radius_m / kCellM;
+  double sum = 0;
+  const int vlo = std::max(0, static_cast<int>(std::floor(v0 - radius_cells)));
+  const int vhi = std::min(height - 1, static_cast<int>(std::ceil(v0 + radius_cells)));
+  const int ulo = std::max(0, static_cast<int>(std::floor(u0 - radius_cells)));
+  const int uhi = std::min(width - 1, static_cast<int>(std::ceil(u0 + radius_cells)));
+  for (int v = vlo; v <= vhi; ++v)
+    for (int u = ulo; u <= uhi; ++u) {
+      const double du = u - u0, dv = v - v0;
+      if (du * du + dv * dv <= radius_cells * radius_cells) sum += position[static_cast<std::size_t>(v) * width + u];
+    }
+  return sum;
+}
+
+double chi2_2(double p) { return -2 * std::log1p(-p); }
+
+}  // namespace
+
+PoseUncertainty pose_uncertainty(const BeliefVolume& belief, const Pose& estimate, int threads) {
+  std::vector<double> position, heading;
+  marginals(belief, threads, position, heading);
+  const int w = belief.width(), h = belief.height();
+  double total = 0, see = 0, sen = 0, snn = 0;
+  double far_best = -1;
+  int far_u = 0, far_v = 0;
+  const double far_cells = kSecondModeMinDistanceM / kCellM;
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      const double m = position[static_cast<std::size_t>(v) * w + u];
+      const double du = u - estimate.u, dv = v - estimate.v;
+      const double e = du * kCellM, n = -dv * kCellM;
+      total += m;
+      see += m * e * e;
+      sen += m * e * n;
+      snn += m * n * n;
+      if (du * du + dv * dv > far_cells * far_cells && m > far_best) {
+        far_best = m;
+        far_u = u;
+        far_v = v;
+      }
+    }
+  PoseUncertainty out;
+  if (!(total > 0)) return out;
+  // A cell's own extent: the position is uniform within the estimate's cell (variance cell^2 / 12
+  // on each axis), so that a belief on one cell does not claim to know the position exactly.
+  const double quantization = kCellM * kCellM / 12;
+  out.cov_ee_m2 = see / total + quantization;
+  out.cov_en_m2 = sen / total;
+  out.cov_nn_m2 = snn / total + quantization;
+  out.mass_within_5m = mass_within(position, w, h, estimate.u, estimate.v, kNearM) / total;
+  if (far_best > 0) {
+    out.second_mode_share = mass_within(position, w, h, far_u, far_v, kNearM) / total;
+    out.second_mode_distance_m = std::hypot(far_u - estimate.u, far_v - estimate.v) * kCellM;
+    out.multimodal = out.second_mode_share >= kSecondModeShare;
+  }
+  double heading_total = 0, heading_var = 0;
+  for (int k = 0; k < belief.headings(); ++k) {
+    const double d = std::remainder(belief.bin_heading_deg(k) - estimate.heading_deg, 360.0);
+    heading_total += heading[static_cast<std::size_t>(k)];
+    heading_var += heading[static_cast<std::size_t>(k)] * d * d;
+  }
+  // A bin's own width likewise (uniform within it).
+  const double bin_deg = 360.0 / belief.headings();
+  out.heading_sd_deg = std::sqrt(heading_var / heading_total + bin_deg * bin_deg / 12);
+  return out;
+}
+
+Ellipse covariance_ellipse(double cov_ee, double cov_en, double cov_nn, double p) {
+  const double mean = (cov_ee + cov_nn) / 2, half = std::hypot((cov_ee - cov_nn) / 2, cov_en);
+  const double major = std::max(mean + half, 0.0), minor = std::max(mean - half, 0.0);
+  const double scale = chi2_2(p);
+  // The major axis' direction (east, north): an eigenvector of [[ee, en], [en, nn]] for `major`.
+  double e = cov_en, n = major - cov_ee;
+  if (std::abs(e) < 1e-300 && std::abs(n) < 1e-300) {
+    e = cov_ee >= cov_nn ? 1.0 : 0.0;
+    n = cov_ee >= cov_nn ? 0.0 : 1.0;
+  }
+  double bearing = std::atan2(e, n) / core::kDegToRad;
+  bearing = std::fmod(bearing + 360.0, 180.0);
+  return {std::sqrt(scale * major), std::sqrt(scale * minor), bearing};
+}
+
+bool inside_ellipse(double cov_ee, double cov_en, double cov_nn, double d_east, double d_north, double p) {
+  const double det = cov_ee * cov_nn - cov_en * cov_en;
+  if (!(det > 0)) return d_east == 0 && d_north == 0;
+  const double q = (cov_nn * d_east * d_east - 2 * cov_en * d_east * d_north + cov_ee * d_north * d_north) / det;
+  return q <= chi2_2(p);
+}
+
+}  // namespace seqloc::filter
