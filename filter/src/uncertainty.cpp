@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "seqloc/core/angles.hpp"
@@ -15,27 +16,30 @@ namespace {
 
 using core::kCellM;
 
-// The position marginal (W x H) and the heading marginal (R), in double.
+// The position marginal (W x H) and the heading marginal (R), in double, in one pass over the
+// belief: rows in parallel, each row's heading sums kept apart and added in row order, so that
+// the sums do not depend on the number of threads.
 void marginals(const BeliefVolume& belief, int threads, std::vector<double>& position, std::vector<double>& heading) {
   const int w = belief.width(), h = belief.height(), r = belief.headings();
   position.assign(belief.slice_cells(), 0.0);
   heading.assign(static_cast<std::size_t>(r), 0.0);
+  std::vector<double> by_row(static_cast<std::size_t>(h) * static_cast<std::size_t>(r));
   core::parallel_chunks(h, threads, [&](int v0, int v1, int) {
-    for (int k = 0; k < r; ++k) {
-      const float* slice = belief.slice(k);
-      for (std::size_t i = static_cast<std::size_t>(v0) * w; i < static_cast<std::size_t>(v1) * w; ++i) {
-        position[i] += slice[i];
+    for (int v = v0; v < v1; ++v) {
+      double* cells = position.data() + static_cast<std::size_t>(v) * w;
+      for (int k = 0; k < r; ++k) {
+        const float* row = belief.slice(k) + static_cast<std::size_t>(v) * w;
+        double s = 0;
+        for (int u = 0; u < w; ++u) {
+          cells[u] += row[u];
+          s += row[u];
+        }
+        by_row[static_cast<std::size_t>(v) * r + k] = s;
       }
     }
   });
-  core::parallel_chunks(r, threads, [&](int k0, int k1, int) {
-    for (int k = k0; k < k1; ++k) {
-      const float* slice = belief.slice(k);
-      double s = 0;
-      for (std::size_t i = 0; i < belief.slice_cells(); ++i) s += slice[i];
-      heading[static_cast<std::size_t>(k)] = s;
-    }
-  });
+  for (int v = 0; v < h; ++v)
+    for (int k = 0; k < r; ++k) heading[static_cast<std::size_t>(k)] += by_row[static_cast<std::size_t>(v) * r + k];
 }
 
 // The mass of `position` within `radius_m` of window cell (u0, v0).
@@ -56,6 +60,57 @@ double mass_within(const std::vector<double>& position, int width, int height, d
 
 double chi2_2(double p) { return -2 * std::log1p(-p); }
 
+// Whether the marginal falls below half of the lower end's value somewhere on the segment between
+// cells a and b (a valley: two places, not one ridge along a road).
+bool valley_between(const std::vector<double>& position, int width, int ua, int va, int ub, int vb) {
+  const double low = 0.5 * std::min(position[static_cast<std::size_t>(va) * width + ua],
+                                    position[static_cast<std::size_t>(vb) * width + ub]);
+  const int steps = std::max(std::abs(ub - ua), std::abs(vb - va));
+  for (int i = 1; i < steps; ++i) {
+    const double t = static_cast<double>(i) / steps;
+    const auto u = static_cast<int>(std::lround(ua + t * (ub - ua)));
+    const auto v = static_cast<int>(std::lround(va + t * (vb - va)));
+    if (position[static_cast<std::size_t>(v) * width + u] < low) return true;
+  }
+  return false;
+}
+
+struct Cell {
+  double mass;
+  int u, v;
+};
+
+// The second mode: among the marginal's local maxima (over their 3 x 3 cells) farther than
+// kSecondModeMinDistanceM from (u0, v0), the largest with a valley between it and the marginal's
+// peak near the estimate.
+std::optional<Cell> second_mode(const std::vector<double>& position, int w, int h, double u0, double v0) {
+  const double far_cells = kSecondModeMinDistanceM / kCellM;
+  std::vector<Cell> maxima;
+  Cell home{-1, static_cast<int>(std::lround(u0)), static_cast<int>(std::lround(v0))};
+  home.u = std::clamp(home.u, 0, w - 1);
+  home.v = std::clamp(home.v, 0, h - 1);
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      const double m = position[static_cast<std::size_t>(v) * w + u];
+      const double du = u - u0, dv = v - v0;
+      if (du * du + dv * dv <= far_cells * far_cells) {
+        if (m > home.mass) home = {m, u, v};
+        continue;
+      }
+      bool peak = m > 0;
+      for (int y = std::max(0, v - 1); y <= std::min(h - 1, v + 1) && peak; ++y)
+        for (int x = std::max(0, u - 1); x <= std::min(w - 1, u + 1) && peak; ++x)
+          peak = position[static_cast<std::size_t>(y) * w + x] <= m;
+      if (peak) maxima.push_back({m, u, v});
+    }
+  std::sort(maxima.begin(), maxima.end(), [](const Cell& a, const Cell& b) { return a.mass > b.mass; });
+  constexpr std::size_t kTried = 16;  // a ridge's plateau has a few; the first separated one decides
+  for (std::size_t i = 0; i < std::min(kTried, maxima.size()); ++i) {
+    if (valley_between(position, w, home.u, home.v, maxima[i].u, maxima[i].v)) return maxima[i];
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 PoseUncertainty pose_uncertainty(const BeliefVolume& belief, const Pose& estimate, int threads) {
@@ -63,23 +118,14 @@ PoseUncertainty pose_uncertainty(const BeliefVolume& belief, const Pose& estimat
   marginals(belief, threads, position, heading);
   const int w = belief.width(), h = belief.height();
   double total = 0, see = 0, sen = 0, snn = 0;
-  double far_best = -1;
-  int far_u = 0, far_v = 0;
-  const double far_cells = kSecondModeMinDistanceM / kCellM;
   for (int v = 0; v < h; ++v)
     for (int u = 0; u < w; ++u) {
       const double m = position[static_cast<std::size_t>(v) * w + u];
-      const double du = u - estimate.u, dv = v - estimate.v;
-      const double e = du * kCellM, n = -dv * kCellM;
+      const double e = (u - estimate.u) * kCellM, n = -(v - estimate.v) * kCellM;
       total += m;
       see += m * e * e;
       sen += m * e * n;
       snn += m * n * n;
-      if (du * du + dv * dv > far_cells * far_cells && m > far_best) {
-        far_best = m;
-        far_u = u;
-        far_v = v;
-      }
     }
   PoseUncertainty out;
   if (!(total > 0)) return out;
@@ -90,9 +136,9 @@ PoseUncertainty pose_uncertainty(const BeliefVolume& belief, const Pose& estimat
   out.cov_en_m2 = sen / total;
   out.cov_nn_m2 = snn / total + quantization;
   out.mass_within_5m = mass_within(position, w, h, estimate.u, estimate.v, kNearM) / total;
-  if (far_best > 0) {
-    out.second_mode_share = mass_within(position, w, h, far_u, far_v, kNearM) / total;
-    out.second_mode_distance_m = std::hypot(far_u - estimate.u, far_v - estimate.v) * kCellM;
+  if (const auto other = second_mode(position, w, h, estimate.u, estimate.v)) {
+    out.second_mode_share = mass_within(position, w, h, other->u, other->v, kNearM) / total;
+    out.second_mode_distance_m = std::hypot(other->u - estimate.u, other->v - estimate.v) * kCellM;
     out.multimodal = out.second_mode_share >= kSecondModeShare;
   }
   double heading_total = 0, heading_var = 0;

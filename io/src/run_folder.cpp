@@ -46,7 +46,8 @@ nlohmann::ordered_json metrics_json(const Metrics& m) {
 std::string poses_csv(const RouteResult& r) {
   std::ostringstream csv;
   csv << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,volume_power,relocalized,position_error_m,"
-         "heading_error_deg,lateral_error_m,longitudinal_error_m,region\n";
+         "heading_error_deg,lateral_error_m,longitudinal_error_m,region,cov_xx_m2,cov_xy_m2,cov_yy_m2,heading_sd_deg,"
+         "mass_5m,second_mode_share,multimodal\n";
   char line[512];
   for (const auto& p : r.poses) {
     std::snprintf(line, sizeof line, "%.6f,%.9f,%.9f,%.4f,%.3f,%.3f,%.6f,%.6f,%.6f,%d,", p.timestamp_s, p.lat_deg,
@@ -54,7 +55,15 @@ std::string poses_csv(const RouteResult& r) {
                   p.relocalized ? 1 : 0);
     csv << core::csv_field(p.frame) << "," << line << optional_number(p.position_error_m, 4) << ","
         << optional_number(p.heading_error_deg, 4) << "," << optional_number(p.lateral_error_m, 4) << ","
-        << optional_number(p.longitudinal_error_m, 4) << "," << core::csv_field(p.region) << "\n";
+        << optional_number(p.longitudinal_error_m, 4) << "," << core::csv_field(p.region);
+    if (p.uncertainty) {
+      const auto& u = *p.uncertainty;
+      std::snprintf(line, sizeof line, ",%.6g,%.6g,%.6g,%.4f,%.5f,%.5f,%d", u.cov_xx_m2, u.cov_xy_m2, u.cov_yy_m2,
+                    u.heading_sd_deg, u.mass_within_5m, u.second_mode_share, u.multimodal ? 1 : 0);
+      csv << line << "\n";
+    } else {
+      csv << ",,,,,,,\n";
+    }
   }
   return csv.str();
 }
@@ -110,6 +119,14 @@ nlohmann::ordered_json track_geojson(const RouteResult& r) {
     if (p.lateral_error_m) props["lateral_error_m"] = *p.lateral_error_m;
     if (p.longitudinal_error_m) props["longitudinal_error_m"] = *p.longitudinal_error_m;
     if (p.truth) props["truth"] = {p.truth->lon_deg, p.truth->lat_deg};
+    if (p.uncertainty) {
+      const auto& u = *p.uncertainty;
+      props["covariance_m2"] = {{u.cov_xx_m2, u.cov_xy_m2}, {u.cov_xy_m2, u.cov_yy_m2}};
+      props["heading_sd_deg"] = u.heading_sd_deg;
+      props["mass_within_5m"] = u.mass_within_5m;
+      props["second_mode_share"] = u.second_mode_share;
+      props["multimodal"] = u.multimodal;
+    }
     features.push_back({{"type", "Feature"},
                         {"geometry", {{"type", "Point"}, {"coordinates", {p.lon_deg, p.lat_deg}}}},
                         {"properties", props}});
@@ -196,21 +213,32 @@ std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
       throw DataError(path.string() + ":" + std::to_string(line) + ": '" + s + "' is not a number");
     }
   };
+  bool with_uncertainty = false;  // the header names the uncertainty's columns (after the region)
   while (auto record = csv.next()) {
     line = record->line;
-    if (line == 1) continue;  // the header
     std::vector<std::string>& f = record->fields;
-    // 16 fields, the region last; 15 in files written before the region was, 14 before
-    // volume_power was (read as power 1). In files written before fields were quoted, a region
-    // name with commas stands unquoted: its parts are joined again.
-    if (f.size() == 14) f.insert(f.begin() + 9, "1");
-    if (f.size() > 16) {
-      for (std::size_t i = 16; i < f.size(); ++i) f[15] += "," + f[i];
-      f.resize(16);
+    if (line == 1) {  // the header
+      with_uncertainty = f.size() == 23 && f[22] == "multimodal";
+      continue;
     }
-    if (f.size() != 15 && f.size() != 16) {
-      throw DataError(path.string() + ":" + std::to_string(line) + ": " + std::to_string(f.size()) +
-                      " fields, expected 16 (a poses.csv written by seqloc localize)");
+    if (with_uncertainty) {
+      if (f.size() != 23) {
+        throw DataError(path.string() + ":" + std::to_string(line) + ": " + std::to_string(f.size()) +
+                        " fields, expected 23 (a poses.csv written by seqloc localize)");
+      }
+    } else {
+      // 16 fields, the region last; 15 in files written before the region was, 14 before
+      // volume_power was (read as power 1). In files written before fields were quoted, a region
+      // name with commas stands unquoted: its parts are joined again.
+      if (f.size() == 14) f.insert(f.begin() + 9, "1");
+      if (f.size() > 16) {
+        for (std::size_t i = 16; i < f.size(); ++i) f[15] += "," + f[i];
+        f.resize(16);
+      }
+      if (f.size() != 15 && f.size() != 16) {
+        throw DataError(path.string() + ":" + std::to_string(line) + ": " + std::to_string(f.size()) +
+                        " fields, expected 16 (a poses.csv written by seqloc localize)");
+      }
     }
     FramePose p;
     p.frame = f[0];
@@ -228,7 +256,18 @@ std::vector<FramePose> read_poses_csv(const std::filesystem::path& path) {
     p.heading_error_deg = number(f[12]);
     p.lateral_error_m = number(f[13]);
     p.longitudinal_error_m = number(f[14]);
-    if (f.size() == 16) p.region = f[15];
+    if (f.size() >= 16) p.region = f[15];
+    if (with_uncertainty && !f[16].empty()) {
+      FramePose::Uncertainty u;
+      u.cov_xx_m2 = number(f[16]).value_or(0);
+      u.cov_xy_m2 = number(f[17]).value_or(0);
+      u.cov_yy_m2 = number(f[18]).value_or(0);
+      u.heading_sd_deg = number(f[19]).value_or(0);
+      u.mass_within_5m = number(f[20]).value_or(0);
+      u.second_mode_share = number(f[21]).value_or(0);
+      u.multimodal = f[22] == "1";
+      p.uncertainty = u;
+    }
     poses.push_back(std::move(p));
   }
   return poses;

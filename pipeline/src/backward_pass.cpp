@@ -32,11 +32,14 @@ void BackwardPass::start(const StepRecord& last, raster::CacheReader& region) {
 }
 
 FrameEstimate BackwardPass::estimate(const filter::BeliefVolume& alpha, const StepRecord& record) {
-  const filter::FrameResult r = filter::smoothed_result(alpha, filter_.belief(), config_);
+  // The smoothed posterior: the uncertainty is its own, not the forward filter's.
+  if (!posterior_) posterior_.emplace(config_.width, config_.height, config_.headings);
+  const filter::FrameResult r = filter::smoothed_result(alpha, filter_.belief(), config_, &*posterior_);
   FrameEstimate e = record.filtered;
   e.x_m = window_.x_of(r.pose.u);
   e.y_m = window_.y_of(r.pose.v);
   e.grid_heading_deg = r.pose.heading_deg;
+  e.uncertainty = uncertainty_of(*posterior_, r.pose, config_.threads);
   return e;
 }
 

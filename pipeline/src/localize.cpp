@@ -15,6 +15,7 @@
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/filter/uncertainty.hpp"
 #include "seqloc/io/npy.hpp"
 #include "seqloc/io/observation.hpp"
 #include "seqloc/matcher/calibration.hpp"
@@ -221,8 +222,15 @@ void check_crops(const io::Route& route, const raster::RegionGrid& grid, const o
   }
 }
 
+io::FramePose::Uncertainty uncertainty_of(const filter::BeliefVolume& belief, const filter::Pose& estimate,
+                                          int threads) {
+  const filter::PoseUncertainty u = filter::pose_uncertainty(belief, estimate, threads);
+  return {u.cov_ee_m2, u.cov_en_m2, u.cov_nn_m2, u.heading_sd_deg, u.mass_within_5m, u.second_mode_share, u.multimodal};
+}
+
 io::FramePose frame_pose(const io::RouteFrame& f, const FrameEstimate& e, const osm::RegionProjection& projection) {
   io::FramePose pose;
+  pose.uncertainty = e.uncertainty;
   pose.entropy = e.entropy;
   pose.etu_weight = e.etu_weight;
   pose.volume_power = e.volume_power;

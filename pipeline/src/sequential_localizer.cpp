@@ -71,6 +71,9 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
   e.etu_weight = r.etu_weight;
   e.volume_power = r.volume_power;
   e.relocalized = r.relocalized;
+  // With a lag, the estimates handed out are the backward pass's, with the smoothed posterior's
+  // uncertainty.
+  if (uncertainty_ && lag_ == 0) e.uncertainty = uncertainty_of(filter_->belief(), r.pose, config_.threads);
   last_ = StepRecord{{window_.origin_u(), window_.origin_v()}, {}, crop_pose, odometry, fix, r.weighting, e};
   // Keep the window on the vehicle.
   keep_in_window(r.pose.u, r.pose.v);

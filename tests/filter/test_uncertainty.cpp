@@ -93,6 +93,23 @@ TEST(Uncertainty, TwoPlacesFortyMetresApartAreFlaggedAndTheCovarianceSpansThem) 
   EXPECT_NEAR(one.second_mode_share, 0.05, 0.005);
 }
 
+TEST(Uncertainty, ARidgeAlongARoadIsOnePlaceNotTwo) {
+  // A long ridge (sigma 20 m along, 1 m across, turned 30 degrees from east): its far cells hold
+  // much of the mass within 5 m of them, but no valley parts them from the estimate.
+  BeliefVolume b = empty(240, 240, 4);
+  const double c = std::cos(30 * M_PI / 180), s = std::sin(30 * M_PI / 180);
+  const double se = std::sqrt(400 * c * c + 1 * s * s), sn = std::sqrt(400 * s * s + 1 * c * c);
+  const double rho = (400 - 1) * c * s / (se * sn);
+  add_gaussian(b, 120, 120, se, sn, rho, 1.0);
+  const PoseUncertainty u = pose_uncertainty(b, {120, 120, 0});
+  EXPECT_FALSE(u.multimodal);
+  EXPECT_EQ(u.second_mode_share, 0.0);
+  // The covariance says how long the ridge is instead: 400 m^2 along it.
+  const Ellipse e = covariance_ellipse(u.cov_ee_m2, u.cov_en_m2, u.cov_nn_m2, 0.95);
+  EXPECT_NEAR(e.major_m, std::sqrt(5.991465 * (400 + kQuantization)), 0.03 * e.major_m);
+  EXPECT_NEAR(e.major_bearing_deg, 60, 0.5);  // 30 degrees north of east
+}
+
 TEST(Uncertainty, HeadingSpreadIsTheWrappedSdAboutTheEstimate) {
   BeliefVolume b = empty(16, 16, 72);  // 5 degree bins
   const double sd = 10;

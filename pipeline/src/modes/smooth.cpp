@@ -127,6 +127,7 @@ void SmoothMode::run(FramePrefetcher& frames) {
   {
     SequentialLocalizer forward(cache_of(0), options.filter, /*online=*/false, options.recentre_margin, /*lag=*/0,
                                 options.device);
+    forward.without_uncertainty();  // each frame's comes from its smoothed posterior
     std::size_t stretch = 0;
     for (std::size_t t = 0; t < n; ++t) {
       const io::RouteFrame& f = route.frames[t];

@@ -9,10 +9,12 @@
 // - the heading standard deviation about the estimate's heading, from the heading marginal, the
 //   differences wrapped into [-180, 180);
 // - the mass within 5 m of the estimate;
-// - the second mode: the marginal's largest cell farther than kSecondModeMinDistanceM from the
-//   estimate, the mass within kNearM of it, and whether that share is at least
+// - the second mode: the largest local maximum of the marginal farther than
+//   kSecondModeMinDistanceM from the estimate with a valley between it and the estimate's peak
+//   (the marginal below half the lower peak somewhere on the segment between them: two places,
+//   not one ridge along a road), the mass within kNearM of it, and whether that share is at least
 //   kSecondModeShare (multimodal: the covariance then spans both places, and a fusion stack
-//   should not take the pose as one Gaussian; docs/ros.md).
+//   should not take the pose as one Gaussian).
 
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/types.hpp"

@@ -45,6 +45,17 @@ struct FramePose {
   std::optional<Truth> truth;
   /// The region (cache file stem) whose CRS x_m, y_m and the errors are in.
   std::string region;
+  /// How far to trust the pose, from the belief it came from (filter/uncertainty.hpp): the modes
+  /// with a belief (online, seqloc, smooth) give it, single and offline do not.
+  struct Uncertainty {
+    double cov_xx_m2 = 0, cov_xy_m2 = 0,
+           cov_yy_m2 = 0;  ///< position covariance along the region's x (east) and y (north)
+    double heading_sd_deg = 0;
+    double mass_within_5m = 0;
+    double second_mode_share = 0;
+    bool multimodal = false;
+  };
+  std::optional<Uncertainty> uncertainty;
 };
 
 struct RouteResult {

@@ -54,6 +54,7 @@ class BackwardPass {
   filter::FilterConfig config_;
   RegionWindow window_;
   filter::BackwardFilter filter_;
+  std::optional<filter::BeliefVolume> posterior_;  ///< the last estimate's smoothed posterior
 };
 
 /// The forward filter resumed from a belief it had, repeating its recorded steps exactly: the same

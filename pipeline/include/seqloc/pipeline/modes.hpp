@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "seqloc/pipeline/frame_prefetcher.hpp"
@@ -28,7 +29,14 @@ struct FrameEstimate {
   double etu_weight = 1;
   double volume_power = 1;  ///< self-calibration's power for the frame (1 where it does not apply)
   bool relocalized = false;
+  /// From the belief the estimate came from (modes that have one; filter/uncertainty.hpp).
+  std::optional<io::FramePose::Uncertainty> uncertainty;
 };
+
+/// The uncertainty of `estimate` (window cells, grid heading) under `belief`, as the outputs hold
+/// it (the window's east and north are the region grid's x and y).
+[[nodiscard]] io::FramePose::Uncertainty uncertainty_of(const filter::BeliefVolume& belief,
+                                                        const filter::Pose& estimate, int threads);
 
 /// The pose a mode estimated for frame `f`, in every form the outputs take (region metres,
 /// lat/lon, compass and grid heading), with its errors against the frame's ground truth.

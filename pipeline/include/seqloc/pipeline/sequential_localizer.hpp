@@ -66,6 +66,10 @@ class SequentialLocalizer {
   /// backward filter carries its belief back across the seam into their region.
   void hand_over(raster::CacheReader& next);
 
+  /// Estimates without their uncertainty (for a caller that makes its own, as smooth does from
+  /// the smoothed posterior): saves a pass over the belief per frame.
+  void without_uncertainty() { uncertainty_ = false; }
+
   [[nodiscard]] const filter::FilterConfig& config() const { return config_; }
   [[nodiscard]] int lag() const { return lag_; }
   [[nodiscard]] const RegionWindow& window() const { return window_; }
@@ -92,6 +96,7 @@ class SequentialLocalizer {
   double recentre_margin_;
   int lag_;
   Device device_;
+  bool uncertainty_ = true;
   RegionWindow window_;
   std::optional<ForwardFilter> filter_;
   int recentres_ = 0;
