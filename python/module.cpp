@@ -801,6 +801,39 @@ void bind_poses(py::module_& m) {
       .def_property_readonly(
           "region", [](const Pose& p) { return p.pose.region; },
           "The region (cache file stem) whose CRS x_m and y_m are in; empty when not recorded")
+      .def_property_readonly(
+          "covariance_m2",
+          [](const Pose& p) -> std::optional<std::pair<std::pair<double, double>, std::pair<double, double>>> {
+            if (!p.pose.uncertainty) return std::nullopt;
+            const auto& u = *p.pose.uncertainty;
+            return std::pair{std::pair{u.cov_xx_m2, u.cov_xy_m2}, std::pair{u.cov_xy_m2, u.cov_yy_m2}};
+          },
+          "Position covariance about the pose, m^2, along the region CRS's x (east) and y (north): "
+          "[[xx, xy], [xy, yy]]; None for modes without a belief (single, offline)")
+      .def_property_readonly(
+          "heading_sd_deg",
+          [](const Pose& p) -> std::optional<double> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->heading_sd_deg) : std::nullopt;
+          },
+          "Heading standard deviation about the pose's heading, degrees")
+      .def_property_readonly(
+          "mass_within_5m",
+          [](const Pose& p) -> std::optional<double> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->mass_within_5m) : std::nullopt;
+          },
+          "The belief's probability within 5 m of the pose")
+      .def_property_readonly(
+          "second_mode_share",
+          [](const Pose& p) -> std::optional<double> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->second_mode_share) : std::nullopt;
+          },
+          "The probability within 5 m of a second place over 10 m away (0: none)")
+      .def_property_readonly(
+          "multimodal",
+          [](const Pose& p) -> std::optional<bool> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->multimodal) : std::nullopt;
+          },
+          "A second place holds at least 10 % of the belief: do not fuse the pose as one Gaussian")
       .def("__repr__", [](const Pose& p) {
         return "Pose(index=" + std::to_string(p.index) + ", frame=" + std::string(py::repr(py::str(p.pose.frame))) +
                ", lat=" + number_text(p.pose.lat_deg) + ", lon=" + number_text(p.pose.lon_deg) +

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
+
+#include "seqloc/filter/uncertainty.hpp"
 
 namespace seqloc::io {
 
@@ -67,6 +70,35 @@ Metrics compute_metrics(std::span<const FramePose> poses) {
     m.mean_abs_longitudinal_m = longitudinal / static_cast<double>(body);
   }
   return m;
+}
+
+std::optional<UncertaintyCalibration> uncertainty_calibration(std::span<const FramePose> poses) {
+  UncertaintyCalibration c;
+  std::size_t inside = 0;
+  std::array<double, 10> reported{}, within{};
+  for (const FramePose& p : poses) {
+    if (!p.truth || !p.uncertainty) continue;
+    const auto& u = *p.uncertainty;
+    const double de = p.truth->x_m - p.x_m, dn = p.truth->y_m - p.y_m;
+    inside += filter::inside_ellipse(u.cov_xx_m2, u.cov_xy_m2, u.cov_yy_m2, de, dn, 0.95) ? 1 : 0;
+    const auto bin = static_cast<std::size_t>(std::clamp(u.mass_within_5m * 10, 0.0, 9.0));
+    ++c.reliability[bin].frames;
+    reported[bin] += u.mass_within_5m;
+    within[bin] += std::hypot(de, dn) <= 5.0 ? 1.0 : 0.0;
+    ++c.frames;
+  }
+  if (c.frames == 0) return std::nullopt;
+  const auto n = static_cast<double>(c.frames);
+  c.coverage_95_pct = 100.0 * static_cast<double>(inside) / n;
+  for (std::size_t b = 0; b < c.reliability.size(); ++b) {
+    auto& bin = c.reliability[b];
+    if (bin.frames == 0) continue;
+    const auto k = static_cast<double>(bin.frames);
+    bin.reported_pct = 100.0 * reported[b] / k;
+    bin.actual_pct = 100.0 * within[b] / k;
+    c.mass_5m_ece_pts += k / n * std::abs(bin.reported_pct - bin.actual_pct);
+  }
+  return c;
 }
 
 }  // namespace seqloc::io

@@ -27,6 +27,21 @@ std::string optional_number(const std::optional<double>& v, int precision) {
   return buffer;
 }
 
+nlohmann::ordered_json calibration_json(const UncertaintyCalibration& c) {
+  nlohmann::ordered_json bins = nlohmann::json::array();
+  for (std::size_t b = 0; b < c.reliability.size(); ++b) {
+    const auto& bin = c.reliability[b];
+    bins.push_back({{"reported_from_pct", 10 * b},
+                    {"frames", bin.frames},
+                    {"reported_pct", bin.reported_pct},
+                    {"actual_pct", bin.actual_pct}});
+  }
+  return {{"frames", c.frames},
+          {"coverage_95_pct", c.coverage_95_pct},
+          {"mass_5m_ece_pts", c.mass_5m_ece_pts},
+          {"reliability", bins}};
+}
+
 nlohmann::ordered_json metrics_json(const Metrics& m) {
   nlohmann::ordered_json j;
   j["frames_with_ground_truth"] = m.frames;
@@ -139,6 +154,7 @@ nlohmann::ordered_json route_metrics(const RouteResult& r) {
   nlohmann::ordered_json metrics = {{"route", r.route}, {"mode", mode_name(r.mode)}, {"frames", r.poses.size()}};
   if (r.lag > 0) metrics["lag"] = r.lag;
   metrics.update(metrics_json(compute_metrics(r.poses)));
+  if (const auto c = uncertainty_calibration(r.poses)) metrics["uncertainty"] = calibration_json(*c);
   if (!r.poses.empty()) {
     // Self-calibration's estimate along the route: the power of the last frame (which saw all
     // but that frame) and the median over the frames.
@@ -189,10 +205,15 @@ std::string format_table(const MetricsByMode& metrics) {
 }
 
 void write_summary(const std::filesystem::path& path, const MetricsByMode& metrics,
-                   const std::vector<std::string>& routes) {
+                   const std::vector<std::string>& routes,
+                   const std::map<std::string, UncertaintyCalibration>& honesty) {
   nlohmann::ordered_json j;
   j["routes"] = routes;
-  for (const auto& [mode, m] : metrics) j["modes"][mode] = metrics_json(m);
+  for (const auto& [mode, m] : metrics) {
+    j["modes"][mode] = metrics_json(m);
+    if (const auto c = honesty.find(mode); c != honesty.end())
+      j["modes"][mode]["uncertainty"] = calibration_json(c->second);
+  }
   core::write_file(path, j.dump(2, ' ', false, kReplaceInvalidUtf8) + "\n");
 }
 
@@ -298,8 +319,12 @@ void RunFolderWriter::add(const RouteResult& result) {
 
 MetricsByMode RunFolderWriter::commit(const std::vector<std::string>& routes) {
   MetricsByMode metrics;
-  for (const auto& [mode, poses] : poses_by_mode_) metrics[mode] = compute_metrics(poses);
-  write_summary(staged_ / "summary.json", metrics, routes);
+  std::map<std::string, UncertaintyCalibration> honesty;
+  for (const auto& [mode, poses] : poses_by_mode_) {
+    metrics[mode] = compute_metrics(poses);
+    if (const auto c = uncertainty_calibration(poses)) honesty[mode] = *c;
+  }
+  write_summary(staged_ / "summary.json", metrics, routes, honesty);
   // Into place: the old folder (if any) is replaced only once the new one is complete.
   core::commit_directory(staged_, root_);
   committed_ = true;

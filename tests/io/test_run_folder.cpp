@@ -38,6 +38,10 @@ RouteResult result_with_ids(Mode mode, const std::vector<std::string>& ids, cons
     p.lateral_error_m = -0.5;
     p.longitudinal_error_m = 1.25;
     p.region = region;
+    if (mode != Mode::single && mode != Mode::offline) {
+      p.uncertainty = FramePose::Uncertainty{4.5 + static_cast<double>(i),       -1.25,     2.0, 7.5, 0.625,
+                                             0.125 * static_cast<double>(i % 3), i % 3 == 2};
+    }
     r.poses.push_back(p);
   }
   return r;
@@ -72,7 +76,73 @@ TEST(RunFolder, IdsWithCommasAndQuotesRoundTrip) {
     EXPECT_NEAR(p.x_m, written[i].x_m, 1e-3);
     EXPECT_EQ(p.relocalized, written[i].relocalized);
     EXPECT_NEAR(*p.position_error_m, *written[i].position_error_m, 1e-4);
+    ASSERT_TRUE(p.uncertainty) << i;
+    const auto& u = *p.uncertainty;
+    const auto& w = *written[i].uncertainty;
+    EXPECT_NEAR(u.cov_xx_m2, w.cov_xx_m2, 1e-5 * w.cov_xx_m2);
+    EXPECT_NEAR(u.cov_xy_m2, w.cov_xy_m2, 1e-5);
+    EXPECT_NEAR(u.cov_yy_m2, w.cov_yy_m2, 1e-5);
+    EXPECT_NEAR(u.heading_sd_deg, w.heading_sd_deg, 1e-4);
+    EXPECT_NEAR(u.mass_within_5m, w.mass_within_5m, 1e-5);
+    EXPECT_NEAR(u.second_mode_share, w.second_mode_share, 1e-5);
+    EXPECT_EQ(u.multimodal, w.multimodal);
   }
+  // A mode without a belief leaves the columns empty and reads back without an uncertainty.
+  for (const FramePose& p : poses[0].second) EXPECT_FALSE(p.uncertainty) << p.frame;
+}
+
+TEST(RunFolder, PosesFilesOfEarlierVersionsStillRead) {
+  // 16 columns (no uncertainty), and 14 (before volume_power and the region).
+  test::ScratchDir dir;
+  const auto path = dir / "poses.csv";
+  std::ofstream(path) << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,volume_power,relocalized,"
+                         "position_error_m,heading_error_deg,lateral_error_m,longitudinal_error_m,region\n"
+                         "0,1.5,49.5,11.25,90,3,4,0.5,1,0.75,0,1.25,2,0.5,1,nb\n";
+  auto poses = read_poses_csv(path);
+  ASSERT_EQ(poses.size(), 1u);
+  EXPECT_EQ(poses[0].region, "nb");
+  EXPECT_DOUBLE_EQ(poses[0].volume_power, 0.75);
+  EXPECT_FALSE(poses[0].uncertainty);
+  std::ofstream(path) << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,relocalized,"
+                         "position_error_m,heading_error_deg,lateral_error_m,longitudinal_error_m\n"
+                         "0,1.5,49.5,11.25,90,3,4,0.5,1,0,1.25,2,0.5,1\n";
+  poses = read_poses_csv(path);
+  ASSERT_EQ(poses.size(), 1u);
+  EXPECT_DOUBLE_EQ(poses[0].volume_power, 1.0);
+  EXPECT_DOUBLE_EQ(*poses[0].position_error_m, 1.25);
+  // The current header with a row short of its columns is an error naming the line.
+  std::ofstream(path) << "frame,timestamp,lat,lon,heading_deg,x_m,y_m,entropy,etu_weight,volume_power,relocalized,"
+                         "position_error_m,heading_error_deg,lateral_error_m,longitudinal_error_m,region,cov_xx_m2,"
+                         "cov_xy_m2,cov_yy_m2,heading_sd_deg,mass_5m,second_mode_share,multimodal\n"
+                         "0,1.5,49.5,11.25,90,3,4,0.5,1,0.75,0,1.25,2,0.5,1,nb,1,0,1\n";
+  try {
+    (void)read_poses_csv(path);
+    FAIL() << "a short row was read";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("poses.csv:2: 19 fields, expected 23"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Results, UncertaintyCalibrationCountsCoverageAndReliability) {
+  // Ten frames of unit covariance (the 95 % ellipse: a circle of radius sqrt(5.99) = 2.45 m): nine
+  // truths 2 m off, one 3 m off; each reports 85 % within 5 m, and all ten are.
+  std::vector<FramePose> poses(10);
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    FramePose& p = poses[i];
+    const double off = i == 9 ? 3.0 : 2.0;
+    p.truth = FramePose::Truth{p.x_m + off * 0.6, p.y_m - off * 0.8, 0, 0, std::nullopt};
+    p.uncertainty = FramePose::Uncertainty{1, 0, 1, 5, 0.85, 0, false};
+  }
+  poses.push_back(FramePose{});  // neither truth nor uncertainty: not counted
+  const auto c = uncertainty_calibration(poses);
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->frames, 10u);
+  EXPECT_DOUBLE_EQ(c->coverage_95_pct, 90.0);
+  EXPECT_EQ(c->reliability[8].frames, 10u);
+  EXPECT_NEAR(c->reliability[8].reported_pct, 85.0, 1e-9);
+  EXPECT_DOUBLE_EQ(c->reliability[8].actual_pct, 100.0);
+  EXPECT_NEAR(c->mass_5m_ece_pts, 15.0, 1e-9);
+  EXPECT_FALSE(uncertainty_calibration(std::vector<FramePose>(3)));
 }
 
 TEST(RunFolder, KeptBeliefsReadBackWithQuotedIds) {

@@ -511,6 +511,13 @@ class RouteAndRunFolders(unittest.TestCase):
                     self.assertAlmostEqual(g.heading_deg, want.heading_deg, delta=0.002, msg=want.frame)
                     self.assertAlmostEqual(g.position_error_m, want.position_error_m, delta=0.002, msg=want.frame)
                     self.assertIsNotNone(g.grid_heading_deg)
+                    # The uncertainty (filtered, or with a lag the smoothed posterior's) as poses.csv has it.
+                    for a, b in zip(sum(g.covariance_m2, ()), sum(want.covariance_m2, ())):
+                        self.assertAlmostEqual(a, b, delta=1e-4 * max(1.0, abs(b)), msg=want.frame)
+                    self.assertGreater(g.covariance_m2[0][0], 0, want.frame)
+                    self.assertAlmostEqual(g.heading_sd_deg, want.heading_sd_deg, delta=1e-3, msg=want.frame)
+                    self.assertAlmostEqual(g.mass_within_5m, want.mass_within_5m, delta=1e-4, msg=want.frame)
+                    self.assertEqual(g.multimodal, want.multimodal, want.frame)
 
                 # The run's metrics are seqloc evaluate's, recomputed here from the errors.
                 metrics = run.evaluate()

@@ -89,4 +89,21 @@ struct Metrics {
 };
 [[nodiscard]] Metrics compute_metrics(std::span<const FramePose> poses);
 
+/// How honest the poses' uncertainty is, over the frames with both ground truth and an
+/// uncertainty (docs/route-format.md, "Uncertainty"): the share whose truth lies inside the
+/// reported 95 % position ellipse, and the reported mass within 5 m against how often the truth
+/// is within 5 m, binned by the reported value (tenths) into a reliability table and its expected
+/// calibration error (the bins' |reported - actual| weighted by their frames).
+struct UncertaintyCalibration {
+  std::size_t frames = 0;
+  double coverage_95_pct = 0;
+  double mass_5m_ece_pts = 0;
+  struct Bin {
+    std::size_t frames = 0;
+    double reported_pct = 0, actual_pct = 0;  ///< mean reported mass within 5 m; share within 5 m
+  };
+  std::array<Bin, 10> reliability{};
+};
+[[nodiscard]] std::optional<UncertaintyCalibration> uncertainty_calibration(std::span<const FramePose> poses);
+
 }  // namespace seqloc::io

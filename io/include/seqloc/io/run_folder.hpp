@@ -56,9 +56,10 @@ class RunFolderWriter {
 /// Writes the files of one route and mode into `dir` (which must exist).
 void write_route_outputs(const std::filesystem::path& dir, const RouteResult& result);
 
-/// summary.json of a run.
+/// summary.json of a run; `honesty`: each mode's uncertainty calibration, where it has one.
 void write_summary(const std::filesystem::path& path, const MetricsByMode& metrics,
-                   const std::vector<std::string>& routes);
+                   const std::vector<std::string>& routes,
+                   const std::map<std::string, UncertaintyCalibration>& honesty = {});
 
 /// Reads a poses.csv written by write_route_outputs. Throws DataError naming the file and line.
 [[nodiscard]] std::vector<FramePose> read_poses_csv(const std::filesystem::path& path);
