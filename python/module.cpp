@@ -762,12 +762,50 @@ void bind_filter_results(py::module_& m) {
       });
 }
 
+// The uncertainty of a Pose (None for modes without a belief).
+void bind_pose_uncertainty(py::class_<Pose>& pose) {
+  pose.def_property_readonly(
+          "covariance_m2",
+          [](const Pose& p) -> std::optional<std::pair<std::pair<double, double>, std::pair<double, double>>> {
+            if (!p.pose.uncertainty) return std::nullopt;
+            const auto& u = *p.pose.uncertainty;
+            return std::pair{std::pair{u.cov_xx_m2, u.cov_xy_m2}, std::pair{u.cov_xy_m2, u.cov_yy_m2}};
+          },
+          "Position covariance about the pose, m^2, along the region CRS's x (east) and y (north): "
+          "[[xx, xy], [xy, yy]]; None for modes without a belief (single, offline)")
+      .def_property_readonly(
+          "heading_sd_deg",
+          [](const Pose& p) -> std::optional<double> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->heading_sd_deg) : std::nullopt;
+          },
+          "Heading standard deviation about the pose's heading, degrees")
+      .def_property_readonly(
+          "mass_within_5m",
+          [](const Pose& p) -> std::optional<double> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->mass_within_5m) : std::nullopt;
+          },
+          "The belief's probability within 5 m of the pose")
+      .def_property_readonly(
+          "second_mode_share",
+          [](const Pose& p) -> std::optional<double> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->second_mode_share) : std::nullopt;
+          },
+          "The probability within 5 m of a second place over 10 m away (0: none)")
+      .def_property_readonly(
+          "multimodal",
+          [](const Pose& p) -> std::optional<bool> {
+            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->multimodal) : std::nullopt;
+          },
+          "A second place holds at least 10 % of the belief: do not fuse the pose as one Gaussian");
+}
+
 void bind_poses(py::module_& m) {
   const auto optional_field = [](std::optional<double> io::FramePose::*field) {
     return [field](const Pose& p) { return p.pose.*field; };
   };
-  py::class_<Pose>(m, "Pose", "A frame's pose: the Localizer's, or a row of a run folder's poses.csv")
-      .def_readonly("index", &Pose::index, "The frame's place in the route, from 0")
+  py::class_<Pose> pose(m, "Pose", "A frame's pose: the Localizer's, or a row of a run folder's poses.csv");
+  bind_pose_uncertainty(pose);
+  pose.def_readonly("index", &Pose::index, "The frame's place in the route, from 0")
       .def_property_readonly(
           "frame", [](const Pose& p) { return p.pose.frame; }, "The frame's id (frames.csv)")
       .def_property_readonly("timestamp_s", [](const Pose& p) { return p.pose.timestamp_s; })
@@ -801,39 +839,6 @@ void bind_poses(py::module_& m) {
       .def_property_readonly(
           "region", [](const Pose& p) { return p.pose.region; },
           "The region (cache file stem) whose CRS x_m and y_m are in; empty when not recorded")
-      .def_property_readonly(
-          "covariance_m2",
-          [](const Pose& p) -> std::optional<std::pair<std::pair<double, double>, std::pair<double, double>>> {
-            if (!p.pose.uncertainty) return std::nullopt;
-            const auto& u = *p.pose.uncertainty;
-            return std::pair{std::pair{u.cov_xx_m2, u.cov_xy_m2}, std::pair{u.cov_xy_m2, u.cov_yy_m2}};
-          },
-          "Position covariance about the pose, m^2, along the region CRS's x (east) and y (north): "
-          "[[xx, xy], [xy, yy]]; None for modes without a belief (single, offline)")
-      .def_property_readonly(
-          "heading_sd_deg",
-          [](const Pose& p) -> std::optional<double> {
-            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->heading_sd_deg) : std::nullopt;
-          },
-          "Heading standard deviation about the pose's heading, degrees")
-      .def_property_readonly(
-          "mass_within_5m",
-          [](const Pose& p) -> std::optional<double> {
-            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->mass_within_5m) : std::nullopt;
-          },
-          "The belief's probability within 5 m of the pose")
-      .def_property_readonly(
-          "second_mode_share",
-          [](const Pose& p) -> std::optional<double> {
-            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->second_mode_share) : std::nullopt;
-          },
-          "The probability within 5 m of a second place over 10 m away (0: none)")
-      .def_property_readonly(
-          "multimodal",
-          [](const Pose& p) -> std::optional<bool> {
-            return p.pose.uncertainty ? std::optional(p.pose.uncertainty->multimodal) : std::nullopt;
-          },
-          "A second place holds at least 10 % of the belief: do not fuse the pose as one Gaussian")
       .def("__repr__", [](const Pose& p) {
         return "Pose(index=" + std::to_string(p.index) + ", frame=" + std::string(py::repr(py::str(p.pose.frame))) +
                ", lat=" + number_text(p.pose.lat_deg) + ", lon=" + number_text(p.pose.lon_deg) +
