@@ -162,6 +162,52 @@ double spearman(const std::vector<std::pair<double, double>>& points) {
   return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
 }
 
+using PosesByConfig = std::map<std::string, std::map<std::string, std::vector<io::FramePose>>>;
+
+// 9. How honest the poses' uncertainty is (io::uncertainty_calibration): for the configurations
+// that report one, per group, the share of frames whose truth lies inside the reported 95 %
+// ellipse and the mass-within-5-m ECE; then the reliability of SeqLoc's and smooth's mass within
+// 5 m, with a picture. Appends to `md` and `results`.
+void honesty_section(const PosesByConfig& poses, const std::vector<std::string>& configs, const fs::path& out,
+                     std::ostringstream& md, nlohmann::ordered_json& results) {
+  md << "\n## 9. The uncertainty's honesty (docs/route-format.md, \"Uncertainty\")\n\n"
+     << "Coverage: % of frames whose truth lies inside the reported 95 % position ellipse (target 95). ECE: the "
+        "reported mass within 5 m, binned by tenths, against the share of frames truly within 5 m, |difference| "
+        "averaged over frames (points; target <= 5).\n\n"
+     << "| configuration | group | frames | coverage of the 95 % ellipse | mass-within-5-m ECE (points) |\n"
+     << "|---|---|---:|---:|---:|\n";
+  std::vector<render::Series> curves;
+  for (const auto& name : configs) {
+    const auto found = poses.find(name);
+    if (found == poses.end()) continue;
+    for (const std::string group : {"feature-sparse", "urban"}) {
+      const auto g = found->second.find(group);
+      if (g == found->second.end()) continue;
+      const auto c = io::uncertainty_calibration(g->second);
+      if (!c) continue;
+      char b[320];
+      std::snprintf(b, sizeof b, "| %s | %s | %zu | %.1f | %.1f |\n", name.c_str(), group.c_str(), c->frames,
+                    c->coverage_95_pct, c->mass_5m_ece_pts);
+      md << b;
+      results["uncertainty"][group][name] = {
+          {"frames", c->frames}, {"coverage_95_pct", c->coverage_95_pct}, {"mass_5m_ece_pts", c->mass_5m_ece_pts}};
+      render::Series series{name + " (" + group + ")", {}, {}, false};
+      for (const auto& bin : c->reliability) {
+        if (bin.frames == 0) continue;
+        series.x.push_back(bin.reported_pct);
+        series.y.push_back(bin.actual_pct);
+      }
+      curves.push_back(series);
+    }
+  }
+  if (curves.empty()) return;
+  curves.push_back({"calibrated", {0, 100}, {0, 100}, false});
+  render::write_picture(out / "reliability_mass_5m.png",
+                        render::plot(curves, "Reported mass within 5 m against the share truly within 5 m",
+                                     "reported mass within 5 m (%, bin mean)", "frames within 5 m (%)", 100));
+  md << "\n![reliability](reliability_mass_5m.png)\n";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -192,7 +238,7 @@ int main(int argc, char** argv) {
     if (only.empty() || c.table == "overall" || only.find("," + c.table + ",") != std::string::npos) all.push_back(c);
   }
   // poses[config][group] and per region for the entropy analysis.
-  std::map<std::string, std::map<std::string, std::vector<io::FramePose>>> poses;
+  PosesByConfig poses;
   std::map<std::string, std::vector<io::FramePose>> single_by_region;
   std::map<std::string, std::map<std::string, std::vector<double>>> last_power;  // [config][group or region]
   std::map<std::string, std::vector<pipeline::VolumeShape>> shapes;
@@ -429,6 +475,10 @@ int main(int argc, char** argv) {
                                 {"ridge_share", static_cast<double>(ridge) / n},
                                 {"across_share", static_cast<double>(across) / n}};
   }
+  honesty_section(poses,
+                  {"SeqLoc", "smooth (every frame given the whole route)", "SeqLoc, lag 10", "online (naive recursion)",
+                   tempered_name("SeqLoc", 4)},
+                  out, md, results);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   md << "\nRun time " << static_cast<int>(seconds) << " s; the matcher took " << static_cast<int>(matcher_seconds)
      << " s for " << frames_matched << " frames.\n";
