@@ -3,6 +3,7 @@
 #include "seqloc/filter/uncertainty.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <optional>
 #include <vector>
@@ -29,12 +30,22 @@ void marginals(const BeliefVolume& belief, int threads, std::vector<double>& pos
       double* cells = position.data() + static_cast<std::size_t>(v) * w;
       for (int k = 0; k < r; ++k) {
         const float* row = belief.slice(k) + static_cast<std::size_t>(v) * w;
-        double s = 0;
-        for (int u = 0; u < w; ++u) {
-          cells[u] += row[u];
-          s += row[u];
+        // Eight partial sums, so that the adds do not wait on one another (and vectorize).
+        constexpr int kLanes = 8;
+        std::array<double, kLanes> part{};
+        int u = 0;
+        for (; u + kLanes <= w; u += kLanes) {
+          for (int l = 0; l < kLanes; ++l) {
+            cells[u + l] += row[u + l];
+            part[static_cast<std::size_t>(l)] += row[u + l];
+          }
         }
-        by_row[static_cast<std::size_t>(v) * r + k] = s;
+        for (; u < w; ++u) {
+          cells[u] += row[u];
+          part[0] += row[u];
+        }
+        by_row[static_cast<std::size_t>(v) * r + k] =
+            ((part[0] + part[1]) + (part[2] + part[3])) + ((part[4] + part[5]) + (part[6] + part[7]));
       }
     }
   });
