@@ -3,10 +3,11 @@
 #include "seqloc/filter/uncertainty.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <optional>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
@@ -17,40 +18,33 @@ namespace {
 
 using core::kCellM;
 
-// The position marginal (W x H) and the heading marginal (R), in double, in one pass over the
-// belief: rows in parallel, each row's heading sums kept apart and added in row order, so that
+// The position marginal (W x H) and the heading marginal (R), in one pass over the belief, in
+// blocks of a fixed number of cells (in parallel; each block reads every slice's stretch of it
+// whole): cells summed over headings in float (SIMD; 256 terms of at most 1 lose under 1e-5
+// relative), each block's heading sums kept apart and added in block order in double, so that
 // the sums do not depend on the number of threads.
 void marginals(const BeliefVolume& belief, int threads, std::vector<double>& position, std::vector<double>& heading) {
-  const int w = belief.width(), h = belief.height(), r = belief.headings();
-  position.assign(belief.slice_cells(), 0.0);
-  heading.assign(static_cast<std::size_t>(r), 0.0);
-  std::vector<double> by_row(static_cast<std::size_t>(h) * static_cast<std::size_t>(r));
-  core::parallel_chunks(h, threads, [&](int v0, int v1, int) {
-    for (int v = v0; v < v1; ++v) {
-      double* cells = position.data() + static_cast<std::size_t>(v) * w;
+  const int r = belief.headings();
+  const std::size_t n = belief.slice_cells();
+  constexpr std::size_t kBlock = 16384;
+  const auto blocks = static_cast<int>((n + kBlock - 1) / kBlock);
+  std::vector<float> cells(n, 0.0f);
+  std::vector<double> by_block(static_cast<std::size_t>(blocks) * static_cast<std::size_t>(r));
+  core::parallel_chunks(blocks, threads, [&](int b0, int b1, int) {
+    for (int b = b0; b < b1; ++b) {
+      const std::size_t start = static_cast<std::size_t>(b) * kBlock, len = std::min(kBlock, n - start);
+      Eigen::Map<Eigen::ArrayXf> acc(cells.data() + start, static_cast<Eigen::Index>(len));
       for (int k = 0; k < r; ++k) {
-        const float* row = belief.slice(k) + static_cast<std::size_t>(v) * w;
-        // Eight partial sums, so that the adds do not wait on one another (and vectorize).
-        constexpr int kLanes = 8;
-        std::array<double, kLanes> part{};
-        int u = 0;
-        for (; u + kLanes <= w; u += kLanes) {
-          for (int l = 0; l < kLanes; ++l) {
-            cells[u + l] += row[u + l];
-            part[static_cast<std::size_t>(l)] += row[u + l];
-          }
-        }
-        for (; u < w; ++u) {
-          cells[u] += row[u];
-          part[0] += row[u];
-        }
-        by_row[static_cast<std::size_t>(v) * r + k] =
-            ((part[0] + part[1]) + (part[2] + part[3])) + ((part[4] + part[5]) + (part[6] + part[7]));
+        const Eigen::Map<const Eigen::ArrayXf> part(belief.slice(k) + start, static_cast<Eigen::Index>(len));
+        acc += part;
+        by_block[static_cast<std::size_t>(b) * r + k] = part.sum();
       }
     }
   });
-  for (int v = 0; v < h; ++v)
-    for (int k = 0; k < r; ++k) heading[static_cast<std::size_t>(k)] += by_row[static_cast<std::size_t>(v) * r + k];
+  position.assign(cells.begin(), cells.end());
+  heading.assign(static_cast<std::size_t>(r), 0.0);
+  for (int b = 0; b < blocks; ++b)
+    for (int k = 0; k < r; ++k) heading[static_cast<std::size_t>(k)] += by_block[static_cast<std::size_t>(b) * r + k];
 }
 
 // The mass of `position` within `radius_m` of window cell (u0, v0).
