@@ -56,10 +56,7 @@ void detail::sample_slice(const float* values, int bins, int vh, int vw, double 
                           double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer,
                           float* out) {
   // Heading: the crop's own heading of window heading h is h - rotation.
-  const double p = core::wrap360(heading_deg - crop.rotation_deg) * bins / 360.0;
-  const int j0 = static_cast<int>(std::floor(p)) % bins;
-  const int j1 = (j0 + 1) % bins;
-  const auto a = static_cast<float>(p - std::floor(p));
+  const auto [j0, j1, a] = math::heading_blend(heading_deg, crop.rotation_deg, bins);
   const std::size_t slice = static_cast<std::size_t>(vw) * vh;
   const float* s0 = values + static_cast<std::size_t>(j0) * slice;
   const float* s1 = values + static_cast<std::size_t>(j1) * slice;

@@ -421,11 +421,11 @@ void SeqLocFilter::retemper(bool held) {
   cached_min_.reset();
 }
 
-std::vector<float> SeqLocFilter::gps_factor(const GpsFix* gps) const {
+std::vector<float> gps_prior_factor(const FilterConfig& config, const GpsFix* gps) {
   std::vector<float> factor;
-  if (!config_.gps_prior || gps == nullptr) return factor;
-  const int W = config_.width, H = config_.height;
-  factor.resize(belief_.slice_cells());
+  if (!config.gps_prior || gps == nullptr) return factor;
+  const int W = config.width, H = config.height;
+  factor.resize(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
   const double sigma_cells = gps->sigma_m / kCellM;
   for (int v = 0; v < H; ++v)
     for (int u = 0; u < W; ++u) {
@@ -441,7 +441,7 @@ double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& cro
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);
-  const std::vector<float> gps_factor = this->gps_factor(gps);
+  const std::vector<float> gps_factor = gps_prior_factor(config_, gps);
   // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum. The first
   // pass also pools the predicted belief for self-calibration, each slice while it is at hand.
   std::vector<double> slice_sum(static_cast<std::size_t>(R));

@@ -29,9 +29,8 @@ double bin_heading_deg(int k, int headings) { return k * 360.0 / headings; }
 std::vector<HeadingBlend> heading_blends(int headings, int frame_bins, double rotation_deg) {
   std::vector<HeadingBlend> blends(static_cast<std::size_t>(headings));
   for (int k = 0; k < headings; ++k) {
-    const double p = core::wrap360(bin_heading_deg(k, headings) - rotation_deg) * frame_bins / 360.0;
-    const int j0 = static_cast<int>(std::floor(p)) % frame_bins;
-    blends[static_cast<std::size_t>(k)] = {j0, (j0 + 1) % frame_bins, static_cast<float>(p - std::floor(p))};
+    blends[static_cast<std::size_t>(k)] =
+        filter::math::heading_blend(bin_heading_deg(k, headings), rotation_deg, frame_bins);
   }
   return blends;
 }
@@ -52,20 +51,6 @@ CropGeometry crop_geometry(const filter::PreparedFrame& frame, double cell_m, co
     g.map = {crop.centre_u, crop.centre_v, std::cos(r), std::sin(r), scale, frame.width, frame.height};
   }
   return g;
-}
-
-std::vector<float> gps_factor(const filter::FilterConfig& config, const filter::GpsFix* gps) {
-  std::vector<float> factor;
-  if (!config.gps_prior || gps == nullptr) return factor;
-  factor.resize(static_cast<std::size_t>(config.width) * config.height);
-  const double sigma_cells = gps->sigma_m / kCellM;
-  for (int v = 0; v < config.height; ++v)
-    for (int u = 0; u < config.width; ++u) {
-      const double du = u - gps->u, dv = v - gps->v;
-      factor[static_cast<std::size_t>(v) * config.width + u] =
-          static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
-    }
-  return factor;
 }
 
 filter::FilterConfig checked(const filter::FilterConfig& config) {
@@ -96,19 +81,17 @@ DeviceFilter::~DeviceFilter() = default;
 void DeviceFilter::reset_uniform() {
   const std::size_t cells = static_cast<std::size_t>(config_.width) * config_.height * config_.headings;
   engine_->fill_belief(static_cast<float>(1.0 / static_cast<double>(cells)));
-  cached_min_.reset();
-  first_ = true;
-  last_estimate_.reset();
-  estimator_.reset();
-  was_held_ = true;
-  last_power_ = 1;
-  entropies_.clear();
+  start_sequence();
 }
 
 void DeviceFilter::reset_gaussian(double u, double v, double sigma_m) {
   filter::BeliefVolume prior(config_.width, config_.height, config_.headings);
   prior.set_gaussian(u, v, sigma_m / kCellM);
   engine_->upload_belief(prior.data());
+  start_sequence();
+}
+
+void DeviceFilter::start_sequence() {
   cached_min_.reset();
   first_ = true;
   last_estimate_.reset();
@@ -261,7 +244,7 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   if (calibrating) engine_->pool_coarse();  // the predicted belief, before the frame goes in
   const std::vector<HeadingBlend> blends = heading_blends(config_.headings, frame.bins, crop.rotation_deg);
   const CropGeometry geometry = crop_geometry(frame, frame.cell_m, crop, config_.width, config_.height);
-  const std::vector<float> gps_term = gps_factor(config_, gps);
+  const std::vector<float> gps_term = filter::gps_prior_factor(config_, gps);
   double total = engine_->multiply(blends, geometry, outside, gps_term, true);
   if (calibrating) estimator_.add(judge(frame, crop));
   if (!(total > 0) || !std::isfinite(total)) {

@@ -18,11 +18,8 @@
 
 namespace seqloc::gpu {
 
-/// The window bins' reading of the frame: bin k blends frame bins j0 and j1 as (1 - a), a.
-struct HeadingBlend {
-  int j0 = 0, j1 = 0;
-  float a = 0;
-};
+/// The window bins' reading of the frame (filter/device_math.hpp).
+using filter::math::HeadingBlend;
 
 /// Where the window's cells read the frame: a translation (an axis-aligned crop of the window's
 /// cell size, as seqloc's own crops are) or the general affine map.

@@ -8,6 +8,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "seqloc/core/angles.hpp"
+
 #if defined(__CUDACC__)
 #define SEQLOC_HD __host__ __device__
 #else
@@ -118,6 +120,22 @@ SEQLOC_HD inline float crop_sample_at(const CropMap& m, int u, int v, float fill
   const std::size_t r0 = static_cast<std::size_t>(y0) * m.vw, r1 = static_cast<std::size_t>(y1) * m.vw;
   return (1 - ay) * ((1 - ax) * read(r0 + x0) + ax * read(r0 + x1)) +
          ay * ((1 - ax) * read(r1 + x0) + ax * read(r1 + x1));
+}
+
+/// Which two of a frame's heading bins a window heading reads: bins j0 and j1 = j0 + 1 (circular),
+/// blended as (1 - a), a.
+struct HeadingBlend {
+  int j0 = 0, j1 = 0;
+  float a = 0;
+};
+
+/// The blend for window heading `heading_deg` of a frame with `bins` bins whose crop is turned by
+/// `rotation_deg`: the crop's own heading is heading - rotation, at p = that * bins / 360 bins.
+/// (Host only: the kernels take the blend per bin.)
+inline HeadingBlend heading_blend(double heading_deg, double rotation_deg, int bins) {
+  const double p = core::wrap360(heading_deg - rotation_deg) * bins / 360.0;
+  const int j0 = static_cast<int>(std::floor(p)) % bins;
+  return {j0, (j0 + 1) % bins, static_cast<float>(p - std::floor(p))};
 }
 
 /// Self-calibration's coarse grid: window heading bins per coarse bin (4, or fewer where the

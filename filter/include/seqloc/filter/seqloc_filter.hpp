@@ -103,6 +103,11 @@ struct GpsFix {
   double sigma_m = 10;
 };
 
+/// The GPS term over the window (W x H, row-major): exp(-d^2 / (2 sigma^2)) at each cell, d its
+/// distance from the fix; empty when the config has no GPS prior or there is no fix. What the
+/// update multiplies into every heading slice (the CPU filter's and the CUDA backend's).
+[[nodiscard]] std::vector<float> gps_prior_factor(const FilterConfig& config, const GpsFix* gps);
+
 /// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
 /// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
 /// the route (the smoother's, smoother.hpp) gives it to SeqLocFilter::update to multiply in the
@@ -186,7 +191,6 @@ class SeqLocFilter {
   FrameResult weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating);
   void retemper(bool held);
   float temper(const PreparedFrame& frame, FrameResult& result);
-  [[nodiscard]] std::vector<float> gps_factor(const GpsFix* gps) const;
   double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
                      bool calibrating);
   void feed_estimator(const PreparedFrame& frame, const CropPose& crop);

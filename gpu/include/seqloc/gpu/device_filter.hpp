@@ -95,6 +95,9 @@ class DeviceFilter {
   class Engine;  ///< the kernels over one execution space (src/engine.hpp)
 
  private:
+  /// A new sequence over the belief just set: no prediction before the next step, and
+  /// self-calibration and ETU's route history start again.
+  void start_sequence();
   filter::FrameResult weigh(const filter::PreparedFrame& frame, const filter::FrameWeighting* weighting,
                             bool calibrating);
   void retemper(bool held);
