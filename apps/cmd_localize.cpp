@@ -1,3 +1,4 @@
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -9,6 +10,7 @@
 #include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/localize_run.hpp"
+#include "seqloc/ros/route_bag.hpp"
 
 namespace seqloc::app {
 namespace {
@@ -75,12 +77,22 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     app.add_flag("--beliefs", options_.keep_beliefs,
                  "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings) and beliefs.csv "
                  "(their windows), which seqloc render then draws without running the filter again");
+    app.add_flag("--mcap", mcap_,
+                 "Also write each route's poses as a ROS 2 bag (MCAP, CDR) for Foxglove and rosbag2, in\n"
+                 "OUT/<route>/<mode>/bag/ for the modes with a belief: online, seqloc, smooth (docs/ros.md)");
+    app.add_option("--mcap-frame-id", bag_.frame_id, "The bag's local east-north-up frame: the poses' frame_id")
+        ->capture_default_str();
+    app.add_option("--mcap-base-frame", bag_.base_frame, "The vehicle's frame: the NavSatFix messages' frame_id")
+        ->capture_default_str();
+    app.add_option("--mcap-origin", mcap_origin_,
+                   "LAT,LON: the local frame's origin (default: the route's first true position, else its first pose)");
     add_overwrite_option(app, "output folder");
     add_progress_option(app);
-    app.footer("Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"
-               "Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} (and groundtruth.tum\n"
-               "when the route has ground truth) and OUT/summary.json,\n"
-               "and prints the recall table. Any bad input stops the run with nothing written.");
+    app.footer(
+        "Routes with an 'observation' column are scored by the built-in matcher (docs/matcher.md).\n"
+        "Writes OUT/<route>/<mode>/{poses.csv,track.geojson,trajectory.tum,metrics.json} (and groundtruth.tum\n"
+        "when the route has ground truth) and OUT/summary.json (with --mcap, also OUT/<route>/<mode>/bag/),\n"
+        "and prints the recall table. Any bad input stops the run with nothing written.");
   }
 
   void check() override {
@@ -111,6 +123,15 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     } else {
       modes_ = {io::parse_mode(mode_).value()};
     }
+    if (!mcap_origin_.empty()) {
+      const auto v = parse_numbers<double>(mcap_origin_, ',', 2);
+      if (!v) throw seqloc::UsageError("--mcap-origin '" + mcap_origin_ + "': expected LAT,LON in degrees");
+      bag_.origin_deg = std::array<double, 2>{(*v)[0], (*v)[1]};
+    }
+    if (!mcap_ && (!mcap_origin_.empty() || bag_.frame_id != ros::BagOptions{}.frame_id ||
+                   bag_.base_frame != ros::BagOptions{}.base_frame)) {
+      throw seqloc::UsageError("--mcap-frame-id, --mcap-base-frame and --mcap-origin go with --mcap");
+    }
     if (!shard_text_.empty()) {
       const auto v = parse_numbers<int>(shard_text_, '/', 2);
       if (!v || (*v)[1] < 1 || (*v)[0] < 0 || (*v)[0] >= (*v)[1]) {
@@ -132,6 +153,7 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     job.limits = limits_;
     job.shard = shard_;
     job.noise = {noise_t_, noise_r_, seed_};
+    if (mcap_) job.bags = bag_;
     ProgressBar bar(show_progress(), "frames");
     const auto report =
         pipeline::run_localize(std::move(job), {[&](const std::string& line) { log("%s", line.c_str()); },
@@ -142,7 +164,11 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
         report.frames_made, report.frames, modes_.size(), report.frames_spilled,
         static_cast<double>(report.peak_frame_memory_bytes) / (1 << 20));
     std::fputs(io::format_table(report.metrics).c_str(), stdout);
-    std::printf("wrote %s (%zu routes)\n", out_.c_str(), report.routes);
+    if (mcap_) {
+      std::printf("wrote %s (%zu routes, %zu ROS 2 bags)\n", out_.c_str(), report.routes, report.bags);
+    } else {
+      std::printf("wrote %s (%zu routes)\n", out_.c_str(), report.routes);
+    }
     return kExitOk;
   }
 
@@ -160,6 +186,9 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
   std::string shard_text_;
   std::uint64_t seed_ = 1;
   io::RouteLimits limits_;
+  bool mcap_ = false;
+  ros::BagOptions bag_;
+  std::string mcap_origin_;
   // What check() made of the options.
   std::vector<io::Mode> modes_;
   io::Shard shard_;

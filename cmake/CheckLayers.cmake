@@ -4,8 +4,8 @@ cmake_minimum_required(VERSION 3.20)
 # (one above it, or beside it): the layering of docs/development.md's layout table, kept by a test.
 #   core (the base: errors, angles, the cell size, CSV, atomic files, the thread pool) under all;
 #   osm <- raster <- ingest; filter (Eigen and core only) <- gpu (its CUDA backend);
-#   osm + raster + filter <- io <- matcher; io + raster <- sim; io + matcher + gpu <- pipeline (the
-#   driver) <- render; raster + filter <- serve; pipeline <- python; everything <- apps.
+#   osm + raster + filter <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + gpu + ros <- pipeline
+#   (the driver) <- render; raster + filter <- serve; pipeline <- python; everything <- apps.
 if(NOT ROOT)
   message(FATAL_ERROR "CheckLayers: set -DROOT=<source tree>")
 endif()
@@ -18,12 +18,13 @@ set(allowed_ingest core osm raster ingest)
 set(allowed_io core osm raster filter io)
 set(allowed_matcher core osm filter io matcher)
 set(allowed_sim core osm raster filter io sim)
-set(allowed_pipeline core osm raster filter gpu io matcher pipeline)
-set(allowed_render core osm raster filter gpu io matcher pipeline render)
+set(allowed_ros core osm raster filter io ros)
+set(allowed_pipeline core osm raster filter gpu io matcher ros pipeline)
+set(allowed_render core osm raster filter gpu io matcher ros pipeline render)
 set(allowed_serve core osm raster filter serve)
-set(allowed_python core osm raster filter gpu io matcher pipeline)
+set(allowed_python core osm raster filter gpu io matcher ros pipeline)
 set(violations 0)
-foreach(module core osm raster filter gpu ingest io matcher sim pipeline render serve python)
+foreach(module core osm raster filter gpu ingest io matcher sim ros pipeline render serve python)
   file(GLOB_RECURSE files "${ROOT}/${module}/*.cpp" "${ROOT}/${module}/*.hpp" "${ROOT}/${module}/*.cu")
   foreach(file IN LISTS files)
     file(STRINGS "${file}" includes REGEX "^[ \t]*#[ \t]*include[ \t]*[<\"]seqloc/[a-z_]+/")

@@ -307,7 +307,7 @@ RunFolderWriter::~RunFolderWriter() {
   std::filesystem::remove_all(staged_, ec);
 }
 
-void RunFolderWriter::add(const RouteResult& result) {
+std::filesystem::path RunFolderWriter::add(const RouteResult& result) {
   const std::filesystem::path dir = staged_ / result.route / mode_name(result.mode);
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
@@ -315,6 +315,7 @@ void RunFolderWriter::add(const RouteResult& result) {
   write_route_outputs(dir, result);
   auto& all = poses_by_mode_[mode_name(result.mode)];
   all.insert(all.end(), result.poses.begin(), result.poses.end());
+  return dir;
 }
 
 MetricsByMode RunFolderWriter::commit(const std::vector<std::string>& routes) {

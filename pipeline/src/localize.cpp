@@ -250,9 +250,11 @@ io::FramePose frame_pose(const io::RouteFrame& f, const FrameEstimate& e, const 
     const auto t = projection.forward(f.truth->where, gamma_true);
     const double ex = e.x_m - t.x_m, ey = e.y_m - t.y_m;
     pose.position_error_m = std::hypot(ex, ey);
-    pose.truth = io::FramePose::Truth{t.x_m, t.y_m, f.truth->where.lat_deg, f.truth->where.lon_deg, std::nullopt};
+    pose.truth =
+        io::FramePose::Truth{t.x_m, t.y_m, f.truth->where.lat_deg, f.truth->where.lon_deg, std::nullopt, std::nullopt};
     if (f.truth->heading_deg) {
       pose.truth->grid_heading_deg = core::wrap360(*f.truth->heading_deg - gamma_true);
+      pose.truth->compass_heading_deg = core::wrap360(*f.truth->heading_deg);
       pose.heading_error_deg = core::heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
       const double h = *pose.truth->grid_heading_deg * M_PI / 180.0;
       pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);

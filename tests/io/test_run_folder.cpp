@@ -130,7 +130,7 @@ TEST(Results, UncertaintyCalibrationCountsCoverageAndReliability) {
   for (std::size_t i = 0; i < poses.size(); ++i) {
     FramePose& p = poses[i];
     const double off = i == 9 ? 3.0 : 2.0;
-    p.truth = FramePose::Truth{p.x_m + off * 0.6, p.y_m - off * 0.8, 0, 0, std::nullopt};
+    p.truth = FramePose::Truth{p.x_m + off * 0.6, p.y_m - off * 0.8, 0, 0, std::nullopt, std::nullopt};
     p.uncertainty = FramePose::Uncertainty{1, 0, 1, 5, 0.85, 0, false};
   }
   poses.push_back(FramePose{});  // neither truth nor uncertainty: not counted

@@ -40,7 +40,8 @@ struct FramePose {
   /// The ground truth of the frame, when the route has it, in the same forms as the estimate.
   struct Truth {
     double x_m = 0, y_m = 0, lat_deg = 0, lon_deg = 0;
-    std::optional<double> grid_heading_deg;  ///< clockwise from grid north
+    std::optional<double> grid_heading_deg;     ///< clockwise from grid north
+    std::optional<double> compass_heading_deg;  ///< clockwise from true north
   };
   std::optional<Truth> truth;
   /// The region (cache file stem) whose CRS x_m, y_m and the errors are in.

@@ -40,8 +40,9 @@ class RunFolderWriter {
   RunFolderWriter(const RunFolderWriter&) = delete;
   RunFolderWriter& operator=(const RunFolderWriter&) = delete;
 
-  /// Writes OUT/<route>/<mode>/ for one result. Throws IoError naming the file.
-  void add(const RouteResult& result);
+  /// Writes OUT/<route>/<mode>/ for one result and returns where it staged that folder (for more
+  /// files of the same result, such as its ROS 2 bag). Throws IoError naming the file.
+  std::filesystem::path add(const RouteResult& result);
 
   /// summary.json over every result added (`routes`: the run's route names), then the folder in
   /// place of `root`. Returns the metrics per mode that summary.json holds.

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -15,6 +16,7 @@
 #include "seqloc/io/route.hpp"
 #include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/localize.hpp"
+#include "seqloc/ros/route_bag.hpp"
 
 namespace seqloc::pipeline {
 
@@ -37,6 +39,8 @@ struct LocalizeRun {
   io::RouteLimits limits;
   io::Shard shard;
   OdometryNoise noise;
+  /// Also a ROS 2 bag per route and mode with a belief (OUT/<route>/<mode>/bag/, docs/ros.md).
+  std::optional<ros::BagOptions> bags;
 };
 
 /// How it went.
@@ -46,6 +50,7 @@ struct LocalizeRunReport {
   std::size_t regions = 0;
   long long frames = 0;  ///< the routes' frames (each run once per mode)
   std::size_t frames_made = 0, frames_spilled = 0, peak_frame_memory_bytes = 0;
+  std::size_t bags = 0;  ///< ROS 2 bags written
 };
 
 /// Progress and notes of a run, all optional: `note` gets a line for the log, `frames` the frames
