@@ -40,6 +40,7 @@
 #include "seqloc/pipeline/sequential_localizer.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "seqloc/raster/crop_window.hpp"
+#include "seqloc/ros/route_bag.hpp"
 
 namespace py = pybind11;
 namespace filter = seqloc::filter;
@@ -796,7 +797,28 @@ void bind_pose_uncertainty(py::class_<Pose>& pose) {
           [](const Pose& p) -> std::optional<bool> {
             return p.pose.uncertainty ? std::optional(p.pose.uncertainty->multimodal) : std::nullopt;
           },
-          "A second place holds at least 10 % of the belief: do not fuse the pose as one Gaussian");
+          "A second place holds at least 10 % of the belief: do not fuse the pose as one Gaussian")
+      .def(
+          "local_frame",
+          [](const Pose& p, double origin_lat_deg, double origin_lon_deg) {
+            if (!p.grid_heading_known) {
+              throw seqloc::UsageError("frame " + p.pose.frame +
+                                       ": a pose read from poses.csv has no grid heading to turn its covariance by");
+            }
+            const seqloc::ros::LocalPose l = seqloc::ros::to_local_frame(p.pose, {origin_lat_deg, origin_lon_deg});
+            const auto& f = l.fix_covariance;
+            const auto& c = l.frame_covariance;
+            py::dict d;
+            d["position_m"] = py::make_tuple(l.position[0], l.position[1], l.position[2]);
+            d["yaw_rad"] = l.yaw_rad;
+            d["covariance_m2"] = py::make_tuple(py::make_tuple(c[0], c[1]), py::make_tuple(c[1], c[2]));
+            d["fix_covariance_m2"] = py::make_tuple(py::make_tuple(f[0], f[1]), py::make_tuple(f[1], f[2]));
+            return d;
+          },
+          py::arg("origin_lat_deg"), py::arg("origin_lon_deg"),
+          "The pose as a ROS 2 bag carries it (docs/ros.md): in the east-north-up frame at the origin, "
+          "position_m (x, y, z), yaw_rad (counter-clockwise from east) and covariance_m2 along the frame's "
+          "axes; fix_covariance_m2 along true east and north at the pose (a NavSatFix's)");
 }
 
 void bind_poses(py::module_& m) {

@@ -212,7 +212,10 @@ std::string McapWriter::finish() {
       .u64(start_ns_)
       .u64(end_ns_);
   std::map<std::uint16_t, std::uint64_t> counts;
-  for (std::uint16_t c = 0; c < channel_records_.size(); ++c) counts[c] = message_count(c);
+  for (std::size_t c = 0; c < channel_records_.size(); ++c) {
+    const auto id = static_cast<std::uint16_t>(c);
+    counts[id] = message_count(id);
+  }
   group(kStatistics, {record(kStatistics, id_count_map(stats, counts))});
   std::vector<std::string> chunk_records;
   for (const auto& c : chunks_) {

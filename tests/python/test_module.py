@@ -479,6 +479,25 @@ class RouteAndRunFolders(unittest.TestCase):
         with self.assertRaises(seqloc.Error):
             seqloc.Route("/nonexistent-route")
 
+    def check_local_frame(self, pose):
+        """Pose.local_frame as docs/ros.md has it: at its own position as origin the pose sits at
+        (0, 0, 0), its yaw is 90 degrees less its compass heading, and its covariance is the grid's
+        turned clockwise by the convergence (heading_deg - grid_heading_deg)."""
+        local = pose.local_frame(pose.lat, pose.lon)
+        for v in local["position_m"]:
+            self.assertAlmostEqual(v, 0, delta=1e-6)
+        yaw = math.degrees(local["yaw_rad"])
+        self.assertAlmostEqual((yaw - (90 - pose.heading_deg) + 180) % 360 - 180, 0, delta=1e-9)
+        g = math.radians(pose.heading_deg - pose.grid_heading_deg)
+        c, s = math.cos(g), math.sin(g)
+        (xx, xy), (_, yy) = pose.covariance_m2
+        ee = c * c * xx + 2 * c * s * xy + s * s * yy
+        en = -c * s * xx + (c * c - s * s) * xy + c * s * yy
+        nn = s * s * xx - 2 * c * s * xy + c * c * yy
+        for got in (local["fix_covariance_m2"], local["covariance_m2"]):
+            for a, b in zip(sum(got, ()), (ee, en, en, nn)):
+                self.assertAlmostEqual(a, b, delta=1e-9 * max(1.0, abs(b)))
+
     @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
     def test_step_frame_gives_localize_poses_and_the_run_folder_reads_them(self):
         for nhw, lag in ((False, 0), (True, 2)):
@@ -518,6 +537,9 @@ class RouteAndRunFolders(unittest.TestCase):
                     self.assertAlmostEqual(g.heading_sd_deg, want.heading_sd_deg, delta=1e-3, msg=want.frame)
                     self.assertAlmostEqual(g.mass_within_5m, want.mass_within_5m, delta=1e-4, msg=want.frame)
                     self.assertEqual(g.multimodal, want.multimodal, want.frame)
+                    self.check_local_frame(g)
+                with self.assertRaises(seqloc.UsageError):  # poses.csv keeps no grid heading
+                    expected[0].local_frame(expected[0].lat, expected[0].lon)
 
                 # The run's metrics are seqloc evaluate's, recomputed here from the errors.
                 metrics = run.evaluate()
