@@ -10,6 +10,7 @@
 #include <osmium/memory/buffer.hpp>
 #include <osmium/osm/object.hpp>
 #include <osmium/osm/object_comparisons.hpp>
+#include <tuple>
 #include <utility>
 
 namespace seqloc::osm {
@@ -19,7 +20,8 @@ namespace {
 struct Key {
   int type = 0;
   std::int64_t id = 0;
-  auto operator<=>(const Key&) const = default;
+  friend bool operator<(const Key& a, const Key& b) { return std::tie(a.type, a.id) < std::tie(b.type, b.id); }
+  friend bool operator==(const Key& a, const Key& b) { return a.type == b.type && a.id == b.id; }
 };
 
 Key key_of(const osmium::OSMObject& o) { return {static_cast<int>(o.type()), o.id()}; }
