@@ -1,0 +1,133 @@
+#include "seqloc/ingest/change_footprint.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <map>
+#include <set>
+#include <string>
+#include <tuple>
+#include <type_traits>
+
+#include "seqloc/raster/tile_renderer.hpp"
+
+namespace seqloc::ingest {
+namespace {
+
+// A feature's identity (kind, OSM id, from a relation) and its whole content as bytes, so that two
+// features are equal exactly when everything the renderer reads of them is.
+using Identity = std::tuple<char, std::int64_t, bool>;
+
+std::string group_bytes(osm::Group g) { return {static_cast<char>(g.channel), static_cast<char>(g.index)}; }
+
+void append(std::string& s, double v) {
+  char b[sizeof v];
+  std::memcpy(b, &v, sizeof v);
+  s.append(b, sizeof v);
+}
+
+std::string content(const osm::PointFeature& f) {
+  std::string s = group_bytes(f.group);
+  append(s, f.where.lat_deg);
+  append(s, f.where.lon_deg);
+  return s;
+}
+
+std::string content(const osm::LineFeature& f) {
+  std::string s = group_bytes(f.group);
+  s += f.highway + '\0';
+  for (const auto& p : f.points) {
+    append(s, p.lat_deg);
+    append(s, p.lon_deg);
+  }
+  return s;
+}
+
+std::string content(const osm::AreaFeature& f) {
+  std::string s = group_bytes(f.group);
+  for (const auto& ring : f.rings) {
+    s += '\x01';
+    for (const auto& p : ring) {
+      append(s, p.lat_deg);
+      append(s, p.lon_deg);
+    }
+  }
+  return s;
+}
+
+// Each state's features by identity: their contents (a multiset: one id may give several) and
+// where they are.
+struct Indexed {
+  std::map<Identity, std::multiset<std::string>> contents;
+};
+
+template <class Feature>
+void index_features(const std::vector<Feature>& features, char kind, Indexed& out) {
+  for (const auto& f : features) {
+    bool from_relation = false;
+    if constexpr (std::is_same_v<Feature, osm::AreaFeature>) from_relation = f.from_relation;
+    out.contents[{kind, f.osm_id, from_relation}].insert(content(f));
+  }
+}
+
+Indexed index_of(const osm::FeatureSet& s) {
+  Indexed i;
+  index_features(s.points, 'n', i);
+  index_features(s.lines, 'l', i);
+  index_features(s.areas, 'a', i);
+  return i;
+}
+
+// The identities whose contents differ between the states.
+std::set<Identity> changed_identities(const Indexed& before, const Indexed& after) {
+  std::set<Identity> changed;
+  for (const auto& [id, c] : before.contents) {
+    const auto it = after.contents.find(id);
+    if (it == after.contents.end() || it->second != c) changed.insert(id);
+  }
+  for (const auto& [id, c] : after.contents) {
+    if (!before.contents.contains(id)) changed.insert(id);
+  }
+  return changed;
+}
+
+// The features of a state whose identity changed (both states' go into one set: their boxes are
+// what matters).
+void collect(const osm::FeatureSet& s, const std::set<Identity>& changed, osm::FeatureSet& out) {
+  for (const auto& f : s.points) {
+    if (changed.contains({'n', f.osm_id, false})) out.points.push_back(f);
+  }
+  for (const auto& f : s.lines) {
+    if (changed.contains({'l', f.osm_id, false})) out.lines.push_back(f);
+  }
+  for (const auto& f : s.areas) {
+    if (changed.contains({'a', f.osm_id, f.from_relation})) out.areas.push_back(f);
+  }
+}
+
+}  // namespace
+
+ChangeFootprint change_footprint(const raster::CacheMetadata& metadata, const osm::FeatureSet& before,
+                                 const osm::FeatureSet& after) {
+  const std::set<Identity> changed = changed_identities(index_of(before), index_of(after));
+  osm::FeatureSet moved;
+  collect(before, changed, moved);
+  collect(after, changed, moved);
+  ChangeFootprint footprint;
+  footprint.features_changed = moved.points.size() + moved.lines.size() + moved.areas.size();
+  const raster::RegionFeatures pixels = raster::project_features(moved, metadata.projection());
+  const auto& grid = metadata.grid;
+  const std::int64_t halo = raster::TileRenderer::halo_for(metadata.max_distance_m);
+  std::set<std::pair<std::int64_t, std::int64_t>> tiles;
+  auto add = [&](const raster::PixelBox& box, std::int64_t margin) {
+    const raster::TileSpan t = raster::tiles_meeting(grid, box, margin);
+    for (std::int64_t r = t.r0; r <= t.r1; ++r)
+      for (std::int64_t c = t.c0; c <= t.c1; ++c) tiles.emplace(c, r);
+  };
+  for (const auto& n : pixels.nodes) add({n.at.u, n.at.v, n.at.u, n.at.v}, 0);
+  for (const auto& l : pixels.lines) add(l.box, l.group == osm::kRoad ? halo : 0);
+  for (const auto& a : pixels.areas) add(a.box, 0);
+  footprint.tiles.assign(tiles.begin(), tiles.end());
+  return footprint;
+}
+
+}  // namespace seqloc::ingest
