@@ -190,6 +190,7 @@ std::optional<std::vector<T>> parse_numbers(std::string_view text, char separato
 }
 
 std::unique_ptr<Command> make_preprocess_command();
+std::unique_ptr<Command> make_update_command();
 std::unique_ptr<Command> make_cache_info_command();
 std::unique_ptr<Command> make_cache_merge_command();
 std::unique_ptr<Command> make_localize_command();

@@ -67,6 +67,8 @@ int main(int argc, char** argv) {
     commands.emplace_back(sub, std::move(command));
   };
   add(&cli, "preprocess", "Build a region cache (GeoPackage) from an OSM file", app::make_preprocess_command());
+  add(&cli, "update", "Apply an OSM change file to a region cache, re-rendering only the tiles it touches",
+      app::make_update_command());
   add(&cli, "localize", "Localize routes against a region cache", app::make_localize_command());
   add(&cli, "evaluate", "Recompute the recall table from localize outputs", app::make_evaluate_command());
   add(&cli, "simulate", "Simulate routes with BEV observations along a cache's roads", app::make_simulate_command());

@@ -15,6 +15,7 @@
 
 #include "feature_blocks.hpp"
 #include "peak_memory.hpp"
+#include "region_tiles.hpp"
 #include "seqloc/core/stopwatch.hpp"
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/raster/cache.hpp"
@@ -469,3 +470,17 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
 }
 
 }  // namespace seqloc::ingest
+
+namespace seqloc::ingest::detail {
+
+osm::GeoBox region_keep_box(const raster::RegionGrid& grid, const osm::RegionProjection& projection, double clamp_m) {
+  return keep_box_for(grid, projection, clamp_m);
+}
+
+void render_region_tiles(const raster::TileRenderer& renderer, std::vector<std::pair<std::int64_t, std::int64_t>> tiles,
+                         raster::CacheWriter& writer, const PreprocessOptions& options,
+                         const std::function<void(const PreprocessProgress&)>& on_progress, PreprocessReport& report) {
+  render_tiles(BlockJob{renderer, 0, 0, std::move(tiles)}, writer, options, on_progress, report);
+}
+
+}  // namespace seqloc::ingest::detail

@@ -149,6 +149,9 @@ CacheMetadata metadata_from_db(const detail::Database& db) {
   m.source_file = get("source_file");
   m.source_sha256 = get("source_sha256");
   m.osm_replication_timestamp = get("osm_replication_timestamp");
+  // Caches written before `seqloc update` existed lack these two keys: nothing applied.
+  if (const auto it = rows.find("osm_replication_sequence"); it != rows.end()) m.osm_replication_sequence = it->second;
+  if (const auto it = rows.find("changes_applied"); it != rows.end()) m.changes_applied = it->second;
   m.centre_lat = number("centre_lat");
   m.centre_lon = number("centre_lon");
   m.bbox = {number("bbox_min_lon"), number("bbox_min_lat"), number("bbox_max_lon"), number("bbox_max_lat")};
@@ -196,6 +199,8 @@ std::vector<std::pair<std::string, std::string>> metadata_rows(const CacheMetada
       {"source_file", m.source_file},
       {"source_sha256", m.source_sha256},
       {"osm_replication_timestamp", m.osm_replication_timestamp},
+      {"osm_replication_sequence", m.osm_replication_sequence},
+      {"changes_applied", m.changes_applied},
       {"centre_lat", detail::format_double(m.centre_lat)},
       {"centre_lon", detail::format_double(m.centre_lon)},
       {"bbox_min_lon", detail::format_double(m.bbox.min_lon)},

@@ -74,6 +74,51 @@ CacheWriter::CacheWriter(const std::filesystem::path& final_path, CacheMetadata 
   }
 }
 
+CacheWriter CacheWriter::updating(const std::filesystem::path& existing, const std::filesystem::path& final_path,
+                                  CacheMetadata metadata) {
+  return CacheWriter(existing, final_path, std::move(metadata), Updating{});
+}
+
+CacheWriter::CacheWriter(const std::filesystem::path& existing, const std::filesystem::path& final_path,
+                         CacheMetadata metadata, Updating)
+    : final_(final_path), partial_(final_path.string() + ".partial"), metadata_(std::move(metadata)) {
+  metadata_.complete = false;
+  metadata_.software_version = SEQLOC_VERSION;
+  detail::remove_sqlite_files(partial_);
+  std::error_code ec;
+  std::filesystem::copy_file(existing, partial_, std::filesystem::copy_options::overwrite_existing, ec);
+  if (ec) throw CacheIoError(partial_.string() + ": cannot copy " + existing.string() + ": " + ec.message());
+  db_ = std::make_unique<detail::Database>(partial_.string(), SQLITE_OPEN_READWRITE);
+  const CacheMetadata previous = detail::metadata_from_db(*db_);
+  if (!(previous.grid == metadata_.grid) || previous.shard_count != 1 || !previous.complete) {
+    db_.reset();
+    detail::remove_sqlite_files(partial_);
+    throw CacheError(existing.string() + ": only a complete, unsharded cache of the same grid can be updated");
+  }
+  db_->exec("PRAGMA journal_mode = WAL");
+  db_->exec("PRAGMA synchronous = NORMAL");
+  resumed_ = updating_ = true;
+  stored_ = metadata_.grid.tile_count();
+  db_->exec("BEGIN");
+  write_metadata();  // "building" until finish(): a copy left by a killed update is no cache
+  db_->exec("COMMIT");
+}
+
+// Before a tile is replaced: its distance statistics row (keyed by the tile row's id, which the
+// replacement changes), and its classes when the new tile leaves them out.
+void CacheWriter::forget_tile(std::int64_t col, std::int64_t row, bool classes_too) {
+  detail::Statement a(*db_,
+                      "DELETE FROM gpkg_2d_gridded_tile_ancillary WHERE tpudt_name = 'road_distance' AND tpudt_id IN "
+                      "(SELECT id FROM road_distance WHERE zoom_level = 0 AND tile_column = ? AND tile_row = ?)");
+  a.bind(1, col).bind(2, row);
+  a.run();
+  if (classes_too) {
+    detail::Statement c(*db_, "DELETE FROM classes WHERE zoom_level = 0 AND tile_column = ? AND tile_row = ?");
+    c.bind(1, col).bind(2, row);
+    c.run();
+  }
+}
+
 CacheWriter::~CacheWriter() {
   if (db_ && in_transaction_) {
     try {
@@ -104,7 +149,7 @@ void CacheWriter::discard() {
   insert_ancillary_.reset();
   in_transaction_ = false;
   db_.reset();  // closing rolls back what was not committed
-  if (!resumed_) detail::remove_sqlite_files(partial_);
+  if (!resumed_ || updating_) detail::remove_sqlite_files(partial_);  // an update's copy is ours alone
 }
 
 std::int64_t CacheWriter::tiles_owned() const { return metadata_.shard_tile_count(); }
@@ -283,7 +328,12 @@ void CacheWriter::commit() {
 }
 
 void CacheWriter::write_roads(const std::vector<RoadLine>& roads) {
-  {
+  if (updating_) {
+    // Replaced whole, numbered from 1 again as a new cache's are.
+    begin();
+    db_->exec("DELETE FROM roads");
+    db_->exec("DELETE FROM sqlite_sequence WHERE name = 'roads'");
+  } else {
     detail::Statement count(*db_, "SELECT COUNT(*) FROM seqloc_metadata WHERE key = 'roads_written'");
     if (count.step() && count.column_int(0) > 0) return;
   }
@@ -315,6 +365,7 @@ void CacheWriter::write_tile(const EncodedTile& tile) {
         *db_, "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, scale, offset, min, max, "
               "mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
   }
+  if (updating_) forget_tile(tile.col, tile.row, tile.classes_png.empty());
   if (!tile.classes_png.empty()) {
     insert_classes_->bind(1, tile.col).bind(2, tile.row).bind_blob(3, tile.classes_png);
     insert_classes_->run();
@@ -331,7 +382,7 @@ void CacheWriter::write_tile(const EncodedTile& tile) {
       .bind(3, tile.distance_max_m)
       .bind(4, tile.distance_mean_m);
   ancillary.run();
-  ++stored_;
+  if (!updating_) ++stored_;
   if (++pending_ >= detail::kTilesPerTransaction) commit();
 }
 

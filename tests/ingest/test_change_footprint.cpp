@@ -13,6 +13,7 @@
 
 #include "seqloc/ingest/change_footprint.hpp"
 #include "seqloc/ingest/preprocess.hpp"
+#include "seqloc/ingest/update.hpp"
 #include "seqloc/osm/changes.hpp"
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/osm/synthetic.hpp"
@@ -141,6 +142,100 @@ TEST(ChangeFootprint, AnEditNoClassReadsTouchesNoTile) {
       change_footprint(old_cache.metadata(), osm::read_osm(dir / "old.osm.pbf"), osm::read_osm(dir / "new.osm.pbf"));
   EXPECT_EQ(fp.features_changed, 0u);
   EXPECT_TRUE(fp.tiles.empty());
+}
+
+std::string file_bytes(const std::filesystem::path& p) { return test::read_file(p); }
+
+// seqloc update against a rebuild: the cache of the old data updated with the change file equals,
+// tile for tile in both layers and road for road, the cache preprocessed from the new data.
+class Update : public ::testing::TestWithParam<double> {};
+
+TEST_P(Update, EqualsARebuildFromTheNewData) {
+  test::ScratchDir dir;
+  const Fixture f = base_map();
+  f.map.write(dir / "old.osm.pbf", 100);
+  std::ofstream(dir / "day.osc") << changes(f);
+  PreprocessOptions old_options = options_for(dir / "old.osm.pbf", dir / "old.gpkg");
+  old_options.corridor_m = GetParam();
+  (void)preprocess_region(old_options);
+  const std::string old_bytes = file_bytes(dir / "old.gpkg");
+
+  UpdateOptions u;
+  u.cache = dir / "old.gpkg";
+  u.base = dir / "old.osm.pbf";
+  u.changes = dir / "day.osc";
+  u.output = dir / "updated.gpkg";
+  u.new_base = dir / "new.osm.pbf";
+  const UpdateReport report = update_region(u);
+  EXPECT_EQ(file_bytes(dir / "old.gpkg"), old_bytes);  // -o leaves the cache as it was
+  PreprocessOptions new_options = options_for(dir / "new.osm.pbf", dir / "rebuilt.gpkg");
+  new_options.corridor_m = GetParam();
+  (void)preprocess_region(new_options);
+
+  raster::CacheReader updated(dir / "updated.gpkg"), rebuilt(dir / "rebuilt.gpkg");
+  const auto& g = rebuilt.grid();
+  ASSERT_TRUE(updated.grid() == g);
+  for (std::int64_t row = 0; row < g.tiles_high(); ++row)
+    for (std::int64_t col = 0; col < g.tiles_wide(); ++col) {
+      for (const auto layer : {raster::Layer::classes, raster::Layer::road_distance}) {
+        EXPECT_EQ(updated.has_tile(layer, col, row), rebuilt.has_tile(layer, col, row)) << col << "," << row;
+        EXPECT_TRUE(updated.tile_blob(layer, col, row) == rebuilt.tile_blob(layer, col, row)) << col << "," << row;
+      }
+    }
+  const auto a = updated.roads(), b = rebuilt.roads();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].osm_id, b[i].osm_id);
+    EXPECT_EQ(a[i].highway, b[i].highway);
+    ASSERT_EQ(a[i].points.size(), b[i].points.size());
+    for (std::size_t k = 0; k < a[i].points.size(); ++k) {
+      EXPECT_EQ(a[i].points[k].x_m, b[i].points[k].x_m);
+      EXPECT_EQ(a[i].points[k].y_m, b[i].points[k].y_m);
+    }
+  }
+  EXPECT_LT(report.tiles_rendered, report.tiles_total);
+  EXPECT_GT(report.tiles_rendered, 0);
+  EXPECT_EQ(updated.metadata().changes_applied, "day.osc");
+  EXPECT_EQ(updated.metadata().source_sha256, rebuilt.metadata().source_sha256);  // the new base's
+  RecordProperty("tiles_rendered", static_cast<int>(report.tiles_rendered));
+}
+
+INSTANTIATE_TEST_SUITE_P(Corridor, Update, ::testing::Values(0.0, 60.0));
+
+TEST(UpdateRefusal, AWrongBaseOrABadChangeFileLeavesTheCacheAsItWas) {
+  test::ScratchDir dir;
+  const Fixture f = base_map();
+  f.map.write(dir / "old.osm.pbf", 100);
+  (void)preprocess_region(options_for(dir / "old.osm.pbf", dir / "old.gpkg"));
+  const std::string before = file_bytes(dir / "old.gpkg");
+  UpdateOptions u;
+  u.cache = dir / "old.gpkg";  // replaced in place when the update succeeds
+  u.base = dir / "old.osm.pbf";
+  u.changes = dir / "bad.osc";
+  std::ofstream(dir / "bad.osc") << changes(f).substr(0, 200);  // truncated
+  EXPECT_THROW((void)update_region(u), osm::OsmInputError);
+  std::ofstream(dir / "other.osm") << "<?xml version='1.0'?><osm version=\"0.6\"><node id=\"1\" version=\"1\" "
+                                      "lat=\"47.5\" lon=\"10.5\"/></osm>\n";
+  u.base = dir / "other.osm";
+  std::ofstream(dir / "day.osc") << changes(f);
+  u.changes = dir / "day.osc";
+  try {
+    (void)update_region(u);
+    ADD_FAILURE() << "updated from a base the cache was not built from";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("not the OSM file"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(file_bytes(dir / "old.gpkg"), before);
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    const std::string name = entry.path().filename().string();
+    EXPECT_TRUE(name.find(".partial") == std::string::npos && name.find(".new-") == std::string::npos) << name;
+  }
+  // In place, the cache is replaced by the updated one.
+  u.base = dir / "old.osm.pbf";
+  const UpdateReport r = update_region(u);
+  EXPECT_GT(r.tiles_rendered, 0);
+  EXPECT_NE(file_bytes(dir / "old.gpkg"), before);
+  EXPECT_EQ(raster::CacheReader(dir / "old.gpkg").metadata().changes_applied, "day.osc");
 }
 
 }  // namespace

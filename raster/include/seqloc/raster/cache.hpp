@@ -67,6 +67,9 @@ struct CacheMetadata {
   std::string source_file;  ///< file name of the OSM input
   std::string source_sha256;
   std::string osm_replication_timestamp;
+  /// The replication sequence number of the data (empty: not known), and the OSM change files
+  /// `seqloc update` applied since the build, oldest first, one per line (empty: none).
+  std::string osm_replication_sequence, changes_applied;
   double centre_lat = 0;  ///< origin of the region CRS
   double centre_lon = 0;
   osm::GeoBox bbox;  ///< the requested bbox (lon/lat)
@@ -108,6 +111,12 @@ class CacheWriter {
   /// (removing a partial file of another build). Throws CacheIoError when the output directory is
   /// missing or not writable.
   CacheWriter(const std::filesystem::path& final_path, CacheMetadata metadata);
+  /// A writer that changes some tiles of the complete cache `existing`: a copy of it at
+  /// `final_path`.partial, whose tiles write_tile() replaces (a tile whose classes are left out
+  /// loses its stored ones), whose roads write_roads() replaces, and which finish() puts in place
+  /// of `final_path` (which may be `existing`) with `metadata`. The grid must be the existing one.
+  [[nodiscard]] static CacheWriter updating(const std::filesystem::path& existing,
+                                            const std::filesystem::path& final_path, CacheMetadata metadata);
   /// Whether a writer of `metadata` would remove the partial file there: one of another build, or
   /// one nothing can read (false when there is none, or it holds this build, which is resumed).
   [[nodiscard]] static bool would_remove_partial(const std::filesystem::path& final_path,
@@ -141,7 +150,11 @@ class CacheWriter {
   [[nodiscard]] const std::filesystem::path& partial_path() const { return partial_; }
 
  private:
+  struct Updating {};
+  CacheWriter(const std::filesystem::path& existing, const std::filesystem::path& final_path, CacheMetadata metadata,
+              Updating);
   void create_schema(const osm::RegionProjection& projection);
+  void forget_tile(std::int64_t col, std::int64_t row, bool classes_too);
   void write_metadata();
   void begin();
   void commit();
@@ -154,6 +167,7 @@ class CacheWriter {
   std::unique_ptr<detail::Statement> insert_classes_, insert_distance_, insert_ancillary_, find_tile_;
   std::int64_t stored_ = 0;
   bool resumed_ = false;
+  bool updating_ = false;
   bool in_transaction_ = false;
   int pending_ = 0;
 };

@@ -1,0 +1,188 @@
+"""`seqloc update` on a real extract with generated edits, against a rebuild (issue 44).
+
+The edits are made on the extract's objects (seeded): road nodes moved, buildings deleted, a
+building added, a node of a multipolygon's member way moved. osmium-tool writes the change file
+(`osmium derive-changes`) and the new data (`osmium apply-changes`); `seqloc preprocess` of that
+new data over the cache's own box is the reference. The updated cache must equal it tile for tile
+in both layers and road for road, having re-rendered fewer tiles than the region has. Bad input
+(a base the cache was not built from, a change file that does not apply) must exit 1 with the
+cache untouched."""
+
+import argparse
+import os
+import random
+import re
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import unittest
+
+ARGS = None
+
+
+def run(*cmd, expect=0):
+    r = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=900)
+    if r.returncode != expect:
+        raise AssertionError(f"{cmd[:3]}: exit {r.returncode}, expected {expect}\n{r.stdout}\n{r.stderr}")
+    return r
+
+
+def read_opl(path):
+    objects = []
+    with open(path) as f:
+        for line in f:
+            line = line.rstrip("\n")
+            if line:
+                objects.append(line.split(" "))
+    return objects
+
+
+def field(obj, key):
+    return next((f[1:] for f in obj[1:] if f.startswith(key)), "")
+
+
+def set_field(obj, key, value):
+    for i, f in enumerate(obj):
+        if i > 0 and f.startswith(key):
+            obj[i] = key + value
+            return
+    obj.append(key + value)
+
+
+def bump(obj):
+    set_field(obj, "v", str(int(field(obj, "v") or "0") + 1))
+
+
+def edit(objects, rng):
+    """Moves nodes of roads and of a multipolygon member, deletes buildings, adds one."""
+    nodes = {o[0][1:]: o for o in objects if o[0][0] == "n"}
+    ways = [o for o in objects if o[0][0] == "w"]
+    roads = [w for w in ways if re.search(r"(^|,)highway=(residential|secondary|tertiary|primary|service)", field(w, "T"))]
+    buildings = [w for w in ways if re.search(r"(^|,)building=", field(w, "T"))]
+    members = set()
+    for r in (o for o in objects if o[0][0] == "r" and "type=multipolygon" in field(o, "T")):
+        members |= {m.split("@")[0][1:] for m in field(r, "M").split(",") if m.startswith("w")}
+    member_ways = [w for w in ways if w[0][1:] in members]
+    moved = set()
+    for w in rng.sample(roads, 5) + rng.sample(member_ways, 1):
+        ref = rng.choice(field(w, "N").split(","))[1:]
+        if ref in moved or ref not in nodes:
+            continue
+        n = nodes[ref]
+        set_field(n, "x", f"{float(field(n, 'x')) + 0.0002:.7f}")
+        set_field(n, "y", f"{float(field(n, 'y')) + 0.0001:.7f}")
+        bump(n)
+        moved.add(ref)
+    deleted = {w[0] for w in rng.sample(buildings, 2)}
+    objects = [o for o in objects if o[0] not in deleted]
+    # A new building (20 m square) beside a moved node.
+    some = nodes[sorted(moved)[0]]
+    x, y = float(field(some, "x")), float(field(some, "y"))
+    top = max(int(o[0][1:]) for o in objects) + 1000
+    square = [(x + 0.0003, y), (x + 0.00057, y), (x + 0.00057, y + 0.00018), (x + 0.0003, y + 0.00018)]
+    new_nodes = [[f"n{top + i}", "v1", "dV", f"x{px:.7f}", f"y{py:.7f}"] for i, (px, py) in enumerate(square)]
+    refs = ",".join(f"n{top + i}" for i in range(4)) + f",n{top}"
+    new_way = [f"w{top + 10}", "v1", "dV", "Tbuilding=yes", "N" + refs]
+    last_node = max(i for i, o in enumerate(objects) if o[0][0] == "n")
+    last_way = max(i for i, o in enumerate(objects) if o[0][0] == "w")
+    objects = objects[: last_node + 1] + new_nodes + objects[last_node + 1: last_way + 1] + [new_way] + \
+        objects[last_way + 1:]
+    return objects, len(moved)
+
+
+def tiles(path):
+    db = sqlite3.connect(path)
+    out = {}
+    for table in ("classes", "road_distance"):
+        for col, row, data in db.execute(f"SELECT tile_column, tile_row, tile_data FROM {table}"):
+            out[(table, col, row)] = bytes(data)
+    roads = list(db.execute("SELECT geom, osm_id, highway FROM roads ORDER BY fid"))
+    meta = dict(db.execute("SELECT key, value FROM seqloc_metadata"))
+    db.close()
+    return out, roads, meta
+
+
+class UpdateRealExtract(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.TemporaryDirectory()
+        d = cls.d = cls.tmp.name
+        cls.old = ARGS.extract
+        run("osmium", "cat", cls.old, "-f", "opl", "-o", os.path.join(d, "old.opl"), "-O")
+        objects, cls.moved = edit(read_opl(os.path.join(d, "old.opl")), random.Random(44))
+        with open(os.path.join(d, "new.opl"), "w") as f:
+            f.writelines(" ".join(o) + "\n" for o in objects)
+        cls.changes = os.path.join(d, "day.osc")
+        run("osmium", "derive-changes", os.path.join(d, "old.opl"), os.path.join(d, "new.opl"), "-o", cls.changes, "-O")
+        cls.cache = os.path.join(d, "old.gpkg")
+        run(ARGS.seqloc, "preprocess", cls.old, "-o", cls.cache, "--no-progress")
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.tmp.cleanup()
+
+    def test_the_update_equals_a_rebuild_of_the_new_data(self):
+        d = self.d
+        updated = os.path.join(d, "updated.gpkg")
+        r = run(ARGS.seqloc, "update", self.cache, "--base", self.old, "--changes", self.changes, "-o", updated,
+                "--no-progress")
+        m = re.search(r"(\d+) of (\d+) tiles re-rendered", r.stdout)
+        self.assertIsNotNone(m, r.stdout)
+        rendered, total = int(m.group(1)), int(m.group(2))
+        # The reference: osmium's new data, preprocessed over the cache's own box.
+        new = os.path.join(d, "new.osm.pbf")
+        run("osmium", "apply-changes", self.old, self.changes, "-o", new, "-O")
+        _, _, meta = tiles(self.cache)
+        bbox = ",".join(meta[k] for k in ("bbox_min_lon", "bbox_min_lat", "bbox_max_lon", "bbox_max_lat"))
+        rebuilt = os.path.join(d, "rebuilt.gpkg")
+        run(ARGS.seqloc, "preprocess", new, "-o", rebuilt, "--bbox", bbox, "--no-progress")
+        old_tiles, _, _ = tiles(self.cache)
+        got, got_roads, got_meta = tiles(updated)
+        want, want_roads, _ = tiles(rebuilt)
+        self.assertEqual(set(got), set(want))
+        differing = [k for k in want if got[k] != want[k]]
+        self.assertEqual(differing, [])
+        self.assertEqual(got_roads, want_roads)
+        changed = {(c, r) for (_, c, r) in want if old_tiles.get((_, c, r)) != want[(_, c, r)]}
+        self.assertGreater(len(changed), 0)
+        self.assertLessEqual(len(changed), rendered)
+        self.assertLess(rendered, total)
+        self.assertEqual(got_meta["changes_applied"], "day.osc")
+        print(f"\n{self.moved} nodes moved, 2 buildings deleted, 1 added: {len(changed)} tiles changed, "
+              f"{rendered} of {total} re-rendered", file=sys.stderr)
+
+    def test_bad_input_exits_1_and_leaves_the_cache(self):
+        d = self.d
+        with open(self.cache, "rb") as f:
+            before = f.read()
+        truncated = os.path.join(d, "cut.osc")
+        with open(self.changes) as f, open(truncated, "w") as g:
+            text = f.read()
+            g.write(text[: len(text) // 2])
+        # A node of the base at its own version (versions going backwards), and one it lacks.
+        first = next(o for o in read_opl(os.path.join(d, "old.opl")) if o[0][0] == "n")
+        backwards, missing = os.path.join(d, "backwards.osc"), os.path.join(d, "missing.osc")
+        for path, node_id, version in ((backwards, first[0][1:], field(first, "v")), (missing, "999999999999", "5")):
+            with open(path, "w") as g:
+                g.write(f'<?xml version="1.0"?>\n<osmChange version="0.6"><modify><node id="{node_id}" '
+                        f'version="{version}" lat="43.7" lon="7.4"/></modify></osmChange>\n')
+        for base, changes, says in ((ARGS.other, self.changes, "not the OSM file"),
+                                    (self.old, truncated, "not a complete OSM change file"),
+                                    (self.old, backwards, "versions going backwards"),
+                                    (self.old, missing, "which the base lacks")):
+            r = run(ARGS.seqloc, "update", self.cache, "--base", base, "--changes", changes, "--no-progress", expect=1)
+            self.assertIn(says, r.stderr)
+            self.assertEqual(len(r.stderr.strip().splitlines()), 1, r.stderr)
+            with open(self.cache, "rb") as f:
+                self.assertEqual(f.read(), before)
+            self.assertEqual([n for n in os.listdir(d) if ".partial" in n or ".new-" in n], [])
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--seqloc", required=True)
+    parser.add_argument("--extract", required=True)
+    parser.add_argument("--other", required=True, help="another OSM file, not the cache's base")
+    ARGS, rest = parser.parse_known_args()
+    unittest.main(argv=[sys.argv[0]] + rest)
