@@ -207,7 +207,8 @@ void honesty_section(const PosesByConfig& poses, const std::vector<std::string>&
     }
     const auto c = io::uncertainty_calibration(pooled);
     if (!c) continue;
-    render::Series series{name, {}, {}, false};
+    // Short legend names; only bins of at least 20 frames are drawn (the table has them all).
+    render::Series series{name.starts_with("smooth") ? "smooth" : name, {}, {}, false};
     for (std::size_t b = 0; b < c->reliability.size(); ++b) {
       const auto& bin = c->reliability[b];
       if (bin.frames == 0) continue;
@@ -215,16 +216,19 @@ void honesty_section(const PosesByConfig& poses, const std::vector<std::string>&
       std::snprintf(line, sizeof line, "| %s | %zu-%zu %% | %zu | %.1f | %.1f |\n", name.c_str(), 10 * b, 10 * b + 10,
                     bin.frames, bin.reported_pct, bin.actual_pct);
       md << line;
+      if (bin.frames < 20) continue;
       series.x.push_back(bin.reported_pct);
       series.y.push_back(bin.actual_pct);
     }
+    series.points = series.x.size() < 2;  // a single bin is a dot, not a line
     curves.push_back(series);
   }
   if (curves.empty()) return;
   curves.push_back({"calibrated", {0, 100}, {0, 100}, false});
   render::write_picture(out / "reliability_mass_5m.png",
                         render::plot(curves, "Reported mass within 5 m against the share truly within 5 m",
-                                     "reported mass within 5 m (%, bin mean)", "frames within 5 m (%)", 100));
+                                     "reported mass within 5 m (%, bin mean; bins of 20 frames or more)",
+                                     "frames truly within 5 m (%)", 100));
   md << "\n![reliability](reliability_mass_5m.png)\n";
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <tuple>
@@ -104,6 +105,73 @@ void collect(const osm::FeatureSet& s, const std::set<Identity>& changed, osm::F
   }
 }
 
+// The points of `a` that `b` does not share at its ends: after their common prefix and before their
+// common suffix, with one shared point on each side (the segments joining the stretch to the rest).
+// The pixels whose drawing differs lie in the box of both stretches: a line draws the rest the
+// same, and an area's fill changes only between its old and new edges.
+std::vector<osm::GeoPoint> stretch(const std::vector<osm::GeoPoint>& a, const std::vector<osm::GeoPoint>& b) {
+  auto same = [](const osm::GeoPoint& x, const osm::GeoPoint& y) {
+    return x.lat_deg == y.lat_deg && x.lon_deg == y.lon_deg;
+  };
+  const std::size_t n = std::min(a.size(), b.size());
+  std::size_t prefix = 0, suffix = 0;
+  while (prefix < n && same(a[prefix], b[prefix])) ++prefix;
+  while (suffix < n - prefix && same(a[a.size() - 1 - suffix], b[b.size() - 1 - suffix])) ++suffix;
+  const std::size_t from = prefix > 0 ? prefix - 1 : 0, to = std::min(a.size(), a.size() - suffix + 1);
+  return from < to ? std::vector<osm::GeoPoint>(a.begin() + static_cast<std::ptrdiff_t>(from),
+                                                a.begin() + static_cast<std::ptrdiff_t>(to))
+                   : std::vector<osm::GeoPoint>{};
+}
+
+// A changed line or area that stays one feature of the same kind, group and rings: its changed
+// stretches, as lines of its group (only their boxes matter). Nothing when it changed otherwise.
+template <class Feature>
+std::optional<std::vector<osm::LineFeature>> stretches(const Feature& a, const Feature& b) {
+  if (!(a.group == b.group)) return std::nullopt;
+  std::vector<osm::LineFeature> out;
+  auto add = [&](const std::vector<osm::GeoPoint>& x, const std::vector<osm::GeoPoint>& y) {
+    for (auto part : {stretch(x, y), stretch(y, x)}) {
+      if (!part.empty()) out.push_back({a.group, a.osm_id, "", std::move(part)});
+    }
+  };
+  if constexpr (std::is_same_v<Feature, osm::LineFeature>) {
+    if (a.highway != b.highway) return std::nullopt;
+    add(a.points, b.points);
+  } else {
+    if (a.rings.size() != b.rings.size()) return std::nullopt;
+    for (std::size_t r = 0; r < a.rings.size(); ++r) add(a.rings[r], b.rings[r]);
+  }
+  return out;
+}
+
+// The features of both states under the changed identities, each one-to-one change narrowed to
+// its changed stretches.
+template <class Feature>
+void narrow(const std::vector<Feature>& before, const std::vector<Feature>& after, char kind,
+            const std::set<Identity>& changed, std::vector<Feature>& whole, std::vector<osm::LineFeature>& parts) {
+  auto identity = [&](const Feature& f) {
+    if constexpr (std::is_same_v<Feature, osm::AreaFeature>) return Identity{kind, f.osm_id, f.from_relation};
+    return Identity{kind, f.osm_id, false};
+  };
+  std::map<Identity, std::pair<std::vector<const Feature*>, std::vector<const Feature*>>> both;
+  for (const auto& f : before) {
+    if (changed.contains(identity(f))) both[identity(f)].first.push_back(&f);
+  }
+  for (const auto& f : after) {
+    if (changed.contains(identity(f))) both[identity(f)].second.push_back(&f);
+  }
+  for (const auto& [id, pair] : both) {
+    if (pair.first.size() == 1 && pair.second.size() == 1) {
+      if (auto s = stretches(*pair.first[0], *pair.second[0])) {
+        parts.insert(parts.end(), std::make_move_iterator(s->begin()), std::make_move_iterator(s->end()));
+        continue;
+      }
+    }
+    for (const auto* f : pair.first) whole.push_back(*f);
+    for (const auto* f : pair.second) whole.push_back(*f);
+  }
+}
+
 }  // namespace
 
 ChangeFootprint change_footprint(const raster::CacheMetadata& metadata, const osm::FeatureSet& before,
@@ -114,6 +182,14 @@ ChangeFootprint change_footprint(const raster::CacheMetadata& metadata, const os
   collect(after, changed, moved);
   ChangeFootprint footprint;
   footprint.features_changed = moved.points.size() + moved.lines.size() + moved.areas.size();
+  // Lines and areas changed in place count by their changed stretches only.
+  osm::FeatureSet narrowed;
+  narrowed.points = std::move(moved.points);
+  narrow(before.lines, after.lines, 'l', changed, narrowed.lines, narrowed.lines);
+  std::vector<osm::LineFeature> area_parts;
+  narrow(before.areas, after.areas, 'a', changed, narrowed.areas, area_parts);
+  narrowed.lines.insert(narrowed.lines.end(), area_parts.begin(), area_parts.end());
+  moved = std::move(narrowed);
   const raster::RegionFeatures pixels = raster::project_features(moved, metadata.projection());
   const auto& grid = metadata.grid;
   const std::int64_t halo = raster::TileRenderer::halo_for(metadata.max_distance_m);

@@ -390,9 +390,10 @@ Picture plot(const std::vector<Series>& series, const std::string& title, const 
     cv::rectangle(m, at + cv::Point(0, -10), at + cv::Point(14, 2), colour, cv::FILLED);
     text(m, s.label, at + cv::Point(20, 0));
   }
-  text(m, title, cv::Point(left, 25), 0.55);
+  // The title on the first line, the y axis's label on the second, just above the axis.
+  text(m, title, cv::Point(left, 18), 0.55);
   text(m, x_label, cv::Point((w - right) / 2, h - 15));
-  text(m, y_label, cv::Point(5, 25), 0.4);
+  text(m, y_label, cv::Point(5, top - 8), 0.4);
   return from_mat(m);
 }
 

@@ -9,14 +9,20 @@ in both layers and road for road, having re-rendered fewer tiles than the region
 cache untouched."""
 
 import argparse
+import http.client
 import os
 import random
 import re
+import shutil
 import sqlite3
 import subprocess
 import sys
 import tempfile
+import time
 import unittest
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from osm_edits import edit, field, read_opl, write_opl  # noqa: E402
 
 ARGS = None
 
@@ -26,69 +32,6 @@ def run(*cmd, expect=0):
     if r.returncode != expect:
         raise AssertionError(f"{cmd[:3]}: exit {r.returncode}, expected {expect}\n{r.stdout}\n{r.stderr}")
     return r
-
-
-def read_opl(path):
-    objects = []
-    with open(path) as f:
-        for line in f:
-            line = line.rstrip("\n")
-            if line:
-                objects.append(line.split(" "))
-    return objects
-
-
-def field(obj, key):
-    return next((f[1:] for f in obj[1:] if f.startswith(key)), "")
-
-
-def set_field(obj, key, value):
-    for i, f in enumerate(obj):
-        if i > 0 and f.startswith(key):
-            obj[i] = key + value
-            return
-    obj.append(key + value)
-
-
-def bump(obj):
-    set_field(obj, "v", str(int(field(obj, "v") or "0") + 1))
-
-
-def edit(objects, rng):
-    """Moves nodes of roads and of a multipolygon member, deletes buildings, adds one."""
-    nodes = {o[0][1:]: o for o in objects if o[0][0] == "n"}
-    ways = [o for o in objects if o[0][0] == "w"]
-    roads = [w for w in ways if re.search(r"(^|,)highway=(residential|secondary|tertiary|primary|service)", field(w, "T"))]
-    buildings = [w for w in ways if re.search(r"(^|,)building=", field(w, "T"))]
-    members = set()
-    for r in (o for o in objects if o[0][0] == "r" and "type=multipolygon" in field(o, "T")):
-        members |= {m.split("@")[0][1:] for m in field(r, "M").split(",") if m.startswith("w")}
-    member_ways = [w for w in ways if w[0][1:] in members]
-    moved = set()
-    for w in rng.sample(roads, 5) + rng.sample(member_ways, 1):
-        ref = rng.choice(field(w, "N").split(","))[1:]
-        if ref in moved or ref not in nodes:
-            continue
-        n = nodes[ref]
-        set_field(n, "x", f"{float(field(n, 'x')) + 0.0002:.7f}")
-        set_field(n, "y", f"{float(field(n, 'y')) + 0.0001:.7f}")
-        bump(n)
-        moved.add(ref)
-    deleted = {w[0] for w in rng.sample(buildings, 2)}
-    objects = [o for o in objects if o[0] not in deleted]
-    # A new building (20 m square) beside a moved node.
-    some = nodes[sorted(moved)[0]]
-    x, y = float(field(some, "x")), float(field(some, "y"))
-    top = max(int(o[0][1:]) for o in objects) + 1000
-    square = [(x + 0.0003, y), (x + 0.00057, y), (x + 0.00057, y + 0.00018), (x + 0.0003, y + 0.00018)]
-    new_nodes = [[f"n{top + i}", "v1", "dV", f"x{px:.7f}", f"y{py:.7f}"] for i, (px, py) in enumerate(square)]
-    refs = ",".join(f"n{top + i}" for i in range(4)) + f",n{top}"
-    new_way = [f"w{top + 10}", "v1", "dV", "Tbuilding=yes", "N" + refs]
-    last_node = max(i for i, o in enumerate(objects) if o[0][0] == "n")
-    last_way = max(i for i, o in enumerate(objects) if o[0][0] == "w")
-    objects = objects[: last_node + 1] + new_nodes + objects[last_node + 1: last_way + 1] + [new_way] + \
-        objects[last_way + 1:]
-    return objects, len(moved)
 
 
 def tiles(path):
@@ -110,9 +53,9 @@ class UpdateRealExtract(unittest.TestCase):
         d = cls.d = cls.tmp.name
         cls.old = ARGS.extract
         run("osmium", "cat", cls.old, "-f", "opl", "-o", os.path.join(d, "old.opl"), "-O")
-        objects, cls.moved = edit(read_opl(os.path.join(d, "old.opl")), random.Random(44))
-        with open(os.path.join(d, "new.opl"), "w") as f:
-            f.writelines(" ".join(o) + "\n" for o in objects)
+        objects, cls.moved = edit(read_opl(os.path.join(d, "old.opl")), random.Random(44), roads=5, deleted=2, added=1,
+                                  members=1)
+        write_opl(os.path.join(d, "new.opl"), objects)
         cls.changes = os.path.join(d, "day.osc")
         run("osmium", "derive-changes", os.path.join(d, "old.opl"), os.path.join(d, "new.opl"), "-o", cls.changes, "-O")
         cls.cache = os.path.join(d, "old.gpkg")
@@ -151,6 +94,42 @@ class UpdateRealExtract(unittest.TestCase):
         self.assertEqual(got_meta["changes_applied"], "day.osc")
         print(f"\n{self.moved} nodes moved, 2 buildings deleted, 1 added: {len(changed)} tiles changed, "
               f"{rendered} of {total} re-rendered", file=sys.stderr)
+
+    def test_serve_picks_up_an_update_in_place(self):
+        """`seqloc serve` keeps answering while the cache it serves is updated in place, and then
+        serves the updated tiles."""
+        d = self.d
+        served = os.path.join(d, "served.gpkg")
+        shutil.copy(self.cache, served)
+        server = subprocess.Popen([str(ARGS.seqloc), "serve", served, "--port", "0", "--reload-check", "0.05"],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            line = server.stdout.readline()
+            self.assertTrue(line.startswith("seqloc serve: http://"), line)
+            host, port = line.split()[2].split("//")[1].rstrip("/").split(":")
+
+            def get(col, row):
+                conn = http.client.HTTPConnection(host, int(port), timeout=10)
+                conn.request("GET", f"/regions/served/road_distance/{col}/{row}.png")
+                r = conn.getresponse()
+                body = r.read()
+                conn.close()
+                self.assertEqual(r.status, 200)
+                return body
+
+            before, _, _ = tiles(served)
+            run(ARGS.seqloc, "update", served, "--base", self.old, "--changes", self.changes, "--no-progress")
+            after, _, _ = tiles(served)
+            changed = [(c, r) for (t, c, r) in after if t == "road_distance" and before[(t, c, r)] != after[(t, c, r)]]
+            self.assertGreater(len(changed), 0)
+            deadline = time.monotonic() + 15
+            while any(get(c, r) != after[("road_distance", c, r)] for c, r in changed):
+                self.assertLess(time.monotonic(), deadline, "the server still serves the old tiles")
+                time.sleep(0.1)
+        finally:
+            server.terminate()
+            server.communicate(timeout=30)
+        self.assertEqual(server.returncode, 0)
 
     def test_bad_input_exits_1_and_leaves_the_cache(self):
         d = self.d
