@@ -381,7 +381,8 @@ Picture plot(const std::vector<Series>& series, const std::string& title, const 
     const cv::Scalar colour = palette[k % 6];
     for (std::size_t i = 0; i < s.x.size(); ++i) {
       if (s.points) {
-        cv::circle(m, px(s.x[i], s.y[i]), 2, colour, cv::FILLED, cv::LINE_AA);
+        cv::circle(m, px(s.x[i], s.y[i]), s.x.size() == 1 ? 6 : 2, colour, cv::FILLED,
+                   cv::LINE_AA);  // a lone point shows
       } else if (i > 0) {
         cv::line(m, px(s.x[i - 1], s.y[i - 1]), px(s.x[i], s.y[i]), colour, 2, cv::LINE_AA);
       }
