@@ -121,6 +121,34 @@ class ClusterScripts(unittest.TestCase):
                 run(command, env=task_env)
         self.check_outputs(work)
 
+    def test_the_update_stage_applies_each_change_file_once(self):
+        """country-job update on the merged cache: two change files (osmium derive-changes of
+        seeded edits) applied in order, the new base kept, a rerun a no-op; the cache equals a
+        rebuild of the last state."""
+        work = self.dir / "update"
+        env = dict(self.env, OSM=str(self.osm), WORK=str(work), SHARDS="1", INDEX="0")
+        job = ROOT / "scripts" / "cluster" / "country-job"
+        run([job, "preprocess"], env=env)
+        run([job, "merge"], env=env)
+        sys.path.insert(0, str(ROOT / "tests" / "support"))
+        from osm_edits import edit, read_opl, write_opl
+        run(["osmium", "cat", self.osm, "-f", "opl", "-o", work / "v0.opl", "-O"])
+        changes = []
+        for k in (1, 2):
+            objects, _ = edit(read_opl(work / f"v{k - 1}.opl"), __import__("random").Random(k), roads=2, deleted=1,
+                              added=1, members=0)
+            write_opl(work / f"v{k}.opl", objects)
+            changes.append(work / f"day{k}.osc")
+            run(["osmium", "derive-changes", work / f"v{k - 1}.opl", work / f"v{k}.opl", "-o", changes[-1], "-O"])
+        env["CHANGES"] = " ".join(map(str, changes))
+        run([job, "update"], env=env)
+        self.assertEqual((work / "applied.txt").read_text().split(), ["day1.osc", "day2.osc"])
+        self.assertEqual(run([job, "update"], env=env).count("skipped"), 2)
+        rebuilt = work / "rebuilt.gpkg"
+        run([SEQLOC, "preprocess", work / "base.osm.pbf", "-o", rebuilt, "--no-progress"])
+        self.assertEqual(tiles(work / "region.gpkg"), tiles(rebuilt))
+        self.assertNotEqual(tiles(work / "region.gpkg"), tiles(self.whole))
+
     def test_a_rerun_task_keeps_a_finished_shard_and_a_bad_stage_is_refused(self):
         work = self.dir / "rerun"
         env = dict(self.env, OSM=str(self.osm), WORK=str(work), SHARDS="2", INDEX="1")
