@@ -156,6 +156,19 @@ class UpdateRealExtract(unittest.TestCase):
             with open(self.cache, "rb") as f:
                 self.assertEqual(f.read(), before)
             self.assertEqual([n for n in os.listdir(d) if ".partial" in n or ".new-" in n], [])
+        # A cache of another format version: refused as it is, not rebuilt or changed.
+        other = os.path.join(d, "v2.gpkg")
+        shutil.copy(self.cache, other)
+        db = sqlite3.connect(other)
+        db.execute("UPDATE seqloc_metadata SET value = '2' WHERE key = 'format_version'")
+        db.commit()
+        db.close()
+        with open(other, "rb") as f:
+            v2 = f.read()
+        r = run(ARGS.seqloc, "update", other, "--base", self.old, "--changes", self.changes, "--no-progress", expect=1)
+        self.assertIn("format version 2", r.stderr)
+        with open(other, "rb") as f:
+            self.assertEqual(f.read(), v2)
 
 
 if __name__ == "__main__":
