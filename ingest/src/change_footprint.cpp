@@ -55,19 +55,18 @@ std::string content(const osm::AreaFeature& f) {
   return s;
 }
 
-// Each state's features by identity: their contents (a multiset: one id may give several) and
-// where they are.
-struct Indexed {
-  std::map<Identity, std::multiset<std::string>> contents;
-};
+// Each state's features by identity: their contents (a multiset: one id may give several).
+using Indexed = std::map<Identity, std::multiset<std::string>>;
+
+template <class Feature>
+Identity identity_of(const Feature& f, char kind) {
+  if constexpr (std::is_same_v<Feature, osm::AreaFeature>) return {kind, f.osm_id, f.from_relation};
+  return {kind, f.osm_id, false};
+}
 
 template <class Feature>
 void index_features(const std::vector<Feature>& features, char kind, Indexed& out) {
-  for (const auto& f : features) {
-    bool from_relation = false;
-    if constexpr (std::is_same_v<Feature, osm::AreaFeature>) from_relation = f.from_relation;
-    out.contents[{kind, f.osm_id, from_relation}].insert(content(f));
-  }
+  for (const auto& f : features) out[identity_of(f, kind)].insert(content(f));
 }
 
 Indexed index_of(const osm::FeatureSet& s) {
@@ -81,28 +80,14 @@ Indexed index_of(const osm::FeatureSet& s) {
 // The identities whose contents differ between the states.
 std::set<Identity> changed_identities(const Indexed& before, const Indexed& after) {
   std::set<Identity> changed;
-  for (const auto& [id, c] : before.contents) {
-    const auto it = after.contents.find(id);
-    if (it == after.contents.end() || it->second != c) changed.insert(id);
+  for (const auto& [id, c] : before) {
+    const auto it = after.find(id);
+    if (it == after.end() || it->second != c) changed.insert(id);
   }
-  for (const auto& [id, c] : after.contents) {
-    if (!before.contents.contains(id)) changed.insert(id);
+  for (const auto& [id, c] : after) {
+    if (!before.contains(id)) changed.insert(id);
   }
   return changed;
-}
-
-// The features of a state whose identity changed (both states' go into one set: their boxes are
-// what matters).
-void collect(const osm::FeatureSet& s, const std::set<Identity>& changed, osm::FeatureSet& out) {
-  for (const auto& f : s.points) {
-    if (changed.contains({'n', f.osm_id, false})) out.points.push_back(f);
-  }
-  for (const auto& f : s.lines) {
-    if (changed.contains({'l', f.osm_id, false})) out.lines.push_back(f);
-  }
-  for (const auto& f : s.areas) {
-    if (changed.contains({'a', f.osm_id, f.from_relation})) out.areas.push_back(f);
-  }
 }
 
 // The points of `a` that `b` does not share at its ends: after their common prefix and before their
@@ -144,32 +129,40 @@ std::optional<std::vector<osm::LineFeature>> stretches(const Feature& a, const F
   return out;
 }
 
-// The features of both states under the changed identities, each one-to-one change narrowed to
-// its changed stretches.
+// The features of both states under the changed identities (both states' go into one set: their
+// boxes are what matters), each one-to-one change of a line or area narrowed to its changed
+// stretches. Returns how many features there were.
 template <class Feature>
-void narrow(const std::vector<Feature>& before, const std::vector<Feature>& after, char kind,
-            const std::set<Identity>& changed, std::vector<Feature>& whole, std::vector<osm::LineFeature>& parts) {
-  auto identity = [&](const Feature& f) {
-    if constexpr (std::is_same_v<Feature, osm::AreaFeature>) return Identity{kind, f.osm_id, f.from_relation};
-    return Identity{kind, f.osm_id, false};
-  };
+std::size_t narrow(const std::vector<Feature>& before, const std::vector<Feature>& after, char kind,
+                   const std::set<Identity>& changed, std::vector<Feature>& whole,
+                   std::vector<osm::LineFeature>& parts) {
   std::map<Identity, std::pair<std::vector<const Feature*>, std::vector<const Feature*>>> both;
+  std::size_t count = 0;
   for (const auto& f : before) {
-    if (changed.contains(identity(f))) both[identity(f)].first.push_back(&f);
+    const Identity id = identity_of(f, kind);
+    if (!changed.contains(id)) continue;
+    both[id].first.push_back(&f);
+    ++count;
   }
   for (const auto& f : after) {
-    if (changed.contains(identity(f))) both[identity(f)].second.push_back(&f);
+    const Identity id = identity_of(f, kind);
+    if (!changed.contains(id)) continue;
+    both[id].second.push_back(&f);
+    ++count;
   }
   for (const auto& [id, pair] : both) {
-    if (pair.first.size() == 1 && pair.second.size() == 1) {
-      if (auto s = stretches(*pair.first[0], *pair.second[0])) {
-        parts.insert(parts.end(), std::make_move_iterator(s->begin()), std::make_move_iterator(s->end()));
-        continue;
+    if constexpr (!std::is_same_v<Feature, osm::PointFeature>) {
+      if (pair.first.size() == 1 && pair.second.size() == 1) {
+        if (auto s = stretches(*pair.first[0], *pair.second[0])) {
+          parts.insert(parts.end(), std::make_move_iterator(s->begin()), std::make_move_iterator(s->end()));
+          continue;
+        }
       }
     }
     for (const auto* f : pair.first) whole.push_back(*f);
     for (const auto* f : pair.second) whole.push_back(*f);
   }
+  return count;
 }
 
 }  // namespace
@@ -177,19 +170,14 @@ void narrow(const std::vector<Feature>& before, const std::vector<Feature>& afte
 ChangeFootprint change_footprint(const raster::CacheMetadata& metadata, const osm::FeatureSet& before,
                                  const osm::FeatureSet& after) {
   const std::set<Identity> changed = changed_identities(index_of(before), index_of(after));
-  osm::FeatureSet moved;
-  collect(before, changed, moved);
-  collect(after, changed, moved);
-  ChangeFootprint footprint;
-  footprint.features_changed = moved.points.size() + moved.lines.size() + moved.areas.size();
   // Lines and areas changed in place count by their changed stretches only.
-  osm::FeatureSet narrowed;
-  narrowed.points = std::move(moved.points);
-  narrow(before.lines, after.lines, 'l', changed, narrowed.lines, narrowed.lines);
-  std::vector<osm::LineFeature> area_parts;
-  narrow(before.areas, after.areas, 'a', changed, narrowed.areas, area_parts);
-  narrowed.lines.insert(narrowed.lines.end(), area_parts.begin(), area_parts.end());
-  moved = std::move(narrowed);
+  osm::FeatureSet moved;
+  std::vector<osm::LineFeature> parts;
+  ChangeFootprint footprint;
+  footprint.features_changed = narrow(before.points, after.points, 'n', changed, moved.points, parts) +
+                               narrow(before.lines, after.lines, 'l', changed, moved.lines, parts) +
+                               narrow(before.areas, after.areas, 'a', changed, moved.areas, parts);
+  moved.lines.insert(moved.lines.end(), std::make_move_iterator(parts.begin()), std::make_move_iterator(parts.end()));
   const raster::RegionFeatures pixels = raster::project_features(moved, metadata.projection());
   const auto& grid = metadata.grid;
   const std::int64_t halo = raster::TileRenderer::halo_for(metadata.max_distance_m);

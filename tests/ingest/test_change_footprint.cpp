@@ -144,7 +144,6 @@ TEST(ChangeFootprint, AnEditNoClassReadsTouchesNoTile) {
   EXPECT_TRUE(fp.tiles.empty());
 }
 
-std::string file_bytes(const std::filesystem::path& p) { return test::read_file(p); }
 
 // seqloc update against a rebuild: the cache of the old data updated with the change file equals,
 // tile for tile in both layers and road for road, the cache preprocessed from the new data.
@@ -158,7 +157,7 @@ TEST_P(Update, EqualsARebuildFromTheNewData) {
   PreprocessOptions old_options = options_for(dir / "old.osm.pbf", dir / "old.gpkg");
   old_options.corridor_m = GetParam();
   (void)preprocess_region(old_options);
-  const std::string old_bytes = file_bytes(dir / "old.gpkg");
+  const std::string old_bytes = test::read_file(dir / "old.gpkg");
 
   UpdateOptions u;
   u.cache = dir / "old.gpkg";
@@ -167,7 +166,7 @@ TEST_P(Update, EqualsARebuildFromTheNewData) {
   u.output = dir / "updated.gpkg";
   u.new_base = dir / "new.osm.pbf";
   const UpdateReport report = update_region(u);
-  EXPECT_EQ(file_bytes(dir / "old.gpkg"), old_bytes);  // -o leaves the cache as it was
+  EXPECT_EQ(test::read_file(dir / "old.gpkg"), old_bytes);  // -o leaves the cache as it was
   PreprocessOptions new_options = options_for(dir / "new.osm.pbf", dir / "rebuilt.gpkg");
   new_options.corridor_m = GetParam();
   (void)preprocess_region(new_options);
@@ -207,7 +206,7 @@ TEST(UpdateRefusal, AWrongBaseOrABadChangeFileLeavesTheCacheAsItWas) {
   const Fixture f = base_map();
   f.map.write(dir / "old.osm.pbf", 100);
   (void)preprocess_region(options_for(dir / "old.osm.pbf", dir / "old.gpkg"));
-  const std::string before = file_bytes(dir / "old.gpkg");
+  const std::string before = test::read_file(dir / "old.gpkg");
   UpdateOptions u;
   u.cache = dir / "old.gpkg";  // replaced in place when the update succeeds
   u.base = dir / "old.osm.pbf";
@@ -225,7 +224,7 @@ TEST(UpdateRefusal, AWrongBaseOrABadChangeFileLeavesTheCacheAsItWas) {
   } catch (const DataError& e) {
     EXPECT_NE(std::string(e.what()).find("not the OSM file"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(file_bytes(dir / "old.gpkg"), before);
+  EXPECT_EQ(test::read_file(dir / "old.gpkg"), before);
   for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
     const std::string name = entry.path().filename().string();
     EXPECT_TRUE(name.find(".partial") == std::string::npos && name.find(".new-") == std::string::npos) << name;
@@ -234,7 +233,7 @@ TEST(UpdateRefusal, AWrongBaseOrABadChangeFileLeavesTheCacheAsItWas) {
   u.base = dir / "old.osm.pbf";
   const UpdateReport r = update_region(u);
   EXPECT_GT(r.tiles_rendered, 0);
-  EXPECT_NE(file_bytes(dir / "old.gpkg"), before);
+  EXPECT_NE(test::read_file(dir / "old.gpkg"), before);
   EXPECT_EQ(raster::CacheReader(dir / "old.gpkg").metadata().changes_applied, "day.osc");
 }
 
