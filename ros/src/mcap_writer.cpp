@@ -235,14 +235,10 @@ std::string McapWriter::finish() {
   for (const auto& o : offsets) file_ += o;
 
   // The footer's CRC covers the summary, the summary offsets and the footer up to the CRC itself.
-  Fields footer;
-  footer.u64(summary_start).u64(summary_offset_start);
-  std::string head = record(kFooter, Fields(footer).u32(0));
-  head.resize(head.size() - 4);
-  file_ += head;
-  Fields crc;
-  crc.u32(crc32_of(std::string_view(file_).substr(summary_start)));
-  file_ += crc.bytes();
+  // Its record is written field by field: opcode, content length (two offsets and the CRC), then
+  // the CRC of everything from the summary's start to here.
+  file_ += Fields().u8(kFooter).u64(8 + 8 + 4).u64(summary_start).u64(summary_offset_start).bytes();
+  file_ += Fields().u32(crc32_of(std::string_view(file_).substr(summary_start))).bytes();
   file_.append(kMagic);
   return std::move(file_);
 }
