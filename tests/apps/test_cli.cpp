@@ -29,11 +29,19 @@ std::filesystem::path small_map(const test::ScratchDir& dir) {
 int count_lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
 
 TEST(Cli, HelpOnEverySubcommand) {
-  for (const std::vector<std::string>& args :
-       {std::vector<std::string>{"--help"}, {"preprocess", "--help"}, {"cache", "--help"}, {"cache", "info", "--help"},
-        {"cache", "merge", "--help"}, {"localize", "--help"}, {"evaluate", "--help"}, {"simulate", "--help"},
-        {"render", "--help"}, {"serve", "--help"}, {"export", "--help"}, {"match", "--help"},
-        {"update", "--help"}}) {
+  for (const std::vector<std::string>& args : {std::vector<std::string>{"--help"},
+                                               {"preprocess", "--help"},
+                                               {"cache", "--help"},
+                                               {"cache", "info", "--help"},
+                                               {"cache", "merge", "--help"},
+                                               {"localize", "--help"},
+                                               {"evaluate", "--help"},
+                                               {"simulate", "--help"},
+                                               {"render", "--help"},
+                                               {"serve", "--help"},
+                                               {"export", "--help"},
+                                               {"match", "--help"},
+                                               {"update", "--help"}}) {
     const auto r = run_seqloc(args);
     EXPECT_EQ(r.exit_code, 0) << args[0];
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
@@ -52,10 +60,10 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(render.find(option), std::string::npos) << option;
   }
   const auto localize = run_seqloc({"localize", "--help"}).out;
-  for (const char* option : {"--matcher-temperature", "--volume-temperature", "--etu-reference", "--outside-crop-nats",
-                             "--matcher-floor", "--shard", "--frame-memory", "--beliefs", "--no-self-calibrate",
-                             "--paper", "--region", "folder of region caches", "--mcap", "--mcap-frame-id",
-                             "--mcap-base-frame", "--mcap-origin"}) {
+  for (const char* option :
+       {"--matcher-temperature", "--volume-temperature", "--etu-reference", "--outside-crop-nats", "--matcher-floor",
+        "--shard", "--frame-memory", "--beliefs", "--no-self-calibrate", "--paper", "--region",
+        "folder of region caches", "--mcap", "--mcap-frame-id", "--mcap-base-frame", "--mcap-origin"}) {
     EXPECT_NE(localize.find(option), std::string::npos) << option;
   }
   const auto update = run_seqloc({"update", "--help"}).out;
