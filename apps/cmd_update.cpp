@@ -20,6 +20,10 @@ class UpdateCommand : public Command, public WithProgress {
                    "OSM change file bringing the base to the new state: .osc, .osc.gz or .osc.bz2 (a replication "
                    "diff, or osmium derive-changes output)")
         ->required();
+    app.add_option("--state", options_.state,
+                   "The change's replication state, recorded in the cache and the new base: the server's "
+                   "state.txt (beside each diff) or the sequence file pyosmium-get-changes -f writes. Without it "
+                   "the updated cache records no replication sequence or timestamp");
     app.add_option("-o,--output", options_.output, "Write the updated cache here instead of replacing CACHE");
     app.add_option("--new-base", options_.new_base,
                    "Keep the new state of the data here (.osm.pbf): the base of the next update");
@@ -58,6 +62,13 @@ class UpdateCommand : public Command, public WithProgress {
         (options_.output.empty() ? options_.cache : options_.output).c_str(), changed, r.features_changed,
         static_cast<long long>(r.tiles_rendered), static_cast<long long>(r.tiles_total), r.total_seconds,
         r.apply_seconds, r.read_seconds, r.render_seconds);
+    const auto& state = r.changes.replication;
+    if (state.sequence.empty()) {
+      std::printf("replication state: not known (change files do not carry it; --state records it)\n");
+    } else {
+      std::printf("replication state: sequence %s%s%s\n", state.sequence.c_str(),
+                  state.timestamp.empty() ? "" : ", timestamp ", state.timestamp.c_str());
+    }
     return kExitOk;
   }
 

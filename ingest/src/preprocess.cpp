@@ -191,12 +191,13 @@ std::pair<osm::GeoBox, osm::FeatureSet> read_region(const PreprocessOptions& opt
 
 // What the cache records of the build: its source, box, grid, options and shard.
 raster::CacheMetadata metadata_for(const PreprocessOptions& options, const osm::GeoBox& bbox,
-                                   const std::string& replication_timestamp) {
+                                   const osm::OsmHeaderInfo& header) {
   const osm::GeoPoint centre = bbox.centre();
   raster::CacheMetadata metadata;
   metadata.source_file = options.input.filename().string();
   metadata.source_sha256 = osm::file_sha256(options.input);
-  metadata.osm_replication_timestamp = replication_timestamp;
+  metadata.osm_replication_timestamp = header.replication_timestamp;
+  metadata.osm_replication_sequence = header.replication_sequence;
   metadata.centre_lat = centre.lat_deg;
   metadata.centre_lon = centre.lon_deg;
   metadata.bbox = bbox;
@@ -424,7 +425,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   std::optional<raster::CacheMetadata> declared_metadata;
   std::optional<raster::CacheWriter> writer;
   if (declared) {
-    declared_metadata = metadata_for(options, *declared, header.replication_timestamp);
+    declared_metadata = metadata_for(options, *declared, header);
     if (!raster::CacheWriter::would_remove_partial(options.output, *declared_metadata)) {
       writer.emplace(options.output, *declared_metadata);
     }
@@ -443,8 +444,7 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
 
   PreprocessReport report = region_report(bbox, grid, features);
   if (!writer) {
-    writer.emplace(options.output,
-                   declared_metadata ? *declared_metadata : metadata_for(options, bbox, header.replication_timestamp));
+    writer.emplace(options.output, declared_metadata ? *declared_metadata : metadata_for(options, bbox, header));
   }
   const raster::CacheMetadata& metadata = writer->metadata();
 

@@ -35,8 +35,9 @@ raster::CacheMetadata updated_metadata(raster::CacheMetadata m, const UpdateOpti
                                        const std::filesystem::path& new_data) {
   m.source_file = (o.new_base.empty() ? o.base : o.new_base).filename().string();
   m.source_sha256 = osm::file_sha256(new_data);
-  if (!s.replication_timestamp.empty()) m.osm_replication_timestamp = s.replication_timestamp;
-  if (!s.replication_sequence.empty()) m.osm_replication_sequence = s.replication_sequence;
+  // The old state's are not the new data's: without a state they are left empty, not kept.
+  m.osm_replication_timestamp = s.replication.timestamp;
+  m.osm_replication_sequence = s.replication.sequence;
   m.changes_applied += (m.changes_applied.empty() ? "" : "\n") + o.changes.filename().string();
   m.created_utc.clear();
   return m;
@@ -68,10 +69,13 @@ UpdateReport update_region(const UpdateOptions& options,
     throw DataError(options.base.string() + ": not the OSM file " + options.cache.string() +
                     " was built from (its SHA-256 differs from the cache's source_sha256)");
   }
+  // Read before anything is written: a bad state file costs nothing.
+  const osm::ReplicationState state =
+      options.state.empty() ? osm::ReplicationState{} : osm::read_replication_state(options.state);
   UpdateReport report;
   const ScratchFile new_data(output.string() + ".new-" + std::to_string(::getpid()) + ".osm.pbf");
   auto t0 = Clock::now();
-  report.changes = osm::apply_changes(options.base, options.changes, new_data.path());
+  report.changes = osm::apply_changes(options.base, options.changes, new_data.path(), state);
   report.apply_seconds = seconds_since(t0);
 
   t0 = Clock::now();

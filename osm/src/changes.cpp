@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <fstream>
 #include <optional>
 #include <osmium/io/any_input.hpp>
 #include <osmium/io/any_output.hpp>
@@ -10,6 +11,8 @@
 #include <osmium/memory/buffer.hpp>
 #include <osmium/osm/object.hpp>
 #include <osmium/osm/object_comparisons.hpp>
+#include <osmium/osm/timestamp.hpp>
+#include <string_view>
 #include <tuple>
 #include <utility>
 
@@ -40,9 +43,8 @@ std::size_t type_index(const osmium::OSMObject& o) {
 // The change file's objects, the last version of each, in type and id order.
 class ChangeList {
  public:
-  ChangeList(const std::filesystem::path& path, osmium::io::Header& header) {
+  explicit ChangeList(const std::filesystem::path& path) {
     osmium::io::Reader reader{osmium::io::File{path.string()}, osmium::osm_entity_bits::object};
-    header = reader.header();
     while (osmium::memory::Buffer b = reader.read()) buffers_.push_back(std::move(b));
     reader.close();
     for (auto& b : buffers_) {
@@ -130,29 +132,100 @@ void merge(const std::filesystem::path& base, ChangeList& changes, Merge& merge,
   for (; changes.peek(); changes.pop()) merge.create(*changes.peek());
 }
 
-// Replication fields: the change file's where it has them, else the base's.
-void take_replication(const osmium::io::Header& changes, osmium::io::Header& out, ChangeSummary& summary) {
-  for (const char* field : {"osmosis_replication_timestamp", "osmosis_replication_sequence_number"}) {
-    const std::string v = changes.get(field);
-    if (!v.empty()) out.set(field, v);
+constexpr const char* kSequenceField = "osmosis_replication_sequence_number";
+constexpr const char* kTimestampField = "osmosis_replication_timestamp";
+
+bool all_digits(std::string_view s) {
+  return !s.empty() && s.size() <= 18 && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+// A Java properties value: `\:` and the like stand for the character escaped.
+std::string unescape(std::string_view v) {
+  std::string out;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (v[i] == '\\' && i + 1 < v.size()) ++i;
+    out += v[i];
   }
-  summary.replication_timestamp = out.get("osmosis_replication_timestamp");
-  summary.replication_sequence = out.get("osmosis_replication_sequence_number");
+  return out;
+}
+
+std::string trimmed(std::string_view s) {
+  const auto first = s.find_first_not_of(" \t\r");
+  if (first == std::string_view::npos) return {};
+  return std::string(s.substr(first, s.find_last_not_of(" \t\r") - first + 1));
+}
+
+// One line of a state file, into `state`; throws naming `where` (file:line).
+void read_state_line(const std::string& line, const std::string& where, ReplicationState& state) {
+  if (all_digits(line)) {  // pyosmium-get-changes -f: the sequence number alone
+    state.sequence = line;
+    return;
+  }
+  const auto eq = line.find_first_of("=:");
+  if (eq == std::string::npos) throw OsmInputError(where + ": expected key=value or a sequence number");
+  const std::string key = trimmed(line.substr(0, eq));
+  const std::string value = unescape(trimmed(line.substr(eq + 1)));
+  if (key == "sequenceNumber") {
+    if (!all_digits(value)) throw OsmInputError(where + ": sequenceNumber '" + value + "' is not a number");
+    state.sequence = value;
+  } else if (key == "timestamp") {
+    try {
+      state.timestamp = osmium::Timestamp(value.c_str()).to_iso();
+    } catch (const std::exception&) {
+      throw OsmInputError(where + ": timestamp '" + value + "' is not an ISO 8601 time (2024-01-31T00:00:00Z)");
+    }
+  }
+}
+
+// The base's header made the new data's: its replication sequence and timestamp describe the old
+// state, so `state`'s replace them; an empty field is not written, so an unknown one is dropped.
+void set_replication(const std::filesystem::path& base, const ReplicationState& state, osmium::io::Header& header) {
+  const std::string base_sequence = header.get(kSequenceField);
+  if (!state.sequence.empty() && !all_digits(state.sequence)) {
+    throw OsmInputError("replication sequence '" + state.sequence + "' is not a number");
+  }
+  if (all_digits(state.sequence) && all_digits(base_sequence) &&
+      std::stoll(state.sequence) <= std::stoll(base_sequence)) {
+    throw OsmInputError((state.source.empty() ? std::string("the replication state") : state.source) + ": sequence " +
+                        state.sequence + " does not follow " + base.string() + "'s " + base_sequence +
+                        " (the state of another change file?)");
+  }
+  header.set(kSequenceField, state.sequence);
+  header.set(kTimestampField, state.timestamp);
+  header.set("timestamp", state.timestamp);
 }
 
 }  // namespace
 
+ReplicationState read_replication_state(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw OsmInputError(path.string() + ": cannot open the replication state file");
+  ReplicationState state;
+  state.source = path.string();
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    line = trimmed(line);
+    if (line.empty() || line.front() == '#' || line.front() == '!') continue;
+    read_state_line(line, path.string() + ":" + std::to_string(number), state);
+  }
+  if (state.sequence.empty()) {
+    throw OsmInputError(path.string() +
+                        ": no sequence number (a state.txt has sequenceNumber=N; a sequence "
+                        "file holds N alone)");
+  }
+  return state;
+}
+
 ChangeSummary apply_changes(const std::filesystem::path& base, const std::filesystem::path& changes,
-                            const std::filesystem::path& output) {
+                            const std::filesystem::path& output, const ReplicationState& state) {
   for (const auto& p : {base, changes}) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(p, ec)) throw OsmInputError(p.string() + ": no such file");
     if (std::filesystem::file_size(p, ec) == 0) throw OsmInputError(p.string() + ": empty file, no OSM data");
   }
-  osmium::io::Header change_header;
   std::optional<ChangeList> list;
   try {
-    list.emplace(changes, change_header);
+    list.emplace(changes);
   } catch (const std::exception& e) {
     throw OsmInputError(changes.string() + ": not a complete OSM change file: " + e.what());
   }
@@ -162,7 +235,8 @@ ChangeSummary apply_changes(const std::filesystem::path& base, const std::filesy
     osmium::io::Reader reader{osmium::io::File{base.string()}, osmium::osm_entity_bits::object};
     osmium::io::Header header = reader.header();
     header.set("generator", "seqloc");
-    take_replication(change_header, header, summary);
+    set_replication(base, state, header);
+    summary.replication = {header.get(kSequenceField), header.get(kTimestampField), state.source};
     osmium::io::Writer writer{osmium::io::File{partial.string(), "pbf"}, header, osmium::io::overwrite::allow};
     Merge m(changes, summary, writer);
     merge(base, *list, m, reader);

@@ -182,6 +182,7 @@ OsmHeaderInfo header_info(const osmium::io::Header& header) {
   }
   info.replication_timestamp = header.get("osmosis_replication_timestamp");
   if (info.replication_timestamp.empty()) info.replication_timestamp = header.get("timestamp");
+  info.replication_sequence = header.get("osmosis_replication_sequence_number");
   return info;
 }
 

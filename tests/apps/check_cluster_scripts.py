@@ -140,9 +140,15 @@ class ClusterScripts(unittest.TestCase):
             write_opl(work / f"v{k}.opl", objects)
             changes.append(work / f"day{k}.osc")
             run(["osmium", "derive-changes", work / f"v{k - 1}.opl", work / f"v{k}.opl", "-o", changes[-1], "-O"])
+        # The replication server's state of the second diff, beside it as servers publish them.
+        (work / "day2.state.txt").write_text("sequenceNumber=102\ntimestamp=2026-12-02T00\\:00\\:00Z\n")
         env["CHANGES"] = " ".join(map(str, changes))
         run([job, "update"], env=env)
         self.assertEqual((work / "applied.txt").read_text().split(), ["day1.osc", "day2.osc"])
+        with sqlite3.connect(f"file:{work / 'region.gpkg'}?mode=ro", uri=True) as db:
+            meta = dict(db.execute("SELECT key, value FROM seqloc_metadata"))
+        self.assertEqual((meta["osm_replication_sequence"], meta["osm_replication_timestamp"]),
+                         ("102", "2026-12-02T00:00:00Z"))
         self.assertEqual(run([job, "update"], env=env).count("skipped"), 2)
         rebuilt = work / "rebuilt.gpkg"
         run([SEQLOC, "preprocess", work / "base.osm.pbf", "-o", rebuilt, "--no-progress"])

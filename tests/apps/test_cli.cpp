@@ -67,7 +67,7 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(localize.find(option), std::string::npos) << option;
   }
   const auto update = run_seqloc({"update", "--help"}).out;
-  for (const char* option : {"--base", "--changes", "-o", "--new-base", "--threads", "--progress"}) {
+  for (const char* option : {"--base", "--changes", "--state", "-o", "--new-base", "--threads", "--progress"}) {
     EXPECT_NE(update.find(option), std::string::npos) << option;
   }
   const auto match = run_seqloc({"match", "--help"}).out;

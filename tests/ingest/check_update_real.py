@@ -92,8 +92,42 @@ class UpdateRealExtract(unittest.TestCase):
         self.assertLessEqual(len(changed), rendered)
         self.assertLess(rendered, total)
         self.assertEqual(got_meta["changes_applied"], "day.osc")
+        # No --state: the base's replication fields are the old state's, so none are recorded.
+        self.assertEqual((got_meta["osm_replication_sequence"], got_meta["osm_replication_timestamp"]), ("", ""))
+        self.assertIn("replication state: not known", r.stdout)
         print(f"\n{self.moved} nodes moved, 2 buildings deleted, 1 added: {len(changed)} tiles changed, "
               f"{rendered} of {total} re-rendered", file=sys.stderr)
+
+    def test_a_state_file_is_recorded_in_the_cache_and_the_new_base(self):
+        """preprocess records the base header's replication state (read back by osmium-tool); update
+        with the change's state.txt records the new one in the cache and in --new-base's header, the
+        replication server's URL kept, so that the next diff can be fetched from it."""
+        d = self.d
+
+        def header(path, option):
+            r = run("osmium", "fileinfo", "-g", f"header.option.{option}", path)
+            return r.stdout.strip()
+
+        sequence = header(self.old, "osmosis_replication_sequence_number")
+        url = header(self.old, "osmosis_replication_base_url")
+        self.assertTrue(sequence.isdigit() and url, (sequence, url))
+        _, _, old_meta = tiles(self.cache)
+        self.assertEqual(old_meta["osm_replication_sequence"], sequence)
+        self.assertEqual(old_meta["osm_replication_timestamp"], header(self.old, "osmosis_replication_timestamp"))
+        state = os.path.join(d, "next.state.txt")
+        with open(state, "w") as f:
+            f.write(f"#Wed Apr 21 21:21:46 UTC 2021\nsequenceNumber={int(sequence) + 1}\n"
+                    "timestamp=2021-04-21T21\\:21\\:46Z\n")
+        updated, new_base = os.path.join(d, "stated.gpkg"), os.path.join(d, "next.osm.pbf")
+        r = run(ARGS.seqloc, "update", self.cache, "--base", self.old, "--changes", self.changes, "--state", state,
+                "-o", updated, "--new-base", new_base, "--no-progress")
+        self.assertIn(f"replication state: sequence {int(sequence) + 1}, timestamp 2021-04-21T21:21:46Z", r.stdout)
+        _, _, meta = tiles(updated)
+        self.assertEqual(meta["osm_replication_sequence"], str(int(sequence) + 1))
+        self.assertEqual(meta["osm_replication_timestamp"], "2021-04-21T21:21:46Z")
+        self.assertEqual(header(new_base, "osmosis_replication_sequence_number"), str(int(sequence) + 1))
+        self.assertEqual(header(new_base, "osmosis_replication_timestamp"), "2021-04-21T21:21:46Z")
+        self.assertEqual(header(new_base, "osmosis_replication_base_url"), url)
 
     def test_serve_picks_up_an_update_in_place(self):
         """`seqloc serve` keeps answering while the cache it serves is updated in place, and then
@@ -146,11 +180,18 @@ class UpdateRealExtract(unittest.TestCase):
             with open(path, "w") as g:
                 g.write(f'<?xml version="1.0"?>\n<osmChange version="0.6"><modify><node id="{node_id}" '
                         f'version="{version}" lat="43.7" lon="7.4"/></modify></osmChange>\n')
-        for base, changes, says in ((ARGS.other, self.changes, "not the OSM file"),
-                                    (self.old, truncated, "not a complete OSM change file"),
-                                    (self.old, backwards, "versions going backwards"),
-                                    (self.old, missing, "which the base lacks")):
-            r = run(ARGS.seqloc, "update", self.cache, "--base", base, "--changes", changes, "--no-progress", expect=1)
+        # The state of an older diff: its sequence is the base's own.
+        stale = os.path.join(d, "stale.state.txt")
+        with open(stale, "w") as f:
+            f.write(run("osmium", "fileinfo", "-g", "header.option.osmosis_replication_sequence_number",
+                        self.old).stdout)
+        for base, changes, extra, says in ((ARGS.other, self.changes, [], "not the OSM file"),
+                                           (self.old, truncated, [], "not a complete OSM change file"),
+                                           (self.old, backwards, [], "versions going backwards"),
+                                           (self.old, missing, [], "which the base lacks"),
+                                           (self.old, self.changes, ["--state", stale], "does not follow")):
+            r = run(ARGS.seqloc, "update", self.cache, "--base", base, "--changes", changes, *extra, "--no-progress",
+                    expect=1)
             self.assertIn(says, r.stderr)
             self.assertEqual(len(r.stderr.strip().splitlines()), 1, r.stderr)
             with open(self.cache, "rb") as f:

@@ -90,22 +90,95 @@ TEST(Changes, AppliedAsOsmiumApplyChangesAppliesThem) {
   EXPECT_EQ(s.objects.back().type, 'r');
 }
 
-TEST(Changes, TheBasesReplicationFieldsCarryOverWhenTheChangeFileHasNone) {
-  test::ScratchDir dir;
+// A base as Geofabrik's extracts are: its header says where it stands in a replication stream.
+std::filesystem::path replicated_base(const test::ScratchDir& dir) {
   write(dir / "base.opl", kBase);
+  const auto r = test::run_program(SEQLOC_OSMIUM,
+                                   {"cat", "-O", "-o", (dir / "base.osm.pbf").string(), (dir / "base.opl").string(),
+                                    "--output-header=osmosis_replication_timestamp=2024-01-31T00:00:00Z",
+                                    "--output-header=osmosis_replication_sequence_number=41",
+                                    "--output-header=osmosis_replication_base_url=https://example.org/region-updates"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  return dir / "base.osm.pbf";
+}
+
+// The header as osmium-tool reads it back.
+std::string header_of(const std::filesystem::path& file) {
+  const auto info = test::run_program(SEQLOC_OSMIUM, {"fileinfo", file.string()});
+  EXPECT_EQ(info.exit_code, 0) << info.err;
+  return info.out;
+}
+
+TEST(Changes, WithoutAStateTheBasesReplicationFieldsAreDroppedNotCarriedToTheNewData) {
+  test::ScratchDir dir;
+  const auto base = replicated_base(dir);
   write(dir / "day.osc", kChanges);
-  const auto r =
-      test::run_program(SEQLOC_OSMIUM, {"cat", "-O", "-o", (dir / "base.osm.pbf").string(), (dir / "base.opl").string(),
-                                        "--output-header=osmosis_replication_timestamp=2024-01-31T00:00:00Z",
-                                        "--output-header=osmosis_replication_sequence_number=41"});
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  const ChangeSummary s = apply_changes(dir / "base.osm.pbf", dir / "day.osc", dir / "new.osm.pbf");
-  EXPECT_EQ(s.replication_timestamp, "2024-01-31T00:00:00Z");
-  EXPECT_EQ(s.replication_sequence, "41");
-  // In the new file's header, as osmium-tool reads it.
-  const auto info = test::run_program(SEQLOC_OSMIUM, {"fileinfo", (dir / "new.osm.pbf").string()});
-  ASSERT_EQ(info.exit_code, 0) << info.err;
-  EXPECT_NE(info.out.find("osmosis_replication_sequence_number=41"), std::string::npos) << info.out;
+  const ChangeSummary s = apply_changes(base, dir / "day.osc", dir / "new.osm.pbf");
+  EXPECT_EQ(s.replication.sequence, "");
+  EXPECT_EQ(s.replication.timestamp, "");
+  const std::string header = header_of(dir / "new.osm.pbf");
+  EXPECT_EQ(header.find("osmosis_replication_sequence_number"), std::string::npos) << header;
+  EXPECT_EQ(header.find("osmosis_replication_timestamp"), std::string::npos) << header;
+  EXPECT_NE(header.find("osmosis_replication_base_url=https://example.org/region-updates"), std::string::npos)
+      << header;
+}
+
+TEST(Changes, AServersStateFileGivesTheNewDataItsSequenceAndTimestamp) {
+  test::ScratchDir dir;
+  const auto base = replicated_base(dir);
+  write(dir / "day.osc", kChanges);
+  write(dir / "000042.state.txt",
+        "#Thu Feb 01 00:00:00 UTC 2024\ntxnMaxQueried=1234\nsequenceNumber=42\ntimestamp=2024-02-01T00\\:00\\:00Z\n");
+  const ReplicationState state = read_replication_state(dir / "000042.state.txt");
+  EXPECT_EQ(state.sequence, "42");
+  EXPECT_EQ(state.timestamp, "2024-02-01T00:00:00Z");
+  const ChangeSummary s = apply_changes(base, dir / "day.osc", dir / "new.osm.pbf", state);
+  EXPECT_EQ(s.replication.sequence, "42");
+  EXPECT_EQ(s.replication.timestamp, "2024-02-01T00:00:00Z");
+  const std::string header = header_of(dir / "new.osm.pbf");
+  EXPECT_NE(header.find("osmosis_replication_sequence_number=42"), std::string::npos) << header;
+  EXPECT_NE(header.find("osmosis_replication_timestamp=2024-02-01T00:00:00Z"), std::string::npos) << header;
+}
+
+TEST(Changes, APyosmiumSequenceFileGivesTheSequenceAlone) {
+  test::ScratchDir dir;
+  write(dir / "sequence.state", "42\n");
+  const ReplicationState state = read_replication_state(dir / "sequence.state");
+  EXPECT_EQ(state.sequence, "42");
+  EXPECT_EQ(state.timestamp, "");
+}
+
+void expect_bad_state(const std::string& text, const std::string& says) {
+  test::ScratchDir dir;
+  write(dir / "state.txt", text);
+  try {
+    (void)read_replication_state(dir / "state.txt");
+    ADD_FAILURE() << "read; expected a refusal saying " << says;
+  } catch (const OsmInputError& e) {
+    EXPECT_NE(std::string(e.what()).find((dir / "state.txt").string() + says), std::string::npos) << e.what();
+  }
+}
+
+TEST(Changes, AStateFileThatIsNotOneIsRefusedNamingItsLine) {
+  expect_bad_state("#comment\nsequenceNumber=4x2\n", ":2: sequenceNumber '4x2' is not a number");
+  expect_bad_state("sequenceNumber=42\ntimestamp=yesterday\n", ":2: timestamp 'yesterday' is not an ISO 8601 time");
+  expect_bad_state("<html>not found</html>\n", ":1: expected key=value");
+  expect_bad_state("timestamp=2024-02-01T00\\:00\\:00Z\n", ": no sequence number");
+  expect_bad_state("", ": no sequence number");
+}
+
+TEST(Changes, AStateThatDoesNotFollowTheBasesIsRefusedAndNothingIsWritten) {
+  test::ScratchDir dir;
+  const auto base = replicated_base(dir);
+  write(dir / "day.osc", kChanges);
+  write(dir / "old.state.txt", "sequenceNumber=41\n");
+  try {
+    (void)apply_changes(base, dir / "day.osc", dir / "new.osm.pbf", read_replication_state(dir / "old.state.txt"));
+    ADD_FAILURE() << "applied a state at the base's own sequence";
+  } catch (const OsmInputError& e) {
+    EXPECT_NE(std::string(e.what()).find("old.state.txt: sequence 41 does not follow"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "new.osm.pbf"));
 }
 
 void expect_refused(const std::string& base, const std::string& changes, const std::string& says) {

@@ -19,6 +19,9 @@ struct UpdateOptions {
   std::filesystem::path cache;    ///< a complete, unsharded cache built from `base`
   std::filesystem::path base;     ///< the OSM file the cache was built from (its SHA-256 is checked)
   std::filesystem::path changes;  ///< an OSM change file (.osc, .osc.gz, .osc.bz2)
+  /// The change's replication state (osm::read_replication_state): a server's state.txt, or a
+  /// sequence file. Empty: the updated cache records no replication sequence or timestamp.
+  std::filesystem::path state;
   std::filesystem::path output;   ///< the updated cache; empty: `cache`, replaced
   /// Where to keep the new state of the data (.osm.pbf), the base of the next update; empty: not kept.
   std::filesystem::path new_base;

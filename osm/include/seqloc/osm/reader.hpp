@@ -27,10 +27,11 @@ struct ReadOptions {
 [[nodiscard]] FeatureSet read_osm_buffer(std::span<const char> data, std::string_view format, const std::string& name,
                                          const ReadOptions& options = {});
 
-/// The header of the file only (cheap): its declared bbox, if any, and replication timestamp.
+/// The header of the file only (cheap): its declared bbox, if any, and replication state.
 struct OsmHeaderInfo {
   std::optional<GeoBox> box;
-  std::string replication_timestamp;
+  std::string replication_timestamp;  ///< `osmosis_replication_timestamp`, else `timestamp`; may be empty
+  std::string replication_sequence;   ///< `osmosis_replication_sequence_number`; may be empty
 };
 [[nodiscard]] OsmHeaderInfo read_osm_header(const std::filesystem::path& input);
 
