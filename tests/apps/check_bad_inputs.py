@@ -206,6 +206,34 @@ def main():
         case("export of a bbox outside the region", "export valley.gpkg --bbox 0,0,0.01,0.01 -o x.tif",
              run("export", cache, "--bbox", "0,0,0.01,0.01", "-o", os.path.join(w, "x.tif")), 1, ["does not meet the region"])
 
+        # seqloc update: the cache is replaced in one rename at the end, so a refusal leaves it as it was.
+        def text_file(name, text):
+            path = os.path.join(w, name)
+            with open(path, "w") as f:
+                f.write(text)
+            return path
+
+        nothing = text_file("day.osc", '<?xml version="1.0"?>\n<osmChange version="0.6"></osmChange>\n')
+        lacks = text_file("lacks.osc", '<?xml version="1.0"?>\n<osmChange version="0.6"><modify><node '
+                                       'id="999999999999" version="5" lat="47.95" lon="11.25"/></modify></osmChange>\n')
+        cut = text_file("cut.osc", '<?xml version="1.0"?>\n<osmChange version="0.6"><modify><node id="1" ver')
+        other = bad_pbf("other.osm.pbf", raw + b"\0")
+        state = text_file("state.txt", "<html>404 Not Found</html>\n")
+        for what, args, fragments in [
+            ("update: a base the cache was not built from", ["--base", other, "--changes", nothing],
+             ["other.osm.pbf", "SHA-256"]),
+            ("update: a change file that does not apply to the base", ["--base", ARGS.sample, "--changes", lacks],
+             ["lacks.osc", "node 999999999999 v5", "which the base lacks"]),
+            ("update: a truncated change file", ["--base", ARGS.sample, "--changes", cut],
+             ["cut.osc", "not a complete OSM change file"]),
+            ("update: a state file that is not one", ["--base", ARGS.sample, "--changes", nothing, "--state", state],
+             ["state.txt:1:", "expected key=value"]),
+        ]:
+            shown = " ".join(os.path.basename(a) if os.sep in a else a for a in args)
+            case(what, f"update valley.gpkg {shown}".replace(os.path.basename(ARGS.sample), "valley.osm.pbf"),
+                 run("update", cache, *args, "--no-progress"), 1, fragments, cache, before_cache,
+                 "the previous cache, unchanged")
+
         # The server: bad requests are answered, never crash it.
         server = subprocess.Popen([ARGS.seqloc, "serve", cache, "--port", "0"], stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True)
