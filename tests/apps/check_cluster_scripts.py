@@ -123,8 +123,9 @@ class ClusterScripts(unittest.TestCase):
 
     def test_the_update_stage_applies_each_change_file_once(self):
         """country-job update on the merged cache: two change files (osmium derive-changes of
-        seeded edits) applied in order, the new base kept, a rerun a no-op; the cache equals a
-        rebuild of the last state."""
+        seeded edits) of the same name in two folders, as replication paths repeat names, applied
+        in order, the new base kept, a rerun a no-op; the cache equals a rebuild of the last
+        state."""
         work = self.dir / "update"
         env = dict(self.env, OSM=str(self.osm), WORK=str(work), SHARDS="1", INDEX="0")
         job = ROOT / "scripts" / "cluster" / "country-job"
@@ -138,17 +139,19 @@ class ClusterScripts(unittest.TestCase):
             objects, _ = edit(read_opl(work / f"v{k - 1}.opl"), __import__("random").Random(k), roads=2, deleted=1,
                               added=1, members=0)
             write_opl(work / f"v{k}.opl", objects)
-            changes.append(work / f"day{k}.osc")
+            changes.append(work / "000" / f"00{k}" / "123.osc")
+            changes[-1].parent.mkdir(parents=True)
             run(["osmium", "derive-changes", work / f"v{k - 1}.opl", work / f"v{k}.opl", "-o", changes[-1], "-O"])
         # The replication server's state of the second diff, beside it as servers publish them.
-        (work / "day2.state.txt").write_text("sequenceNumber=102\ntimestamp=2026-12-02T00\\:00\\:00Z\n")
+        (work / "000" / "002" / "123.state.txt").write_text("sequenceNumber=2123\ntimestamp=2026-12-02T00\\:00\\:00Z\n")
         env["CHANGES"] = " ".join(map(str, changes))
         run([job, "update"], env=env)
-        self.assertEqual((work / "applied.txt").read_text().split(), ["day1.osc", "day2.osc"])
+        self.assertEqual([line.split(" ", 1)[1] for line in (work / "applied.txt").read_text().splitlines()],
+                         list(map(str, changes)))
         with sqlite3.connect(f"file:{work / 'region.gpkg'}?mode=ro", uri=True) as db:
             meta = dict(db.execute("SELECT key, value FROM seqloc_metadata"))
         self.assertEqual((meta["osm_replication_sequence"], meta["osm_replication_timestamp"]),
-                         ("102", "2026-12-02T00:00:00Z"))
+                         ("2123", "2026-12-02T00:00:00Z"))
         self.assertEqual(run([job, "update"], env=env).count("skipped"), 2)
         rebuilt = work / "rebuilt.gpkg"
         run([SEQLOC, "preprocess", work / "base.osm.pbf", "-o", rebuilt, "--no-progress"])
