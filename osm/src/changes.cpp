@@ -184,8 +184,7 @@ void set_replication(const std::filesystem::path& base, const ReplicationState& 
   if (!state.sequence.empty() && !all_digits(state.sequence)) {
     throw OsmInputError("replication sequence '" + state.sequence + "' is not a number");
   }
-  if (all_digits(state.sequence) && all_digits(base_sequence) &&
-      std::stoll(state.sequence) <= std::stoll(base_sequence)) {
+  if (!state.sequence.empty() && all_digits(base_sequence) && std::stoll(state.sequence) <= std::stoll(base_sequence)) {
     throw OsmInputError((state.source.empty() ? std::string("the replication state") : state.source) + ": sequence " +
                         state.sequence + " does not follow " + base.string() + "'s " + base_sequence +
                         " (the state of another change file?)");
@@ -236,7 +235,7 @@ ChangeSummary apply_changes(const std::filesystem::path& base, const std::filesy
     osmium::io::Header header = reader.header();
     header.set("generator", "seqloc");
     set_replication(base, state, header);
-    summary.replication = {header.get(kSequenceField), header.get(kTimestampField), state.source};
+    summary.replication = state;  // what set_replication wrote into the header
     osmium::io::Writer writer{osmium::io::File{partial.string(), "pbf"}, header, osmium::io::overwrite::allow};
     Merge m(changes, summary, writer);
     merge(base, *list, m, reader);
