@@ -12,6 +12,7 @@
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 #include "seqloc/filter/calibration_evidence.hpp"
+#include "seqloc/filter/power_bank.hpp"
 
 namespace seqloc::filter {
 namespace {
@@ -55,12 +56,13 @@ struct FrameShape {
 }  // namespace
 
 struct SeqLocFilter::Impl {
-  BeliefVolume scratch;          // the other buffer of predict
+  BeliefVolume scratch;           // the other buffer of predict
   AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
   PowerEstimator estimator;
-  bool shape_pending = false;  // weigh() left the powered frame's peak and entropy to temper()
-  bool was_held = true;        // the estimator's hold at the last frame
-  double last_power = 1;       // and its power
+  std::optional<PowerBank> bank;  // self-calibration's judge when FilterConfig::self_calibration_bank
+  bool shape_pending = false;     // weigh() left the powered frame's peak and entropy to temper()
+  bool was_held = true;           // the estimator's hold at the last frame
+  double last_power = 1;          // and its power
   // Self-calibration's view of the predicted belief: each slice summed over 2 x 2 cells as the
   // update reads it, then `pooling` slices into one coarse bin (detail::pool_headings).
   std::optional<BeliefVolume> coarse;
@@ -79,7 +81,8 @@ struct SeqLocFilter::Impl {
                    c.self_calibration_hold_share, c.self_calibration_hold_follow_octaves}),
         workers(static_cast<std::size_t>(c.threads)) {
     for (auto& w : workers) w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
-    if (c.self_calibrate) {
+    if (c.self_calibrate && c.self_calibration_bank) bank.emplace(c);
+    if (c.self_calibrate && !c.self_calibration_bank) {
       pooling = detail::calibration_bins(c.headings);
       coarse.emplace(coarse_belief_for(c));
       pooled.resize(coarse->slice_cells() * static_cast<std::size_t>(c.headings));
@@ -94,6 +97,7 @@ struct SeqLocFilter::Impl {
   // so that they do not depend on the number of threads. `raised`, when given, already holds
   // e^{k r} for every cell (the update's tempered frame where ETU's weight is 1): no exp then.
   FrameShape scan_frame(const PreparedFrame& f, double power, int threads, const float* raised_given = nullptr) {
+    const bool estimating = !bank.has_value();
     const std::size_t slice = static_cast<std::size_t>(f.width) * f.height;
     std::vector<double> bin_z(static_cast<std::size_t>(f.bins)), bin_zr(static_cast<std::size_t>(f.bins));
     const bool raised = power != 1.0;
@@ -106,7 +110,7 @@ struct SeqLocFilter::Impl {
       auto& cells = workers[static_cast<std::size_t>(t)].frame_cells;
       for (int j = j0; j < j1; ++j) {
         double z = 0, zr = 0;
-        const bool binned = j % stride == 0;
+        const bool binned = estimating && j % stride == 0;
         if (!binned && !raised) continue;  // nothing to read in this bin (z, zr stay 0, unused)
         for (std::size_t start = 0; start < slice; start += kBlock) {
           const std::size_t len = std::min(kBlock, slice - start);
@@ -180,6 +184,7 @@ void SeqLocFilter::reset_uniform() {
   first_ = true;
   last_estimate_.reset();
   impl_->estimator.reset();
+  if (impl_->bank) impl_->bank->reset();
   impl_->was_held = true;
   impl_->last_power = 1;
   entropies_.clear();
@@ -191,12 +196,15 @@ void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
   first_ = true;
   last_estimate_.reset();
   impl_->estimator.reset();
+  if (impl_->bank) impl_->bank->reset(belief_);
   impl_->was_held = true;
   impl_->last_power = 1;
   entropies_.clear();
 }
 
 const PowerEstimator& SeqLocFilter::calibration() const { return impl_->estimator; }
+
+const PowerBank* SeqLocFilter::power_bank() const { return impl_->bank ? &*impl_->bank : nullptr; }
 
 void SeqLocFilter::rebase(BeliefVolume belief, const std::optional<Pose>& last_estimate) {
   if (belief.width() != belief_.width() || belief.height() != belief_.height() ||
@@ -209,11 +217,13 @@ void SeqLocFilter::rebase(BeliefVolume belief, const std::optional<Pose>& last_e
   belief_ = std::move(belief);
   cached_min_.reset();
   last_estimate_ = last_estimate;
+  if (impl_->bank) impl_->bank->rebase(belief_);
 }
 
 void SeqLocFilter::recentre(int du, int dv) {
   belief_.recentre(du, dv);
   cached_min_.reset();
+  if (impl_->bank) impl_->bank->recentre(du, dv);
   if (last_estimate_) {
     last_estimate_->u -= du;
     last_estimate_->v -= dv;
@@ -228,6 +238,7 @@ void SeqLocFilter::predict(const Odometry& odometry) {
   detail::warp_volume(belief_, impl_->scratch, odometry, fill, config_.threads);
   cached_min_.reset();
   std::swap(belief_, impl_->scratch);
+  if (impl_->bank) impl_->bank->predict(odometry);
 
   if (config_.motion_noise) {
     const double step_m = std::hypot(odometry.forward_m, odometry.left_m);
@@ -252,7 +263,9 @@ void SeqLocFilter::predict(const Odometry& odometry) {
     const std::size_t n = belief_.slice_cells();
     std::vector<float> tmp(belief_.size());
     float* p = belief_.data();
-    auto idx = [&](int u, int v, int k) { return static_cast<std::size_t>(k) * n + static_cast<std::size_t>(v) * W + u; };
+    auto idx = [&](int u, int v, int k) {
+      return static_cast<std::size_t>(k) * n + static_cast<std::size_t>(v) * W + u;
+    };
     for (int k = 0; k < R; ++k)
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
@@ -294,15 +307,17 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
     double du = 0, dv = 0;
     displacement_cells(odometry, last_estimate_->heading_deg, du, dv);
     const double pu = last_estimate_->u + du, pv = last_estimate_->v + dv;
-    result.relocalized = std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
+    result.relocalized =
+        std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
   }
   last_estimate_ = result.pose;
   first_ = false;
   return result;
 }
 
-FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop, std::span<const float> road_distance_m,
-                                 const GpsFix* gps, const FrameWeighting* weighting) {
+FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop,
+                                 std::span<const float> road_distance_m, const GpsFix* gps,
+                                 const FrameWeighting* weighting) {
   // Checked before anything changes: a refused step leaves the belief as it was.
   if (config_.mgr && road_distance_m.empty())
     throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
@@ -313,11 +328,15 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   }
   // Self-calibration estimates from this frame unless a weighting repeats an earlier pass.
   const bool calibrating = config_.self_calibrate && weighting == nullptr;
+  // The one-step criterion's evidence is collected while the frame is multiplied in; the bank
+  // judges the frame on its own coarse windows after the step.
+  const bool estimating = calibrating && !impl_->bank;
   FrameResult result = weigh(given, weighting, calibrating);
-  if (calibrating) retemper(impl_->estimator.held());
+  if (calibrating) retemper(impl_->bank ? false : impl_->estimator.held());
   const float outside = temper(given, result);
-  const double total = multiply_in(given, crop, outside, gps, calibrating);
+  const double total = multiply_in(given, crop, outside, gps, estimating);
   const Peak peak = normalize(total, road_distance_m);
+  if (calibrating && impl_->bank) impl_->bank->update(given, crop, result.etu_weight);
   result.peak_log_belief = std::log(peak.value);
   result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), belief_.bin_heading_deg(peak.k)};
   result.pose = refine(peak);
@@ -333,9 +352,9 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting
     result.volume_power = weighting->volume_power;
     result.etu_weight = weighting->etu_weight;
   } else {
-    result.volume_power = calibrating ? impl_->estimator.power() : 1.0;
+    result.volume_power = !calibrating ? 1.0 : impl_->bank ? impl_->bank->power() : impl_->estimator.power();
   }
-  if (calibrating) {
+  if (calibrating && !impl_->bank) {
     for (auto& worker : impl_->workers) worker.frame_cells.clear();
   }
   // Where ETU's weight does not read the powered frame's entropy, the pass over the frame waits
@@ -350,7 +369,8 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting
     // As weighed before.
   } else if (config_.etu && config_.etu_route_reference) {
     entropies_.push_back(given.entropy);
-    if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
+    if (entropies_.size() > 2 * kEtuRouteFrames)
+      entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
     result.etu_weight = etu_weight(given.entropy, route_reference_entropy(entropies_));
   } else {
     result.etu_weight = config_.etu ? etu_weight(used.entropy, config_.etu_reference_entropy) : 1.0;
@@ -388,19 +408,33 @@ float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result) {
 }
 
 void SeqLocFilter::retemper(bool held) {
-  // The hold released (for the rest of the route: it is not taken again): the frames before went
-  // in at the power held until now (1, or an estimate followed far under 1), so the belief is
-  // raised to the ratio of the new power to that one, as if they had gone in at the new one
-  // (exact for a belief that is their product; motion and MGR between them make it an
-  // approximation).
-  const double now = impl_->estimator.power();
-  if (held || !impl_->was_held) {
+  // The belief is raised to the ratio of the new power to the one the frames before went in at,
+  // as if they had gone in at the new one (exact for a belief that is their product; motion and
+  // MGR between them make it an approximation): an early lock at a power the route has since
+  // voted against is undone. The bank: whenever its power has moved half an octave or more from
+  // the one the belief was last raised to (frames between go in at the power of their step). The
+  // one-step criterion: once, when the hold is released (it is not taken again), from the power
+  // held until then (1, or an estimate followed far under 1).
+  double ratio = 1;
+  if (impl_->bank) {
+    const double now = impl_->bank->power();
+    if (std::abs(std::log2(now / impl_->last_power)) < 0.5) return;
+    ratio = now / impl_->last_power;
     impl_->last_power = now;
-    return;
+  } else {
+    const double now = impl_->estimator.power();
+    if (held || !impl_->was_held) {
+      impl_->last_power = now;
+      return;
+    }
+    ratio = now / impl_->last_power;
+    impl_->was_held = held;
+    impl_->last_power = now;
   }
-  const auto ratio = static_cast<float>(now / impl_->last_power);
-  impl_->was_held = held;
-  impl_->last_power = now;
+  retemper_by(static_cast<float>(ratio));
+}
+
+void SeqLocFilter::retemper_by(float ratio) {
   if (first_ || ratio == 1.0f) return;
   std::vector<double> sums(static_cast<std::size_t>(config_.headings));
   const auto n = static_cast<Eigen::Index>(belief_.slice_cells());
@@ -527,8 +561,8 @@ SeqLocFilter::Peak SeqLocFilter::normalize(double total, std::span<const float> 
   }
   cached_min_ = *std::min_element(least_value.begin(), least_value.end());
   const float* star_slice = belief_.slice(k_star);
-  const auto cell = static_cast<int>(std::find(star_slice, star_slice + n, best_value[static_cast<std::size_t>(k_star)]) -
-                                     star_slice);
+  const auto cell = static_cast<int>(
+      std::find(star_slice, star_slice + n, best_value[static_cast<std::size_t>(k_star)]) - star_slice);
   return {cell % W, cell / W, k_star, best_value[static_cast<std::size_t>(k_star)]};
 }
 

@@ -60,7 +60,7 @@ std::uint16_t detail::float_to_half_portable(float f) {
     const std::uint32_t kept = value >> dropped, rest = value & ((1u << dropped) - 1), half = 1u << (dropped - 1);
     return kept + ((rest > half || (rest == half && (kept & 1u))) ? 1u : 0u);
   };
-  if (magnitude > 0x7F800000u) return static_cast<std::uint16_t>(sign | 0x7E00u);  // NaN, quiet
+  if (magnitude > 0x7F800000u) return static_cast<std::uint16_t>(sign | 0x7E00u);   // NaN, quiet
   if (magnitude >= 0x477FF000u) return static_cast<std::uint16_t>(sign | 0x7C00u);  // >= 65520: infinity
   if (magnitude >= 0x38800000u) {  // a normal half (>= 2^-14): rebias the exponent, keep 10 mantissa bits;
     // a carry out of the mantissa correctly moves to the next exponent.
@@ -93,6 +93,9 @@ std::span<const FilterConfigField> filter_config_fields() {
        "Window cells outside a frame's crop get log(1/M) minus this (0: the paper's rule)"},
       {"self_calibrate", &C::self_calibrate,
        "self-calibration: raise each volume to the power its predecessors' predictive likelihood favours"},
+      {"self_calibration_bank", &C::self_calibration_bank,
+       "Self-calibration: judge each power by the route's likelihood under a coarse filter run at it "
+       "(off: by the one-step predictive likelihood, with the hold)"},
       {"self_calibration_prior_octaves", &C::self_calibration_prior_octaves,
        "Self-calibration: sigma of the prior on log2 of the power (octaves)"},
       {"self_calibration_outlier_share", &C::self_calibration_outlier_share,

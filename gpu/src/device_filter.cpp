@@ -59,6 +59,11 @@ filter::FilterConfig checked(const filter::FilterConfig& config) {
     throw FilterError("the CUDA backend has no motion noise yet: run without --motion-noise or on the CPU",
                       ErrorCategory::usage);
   }
+  if (config.self_calibrate && config.self_calibration_bank) {
+    throw FilterError(
+        "the CUDA backend has no self-calibration bank yet: run without self_calibration_bank or on the CPU",
+        ErrorCategory::usage);
+  }
   return config;
 }
 

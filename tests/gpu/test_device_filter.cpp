@@ -199,6 +199,14 @@ TEST(DeviceFilter, MotionNoiseIsRefusedNotIgnored) {
   EXPECT_THROW(DeviceFilter(c, Backend::host), filter::FilterError);
 }
 
+TEST(DeviceFilter, TheSelfCalibrationBankIsRefusedNotIgnored) {
+  FilterConfig c;
+  c.self_calibration_bank = true;
+  EXPECT_THROW(DeviceFilter(c, Backend::host), filter::FilterError);
+  c.self_calibrate = false;  // the bank is part of self-calibration: off with it
+  EXPECT_NO_THROW(DeviceFilter(c, Backend::host));
+}
+
 TEST(DeviceFilter, SetBeliefChecksTheWindow) {
   if (!built_with_cuda()) GTEST_SKIP() << cuda_status().reason;
   FilterConfig c;

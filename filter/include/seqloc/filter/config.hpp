@@ -15,9 +15,9 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   int headings = 256;  ///< R, heading bins
 
   // The three components of SeqLoc; all off is the naive online recursion.
-  bool etu = true;   ///< Entropy-Tempered Uncertainty
-  bool mgr = true;   ///< Map-Guided Relocalization
-  bool pas = true;   ///< Peak-Anchored Smoothing
+  bool etu = true;  ///< Entropy-Tempered Uncertainty
+  bool mgr = true;  ///< Map-Guided Relocalization
+  bool pas = true;  ///< Peak-Anchored Smoothing
   /// ETU relative to a typical frame (ours; 0 is the paper's ETU, w = 1 - H): w = clamp((1 - H) /
   /// (1 - H_ref), 1e-3, 1). Calibrated volumes are spread by design (their floor), so the paper's
   /// weights temper every frame (w ~ 0.1) and the belief hardly moves. 0.9: the median entropy of
@@ -47,6 +47,13 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// kappa that maximizes the predictive likelihood of the frames before it under the belief, so
   /// that an overconfident (or timid) backbone is tempered without ground truth.
   bool self_calibrate = true;
+  /// How each power is judged: by how well the filter's own predicted belief predicts each frame
+  /// at that power, with the hold below (false: the one-step criterion); or by the route's marginal
+  /// likelihood under the recursion run at that power, a bank of coarse filters one per power
+  /// (true; power_bank.hpp; not on the CUDA backend). Both read errors that consecutive frames
+  /// share as sharpness (docs/filter.md, "Self-calibration": the ridge routes), so the bank is not
+  /// the default.
+  bool self_calibration_bank = false;
   /// The prior on kappa: Gaussian in log2 kappa around 0 with this sigma (octaves). It holds the
   /// estimate near 1 until the frames' evidence outweighs it.
   double self_calibration_prior_octaves = 2.0;
@@ -54,13 +61,12 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// a belief locked onto the wrong place makes every good frame look overconfident, and without
   /// it would drive the power down so that the frames could no longer correct it.
   double self_calibration_outlier_share = 0.1;
-  /// The hold: the power stays exactly 1 while the posterior on it keeps at least
-  /// self_calibration_hold_share of its mass on powers from self_calibration_hold_below_octaves
-  /// under 1 to self_calibration_hold_above_octaves over it; released, it follows the estimate for
-  /// the rest of the route. A calibrated backbone is then run as given, and a miscalibrated one is
-  /// tempered once its frames show it. The band is wider above: the estimate reads frames whose
-  /// errors their neighbours share as sharper than they are. Chosen on development routes
-  /// (docs/filter.md, "Self-calibration").
+  /// The one-step criterion's hold (self_calibration_bank off): the power stays exactly 1 while the posterior on it
+  /// keeps at least self_calibration_hold_share of its mass on powers from self_calibration_hold_below_octaves under 1
+  /// to self_calibration_hold_above_octaves over it; released, it follows the estimate for the rest of the route. A
+  /// calibrated backbone is then run as given, and a miscalibrated one is tempered once its frames show it. The band is
+  /// wider above: the estimate reads frames whose errors their neighbours share as sharper than they are. Chosen on
+  /// development routes (docs/filter.md, "Self-calibration").
   double self_calibration_hold_below_octaves = 0.35;
   double self_calibration_hold_above_octaves = 0.75;
   double self_calibration_hold_share = 0.05;
@@ -73,12 +79,12 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   double relocalization_jump_m = 10.0;
 
   // Beyond the paper, each off by default so that the paper's configuration stays reproducible.
-  bool subbin_heading = false;  ///< refine th* by a circular mean over the bins around it
-  int subbin_half_width = 2;    ///< bins each side of th* in that mean
-  bool motion_noise = false;    ///< diffuse the predicted belief by a Gaussian growing with the step
+  bool subbin_heading = false;           ///< refine th* by a circular mean over the bins around it
+  int subbin_half_width = 2;             ///< bins each side of th* in that mean
+  bool motion_noise = false;             ///< diffuse the predicted belief by a Gaussian growing with the step
   double motion_noise_xy_per_m = 0.05;   ///< sigma of position noise per metre driven
   double motion_noise_deg_per_m = 0.05;  ///< sigma of heading noise (degrees) per metre driven
-  bool gps_prior = false;  ///< add a Gaussian position term for frames that carry a GPS fix
+  bool gps_prior = false;                ///< add a Gaussian position term for frames that carry a GPS fix
 
   int threads = 1;  ///< worker threads of one step
 

@@ -30,6 +30,8 @@
 
 namespace seqloc::filter {
 
+class PowerBank;
+
 /// log(0) stands for this finite value inside the filter, so that no interpolation weight of 0
 /// times -inf can produce a NaN; exp() of it is 0 in float and double.
 inline constexpr float kLogZero = -1e30f;
@@ -40,9 +42,9 @@ struct PreparedFrame {
   int height = 0, width = 0, bins = 0;
   double cell_m = 0.5;
   AlignedVector<float> log_prob;  ///< [bin][v][u]
-  double log_cells = 0;         ///< log M
-  double entropy = 0;           ///< H_hat = -sum p log p / log M, in [0, 1]
-  float max_log_prob = 0;       ///< the largest normalized log-probability
+  double log_cells = 0;           ///< log M
+  double entropy = 0;             ///< H_hat = -sum p log p / log M, in [0, 1]
+  float max_log_prob = 0;         ///< the largest normalized log-probability
   int argmax_v = 0, argmax_u = 0, argmax_bin = 0;
 };
 
@@ -94,8 +96,8 @@ inline constexpr std::size_t kEtuRouteFrames = 256;
 
 /// The road prior of MGR over the window: log q(x) for every cell (one heading's share).
 /// `road_distance_m` is W x H, row-major (v, u) (FilterError when it holds another number of values).
-[[nodiscard]] std::vector<float> road_prior_log_q(std::span<const float> road_distance_m, int width, int height, int headings,
-                                                  double sigma_m);
+[[nodiscard]] std::vector<float> road_prior_log_q(std::span<const float> road_distance_m, int width, int height,
+                                                  int headings, double sigma_m);
 
 /// A GPS fix in window cells, for the optional GPS prior term.
 struct GpsFix {
@@ -119,8 +121,8 @@ struct FrameWeighting {
 };
 
 struct FrameResult {
-  Pose pose;     ///< the estimate: PAS's x_hat with th* (or the argmax when PAS is off)
-  Pose argmax;   ///< (x*, th*)
+  Pose pose;    ///< the estimate: PAS's x_hat with th* (or the argmax when PAS is off)
+  Pose argmax;  ///< (x*, th*)
   float peak_log_belief = 0;
   double frame_entropy = 0;  ///< H_hat of the frame's own volume, after self-calibration's power
   double etu_weight = 1;     ///< the weight used (1 with ETU off)
@@ -172,8 +174,12 @@ class SeqLocFilter {
   FrameResult update(const PreparedFrame& given, const CropPose& crop, std::span<const float> road_distance_m,
                      const GpsFix* gps = nullptr, const FrameWeighting* weighting = nullptr);
 
-  /// Self-calibration's estimator (its power is what the next step uses).
+  /// Self-calibration's one-step estimator (its power is what the next step uses when the bank is
+  /// off; unused otherwise).
   [[nodiscard]] const PowerEstimator& calibration() const;
+  /// Self-calibration's bank (power_bank.hpp; its power is what the next step uses), or nullptr
+  /// when self-calibration or the bank is off.
+  [[nodiscard]] const PowerBank* power_bank() const;
 
  private:
   struct Impl;
@@ -190,6 +196,7 @@ class SeqLocFilter {
   // the sub-bin heading around it (refine).
   FrameResult weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating);
   void retemper(bool held);
+  void retemper_by(float ratio);
   float temper(const PreparedFrame& frame, FrameResult& result);
   double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
                      bool calibrating);

@@ -1,0 +1,95 @@
+// bench/ridge_routes: self-calibration's criteria on the ridge routes of the tests
+// (tests/filter/ridge_routes.hpp), against the naive recursion and the best fixed power per route.
+// Prints a table per kind of route and ends with one line of JSON.
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "filter/ridge_routes.hpp"
+
+namespace {
+
+using seqloc::filter::FilterConfig;
+using seqloc::filter::test::ridge_recall;
+using seqloc::filter::test::RidgeKind;
+using seqloc::filter::test::RidgeRoute;
+
+struct Row {
+  double naive = 0, off = 0, one_step = 0, bank = 0, best_fixed = 0;
+};
+
+Row measure(const RidgeKind& kind, int routes, int frames) {
+  FilterConfig naive = RidgeRoute::config();
+  naive.etu = naive.mgr = naive.pas = naive.self_calibrate = false;
+  FilterConfig off = RidgeRoute::config();
+  off.self_calibrate = false;
+  FilterConfig one_step = RidgeRoute::config();
+  one_step.self_calibration_bank = false;
+  FilterConfig bank = RidgeRoute::config();
+  bank.self_calibration_bank = true;
+  Row mean;
+  for (int r = 0; r < routes; ++r) {
+    const auto seed = static_cast<unsigned>(1000 + r);  // seeds the tests do not use
+    Row row{ridge_recall(kind, seed, naive, frames), ridge_recall(kind, seed, off, frames),
+            ridge_recall(kind, seed, one_step, frames), ridge_recall(kind, seed, bank, frames), 0};
+    double best_power = 1;
+    for (int i = -8; i <= 4; ++i) {  // fixed powers 2^-4 .. 2^2 in half octaves, as given otherwise
+      const double power = std::exp2(i / 2.0), recall = ridge_recall(kind, seed, off, frames, power);
+      if (recall > row.best_fixed) {
+        row.best_fixed = recall;
+        best_power = power;
+      }
+    }
+    std::printf(
+        "  route %d: naive %5.1f  no self-cal %5.1f  one-step %5.1f  bank %5.1f  best fixed %5.1f (power %.3g)\n", r,
+        row.naive, row.off, row.one_step, row.bank, row.best_fixed, best_power);
+    mean.naive += row.naive / routes;
+    mean.off += row.off / routes;
+    mean.one_step += row.one_step / routes;
+    mean.bank += row.bank / routes;
+    mean.best_fixed += row.best_fixed / routes;
+  }
+  return mean;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int routes = 6, frames = 60;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string flag = argv[i];
+    if (flag == "--routes") {
+      routes = std::atoi(argv[i + 1]);
+    } else if (flag == "--frames") {
+      frames = std::atoi(argv[i + 1]);
+    } else {
+      std::fprintf(stderr, "usage: bench_ridge_routes [--routes N] [--frames N]\n");
+      return 2;
+    }
+  }
+  if (routes < 1 || frames < 1) {
+    std::fprintf(stderr, "bench_ridge_routes: --routes and --frames must be at least 1\n");
+    return 2;
+  }
+  const std::vector<std::pair<std::string, RidgeKind>> kinds{{"sharp_shared", seqloc::filter::test::sharp_shared()},
+                                                             {"timid", seqloc::filter::test::timid()}};
+  std::string json =
+      "{\"bench\": \"ridge_routes\", \"routes\": " + std::to_string(routes) + ", \"frames\": " + std::to_string(frames);
+  for (const auto& [name, kind] : kinds) {
+    std::printf("%s (R@5m, %d routes x %d frames):\n", name.c_str(), routes, frames);
+    const Row m = measure(kind, routes, frames);
+    std::printf("  mean:    naive %5.1f  no self-cal %5.1f  one-step %5.1f  bank %5.1f  best fixed %5.1f\n", m.naive,
+                m.off, m.one_step, m.bank, m.best_fixed);
+    char buffer[256];
+    std::snprintf(buffer, sizeof buffer,
+                  ", \"%s\": {\"naive\": %.1f, \"no_self_calibration\": %.1f, \"one_step\": %.1f, \"bank\": %.1f, "
+                  "\"best_fixed\": %.1f}",
+                  name.c_str(), m.naive, m.off, m.one_step, m.bank, m.best_fixed);
+    json += buffer;
+  }
+  std::printf("%s}\n", json.c_str());
+  return 0;
+}
