@@ -39,8 +39,7 @@ bool killed_after(const std::vector<std::string>& args, long long delay_ms) {
 }
 
 TEST(CrashSafety, KillNineNeverDamagesTheCacheAndARerunCompletes) {
-  const auto osm = test::shared_osm("north-bayreuth.osm.pbf");
-  if (osm.empty()) GTEST_SKIP() << "../shared/data/osm is not available";
+  const auto osm = test::osm_extract("north-bayreuth.osm.pbf");
   test::ScratchDir dir;
   const auto out = dir / "region.gpkg";
   const std::vector<std::string> base{"preprocess", osm.string(), "-o", out.string(), "--bbox", kBbox, "--no-progress"};

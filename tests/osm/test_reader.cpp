@@ -17,8 +17,8 @@ SyntheticMap small_map() {
   SyntheticMap map(47.5, 10.5);
   map.way({{-50, 0}, {50, 0}}, {{"highway", "track"}});
   map.way({{0, 10}, {10, 10}, {10, 20}, {0, 20}}, {{"building", "yes"}}, true);
-  map.multipolygon({{{-100, -100}, {100, -100}, {100, 100}, {-100, 100}}}, {{{-20, -20}, {20, -20}, {20, 20}, {-20, 20}}},
-                   {{"landuse", "forest"}});
+  map.multipolygon({{{-100, -100}, {100, -100}, {100, 100}, {-100, 100}}},
+                   {{{-20, -20}, {20, -20}, {20, 20}, {-20, 20}}}, {{"landuse", "forest"}});
   map.node({5, 5}, {{"natural", "tree"}});
   map.node({6, 6});  // untagged
   return map;
@@ -61,8 +61,7 @@ TEST(Reader, KeepBoxDropsFeaturesFarAway) {
 }
 
 TEST(Reader, ReadsTheRealNorthBayreuthExtract) {
-  const auto path = test::shared_osm("north-bayreuth.osm.pbf");
-  if (path.empty()) GTEST_SKIP() << "../shared/data/osm is not available";
+  const auto path = test::osm_extract("north-bayreuth.osm.pbf");
   const auto features = read_osm(path);
   ASSERT_TRUE(features.header_box.has_value());
   EXPECT_NEAR(features.header_box->min_lon, 11.4807, 1e-3);
@@ -99,13 +98,13 @@ TEST(Reader, BadInputGivesOneClearError) {
 }
 
 TEST(Reader, TruncatedRealPbfFails) {
-  const auto path = test::shared_osm("monaco.osm.pbf");
-  if (path.empty()) GTEST_SKIP() << "../shared/data/osm is not available";
+  const auto path = test::osm_extract("monaco.osm.pbf");
   test::ScratchDir dir;
   const std::string bytes = test::read_file(path);
   for (const double fraction : {0.5, 0.9, 0.999}) {
     const auto cut = dir / ("cut" + std::to_string(static_cast<int>(fraction * 1000)) + ".osm.pbf");
-    std::ofstream(cut, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(static_cast<double>(bytes.size()) * fraction));
+    std::ofstream(cut, std::ios::binary)
+        .write(bytes.data(), static_cast<std::streamsize>(static_cast<double>(bytes.size()) * fraction));
     expect_input_error(cut, "cannot read OSM data");
   }
 }

@@ -4,8 +4,8 @@
 #include <cmath>
 
 #include <gdal_priv.h>
-#include <ogrsf_frmts.h>
 #include <gtest/gtest.h>
+#include <ogrsf_frmts.h>
 
 #include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/raster/cache.hpp"
@@ -18,7 +18,7 @@ class GdalInterop : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     GDALAllRegister();
-    const auto osm = test::shared_osm("north-bayreuth.osm.pbf");
+    const auto osm = test::osm_extract("north-bayreuth.osm.pbf");
     if (osm.empty()) return;
     dir_ = new test::ScratchDir();
     ingest::PreprocessOptions options;
@@ -29,9 +29,7 @@ class GdalInterop : public ::testing::Test {
     path_ = options.output;
   }
   static void TearDownTestSuite() { delete dir_; }
-  void SetUp() override {
-    if (path_.empty()) GTEST_SKIP() << "../shared/data/osm is not available";
-  }
+  void SetUp() override {}
   static inline test::ScratchDir* dir_ = nullptr;
   static inline std::filesystem::path path_;
 };
@@ -86,8 +84,7 @@ TEST_F(GdalInterop, GdalReadsTheValuesTheLibraryReads) {
   const auto distance = open_raster(path_, "road_distance");
   ASSERT_TRUE(distance);
   std::vector<float> theirs(static_cast<std::size_t>(w) * h);
-  ASSERT_EQ(distance->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, theirs.data(), w, h, GDT_Float32, 0, 0),
-            CE_None);
+  ASSERT_EQ(distance->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, w, h, theirs.data(), w, h, GDT_Float32, 0, 0), CE_None);
   std::size_t differing = 0, near_road = 0;
   for (std::size_t i = 0; i < theirs.size(); ++i) {
     // GDAL applies the coverage's scale (0.01) and returns metres.
@@ -104,8 +101,7 @@ TEST_F(GdalInterop, GdalReadsTheValuesTheLibraryReads) {
   ASSERT_GE(classes->GetRasterCount(), 3);
   std::vector<std::uint8_t> band(static_cast<std::size_t>(w) * h);
   for (int b = 0; b < 3; ++b) {
-    ASSERT_EQ(classes->GetRasterBand(b + 1)->RasterIO(GF_Read, 0, 0, w, h, band.data(), w, h, GDT_Byte, 0, 0),
-              CE_None);
+    ASSERT_EQ(classes->GetRasterBand(b + 1)->RasterIO(GF_Read, 0, 0, w, h, band.data(), w, h, GDT_Byte, 0, 0), CE_None);
     std::size_t mismatches = 0, labelled = 0;
     for (std::size_t i = 0; i < band.size(); ++i) {
       mismatches += band[i] != ours_rgb[i * 3 + static_cast<std::size_t>(b)];

@@ -37,7 +37,7 @@ std::filesystem::path monaco_cache() {
   static std::filesystem::path built;
   if (built.empty()) {
     ingest::PreprocessOptions options;
-    options.input = test::shared_osm("monaco.osm.pbf");
+    options.input = test::osm_extract("monaco.osm.pbf");
     options.output = dir / "monaco.gpkg";
     options.threads = 2;
     ingest::preprocess_region(options);
@@ -75,7 +75,6 @@ class ListeningServer {
 class ServiceTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    if (test::shared_osm("monaco.osm.pbf").empty()) GTEST_SKIP() << "shared data not found";
     service_ = std::make_unique<Service>(std::vector<std::filesystem::path>{monaco_cache()}, ServiceOptions{});
     cache_ = std::make_unique<raster::CacheReader>(monaco_cache());
   }
@@ -126,8 +125,10 @@ TEST_F(ServiceTest, HealthAndCatalogDescribeTheRegion) {
 
 TEST_F(ServiceTest, PngTilesAreTheStoredTiles) {
   for (auto [col, row] : {std::pair{0, 0}, std::pair{6, 7}, std::pair{13, 13}}) {
-    for (auto [layer, name] : {std::pair{raster::Layer::classes, "classes"}, std::pair{raster::Layer::road_distance, "road_distance"}}) {
-      const Response r = get("/regions/monaco/" + std::string(name) + "/" + std::to_string(col) + "/" + std::to_string(row) + ".png");
+    for (auto [layer, name] :
+         {std::pair{raster::Layer::classes, "classes"}, std::pair{raster::Layer::road_distance, "road_distance"}}) {
+      const Response r =
+          get("/regions/monaco/" + std::string(name) + "/" + std::to_string(col) + "/" + std::to_string(row) + ".png");
       ASSERT_EQ(r.status, 200) << r.text();
       EXPECT_EQ(r.content_type, "image/png");
       const auto blob = cache_->tile_blob(layer, col, row);
@@ -174,7 +175,8 @@ TEST_F(ServiceTest, GeoTiffTilesCarryTheTilesGeoreference) {
   EXPECT_DOUBLE_EQ(gt[1], 0.5);
   EXPECT_DOUBLE_EQ(gt[5], -0.5);
   std::vector<float> values(512 * 512);
-  ASSERT_EQ(GDALRasterIO(GDALGetRasterBand(ds, 1), GF_Read, 0, 0, 512, 512, values.data(), 512, 512, GDT_Float32, 0, 0), CE_None);
+  ASSERT_EQ(GDALRasterIO(GDALGetRasterBand(ds, 1), GF_Read, 0, 0, 512, 512, values.data(), 512, 512, GDT_Float32, 0, 0),
+            CE_None);
   const auto cm = cache_->distance_tile(3, 9);
   for (std::size_t i = 0; i < values.size(); i += 97) ASSERT_NEAR(values[i], (*cm)[i] / 100.0, 1e-5);
   GDALClose(ds);
@@ -192,14 +194,15 @@ TEST_F(ServiceTest, CropCellsSitWhereTheConventionPutsThem) {
     const double size_m = trial % 2 ? 32.5 : 40.0;  // 65 cells (odd), 80 cells (even)
     const osm::GeoPoint where = projection.reverse({ux(rng), uy(rng)});
     const Response r = get("/regions/monaco/crop", {{"lat", std::to_string(where.lat_deg)},
-                                                   {"lon", std::to_string(where.lon_deg)},
-                                                   {"size_m", std::to_string(size_m)},
-                                                   {"layers", "classes,road_distance"}});
+                                                    {"lon", std::to_string(where.lon_deg)},
+                                                    {"size_m", std::to_string(size_m)},
+                                                    {"layers", "classes,road_distance"}});
     ASSERT_EQ(r.status, 200) << r.text();
     const int n = static_cast<int>(size_m * 2);
     const double cx = std::stod(header(r, "X-Seqloc-Crop-X")), cy = std::stod(header(r, "X-Seqloc-Crop-Y"));
     // The crop's centre is within half a cell of the point, per axis (a cell centre or corner).
-    const auto p = projection.forward({std::stod(std::to_string(where.lat_deg)), std::stod(std::to_string(where.lon_deg))});
+    const auto p =
+        projection.forward({std::stod(std::to_string(where.lat_deg)), std::stod(std::to_string(where.lon_deg))});
     EXPECT_LE(std::abs(p.x_m - cx), 0.25 + 1e-6);
     EXPECT_LE(std::abs(p.y_m - cy), 0.25 + 1e-6);
     const auto values = npy_values<float>(r.text(), "<f4", "(" + std::to_string(n) + ", " + std::to_string(n) + ", 4)");
@@ -231,7 +234,8 @@ TEST_F(ServiceTest, CropSidecarAgreesWithTheHeaders) {
   ASSERT_EQ(sidecar.status, 200);
   EXPECT_EQ(header(crop, "X-Seqloc-Shape"), "128,128,5");
   const double cx = std::stod(header(crop, "X-Seqloc-Crop-X"));
-  EXPECT_NE(sidecar.text().find("\"crop_x\": " + std::to_string(static_cast<int>(cx))), std::string::npos) << sidecar.text();
+  EXPECT_NE(sidecar.text().find("\"crop_x\": " + std::to_string(static_cast<int>(cx))), std::string::npos)
+      << sidecar.text();
   EXPECT_NE(sidecar.text().find("\"road_prior\""), std::string::npos);
 }
 
@@ -282,7 +286,10 @@ TEST_F(ServiceTest, BadRequestsGetOneClearError) {
       {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"size_m", "0"}}, 400, "at least one cell"},
       {"/regions/monaco/crop", {{"lat", "48.0"}, {"lon", "11.0"}}, 404, "outside the region"},
       {"/regions/monaco/crop", {{"lat", "95"}, {"lon", "7.4"}}, 400, "not a WGS84"},
-      {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"layers", "classes,roads"}}, 400, "unknown layer"},
+      {"/regions/monaco/crop",
+       {{"lat", "43.7384"}, {"lon", "7.4246"}, {"layers", "classes,roads"}},
+       400,
+       "unknown layer"},
       {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"format", "png"}}, 400, "one layer"},
       {"/regions/monaco/crop", {{"lat", "43.7384"}, {"lon", "7.4246"}, {"format", "jpeg"}}, 400, "format"},
       {"/regions/monaco/point/7.4246", {}, 400, "LON,LAT"},
@@ -318,7 +325,8 @@ TEST(HttpStatus, FromTheErrorOnce) {
 }
 
 TEST(ParseRequest, DecodesTheTargetLikeABrowserEncodesIt) {
-  const Request r = parse_request("GET", "/regions/mon%61co/crop?lat=43.7&lon=%2D7.4&layers=classes%2Croad_prior&q=a+b&&=x&flag");
+  const Request r =
+      parse_request("GET", "/regions/mon%61co/crop?lat=43.7&lon=%2D7.4&layers=classes%2Croad_prior&q=a+b&&=x&flag");
   EXPECT_EQ(r.method, "GET");
   EXPECT_EQ(r.path, "/regions/monaco/crop");
   const std::multimap<std::string, std::string> expected{
@@ -406,7 +414,9 @@ class RawClient {
   RawClient& operator=(const RawClient&) = delete;
 
   [[nodiscard]] bool connected() const { return connected_; }
-  bool send(const std::string& bytes) { return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size()); }
+  bool send(const std::string& bytes) {
+    return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size());
+  }
   /// One response: its status (0 when the connection closed or timed out first) and body.
   std::pair<int, std::string> response() {
     while (pending_.find("\r\n\r\n") == std::string::npos) {
@@ -415,7 +425,8 @@ class RawClient {
     const std::size_t head_end = pending_.find("\r\n\r\n") + 4;
     const std::string head = pending_.substr(0, head_end);
     std::size_t length = 0;
-    if (const auto at = head.find("Content-Length: "); at != std::string::npos) length = std::stoul(head.substr(at + 16));
+    if (const auto at = head.find("Content-Length: "); at != std::string::npos)
+      length = std::stoul(head.substr(at + 16));
     while (pending_.size() < head_end + length) {
       if (!receive()) return {0, {}};
     }
@@ -528,7 +539,8 @@ TEST_F(ServiceTest, HttpServerClosesConnectionsThatMissTheirDeadlines) {
   ASSERT_TRUE(dribble.connected());
   const auto dribble_start = std::chrono::steady_clock::now();
   bool cut = false;
-  for (char ch : std::string("GET /health HTTP/1.1\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\r\n\r\n")) {
+  for (char ch :
+       std::string("GET /health HTTP/1.1\r\nX-Slow: aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\r\n\r\n")) {
     if (!dribble.send(std::string(1, ch))) {
       cut = true;
       break;
@@ -554,7 +566,8 @@ TEST_F(ServiceTest, HttpServerRefusesOversizedHeadsAndBodies) {
   // A head over max_header_bytes: a 431, then the connection is closed.
   RawClient big_head(port);
   ASSERT_TRUE(big_head.connected());
-  ASSERT_TRUE(big_head.send("GET /health HTTP/1.1\r\nX-Big: " + std::string(options.max_header_bytes, 'a') + "\r\n\r\n"));
+  ASSERT_TRUE(
+      big_head.send("GET /health HTTP/1.1\r\nX-Big: " + std::string(options.max_header_bytes, 'a') + "\r\n\r\n"));
   EXPECT_EQ(big_head.response().first, 431);
   EXPECT_TRUE(big_head.closed_by_server());
   // A declared body over max_body_bytes: a 413 before a byte of it is read.
@@ -697,7 +710,6 @@ TEST(ServiceReload, AReplacedCacheIsServedFromTheNextRequestOn) {
 TEST(ServiceSetup, RefusesMissingCachesAndDuplicateIds) {
   EXPECT_THROW(Service({}, ServiceOptions{}), ServiceError);
   EXPECT_THROW(Service({"/nonexistent/region.gpkg"}, ServiceOptions{}), raster::CacheError);
-  if (test::shared_osm("monaco.osm.pbf").empty()) GTEST_SKIP() << "shared data not found";
   EXPECT_THROW(Service({monaco_cache(), monaco_cache()}, ServiceOptions{}), ServiceError);
 }
 

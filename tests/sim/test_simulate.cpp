@@ -36,7 +36,7 @@ const std::filesystem::path& region_cache(const std::string& name) {
   auto it = built.find(name);
   if (it == built.end()) {
     ingest::PreprocessOptions options;
-    options.input = test::shared_osm(name + ".osm.pbf");
+    options.input = test::osm_extract(name + ".osm.pbf");
     options.output = dir / (name + ".gpkg");
     ingest::preprocess_region(options);
     it = built.emplace(name, options.output).first;

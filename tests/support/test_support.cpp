@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 
 #include <gtest/gtest.h>
 
@@ -82,9 +83,13 @@ CommandResult run_seqloc(const std::vector<std::string>& args) { return run_prog
 
 int start_seqloc(const std::vector<std::string>& args) { return spawn(SEQLOC_BINARY, args, "/dev/null", "/dev/null"); }
 
-std::filesystem::path shared_osm(const std::string& name) {
-  const auto path = std::filesystem::path(SEQLOC_SHARED_DATA) / name;
-  return std::filesystem::exists(path) ? path : std::filesystem::path();
+std::filesystem::path osm_extract(const std::string& name) {
+  const auto path = std::filesystem::path(SEQLOC_OSM_DATA) / name;
+  if (!std::filesystem::exists(path)) {
+    throw std::runtime_error(path.string() +
+                             ": not found (the extracts ship in data/osm/; a checkout without them is broken)");
+  }
+  return path;
 }
 
 void write_npy_float32(const std::filesystem::path& path, int h, int w, int n, const std::vector<float>& values) {

@@ -35,8 +35,8 @@ CommandResult run_seqloc(const std::vector<std::string>& args);
 /// Starts the seqloc binary in the background (output discarded); returns its pid, or -1.
 int start_seqloc(const std::vector<std::string>& args);
 
-/// ../shared/data/osm/NAME, or an empty path when the shared data is not there.
-std::filesystem::path shared_osm(const std::string& name);
+/// data/osm/NAME (data/osm/SOURCES.md); std::runtime_error when it is not there.
+std::filesystem::path osm_extract(const std::string& name);
 
 std::string read_file(const std::filesystem::path& path);
 
