@@ -23,13 +23,16 @@ class CalibrateCommand : public Command, public WithOverwrite, public WithProgre
     app.add_option("-o,--output", out_, "The calibration file to write (JSON)")->required();
     add_matcher_options(app, options_.matcher);
     add_route_limit_options(app, limits_);
-    app.add_option("--threads", options_.matcher.threads, "Threads")->default_val(default_threads());
+    app.add_option("--threads", options_.matcher.threads, "Threads")
+        ->default_val(default_threads())
+        ->default_str("cores");
     add_overwrite_option(app, "calibration file");
     add_progress_option(app);
-    app.footer("Fits a temperature, a blur and a floor to the routes' volumes (.npy from any backbone, or the built-in\n"
-               "matcher's) by the mean negative log-likelihood of the true cell, prints the fit against the volumes as\n"
-               "given and a uniform volume, and writes them for `seqloc localize --calibration` and the Python module\n"
-               "(docs/localize.md). Use routes that you do not report results on.");
+    app.footer(
+        "Fits a temperature, a blur and a floor to the routes' volumes (.npy from any backbone, or the built-in\n"
+        "matcher's) by the mean negative log-likelihood of the true cell, prints the fit against the volumes as\n"
+        "given and a uniform volume, and writes them for `seqloc localize --calibration` and the Python module\n"
+        "(docs/localize.md). Use routes that you do not report results on.");
   }
 
   void check() override {

@@ -44,8 +44,10 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
     // Every filter setting from the filter's field table; the window and threads have their own.
     add_filter_options(app, options_.filter, {"width", "height", "threads"});
     app.add_option("--window", window_, "Belief window, cells of 0.5 m each way")->capture_default_str();
-    app.add_option("--threads", options_.filter.threads, "Threads: routes run side by side, or one route's filter uses them all")
-        ->default_val(default_threads());
+    app.add_option("--threads", options_.filter.threads,
+                   "Threads: routes run side by side, or one route's filter uses them all")
+        ->default_val(default_threads())
+        ->default_str("cores");
     app.add_option("--odometry-noise", noise_, "SIGMA_T_PCT,SIGMA_R_DEG_PER_M: perturb the odometry (KITTI style)");
     app.add_option("--seed", seed_, "Seed of the odometry noise")->default_val(1);
     add_route_limit_options(app, limits_);

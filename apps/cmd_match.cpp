@@ -23,13 +23,16 @@ class MatchCommand : public Command, public WithOverwrite, public WithProgress {
     app.add_option("-o,--output", out_, "Output folder of volume routes (written whole, or not at all)")->required();
     add_matcher_options(app, options_.matcher);
     add_route_limit_options(app, limits_);
-    app.add_option("--threads", options_.matcher.threads, "Matcher threads")->default_val(default_threads());
+    app.add_option("--threads", options_.matcher.threads, "Matcher threads")
+        ->default_val(default_threads())
+        ->default_str("cores");
     add_overwrite_option(app, "output folder");
     add_progress_option(app);
-    app.footer("Writes OUT/<route>/{route.json,frames.csv,volumes/NNNNNN.npy}: each frame's volume from the built-in\n"
-               "matcher as seqloc localize scores it (calibrated, normalized log-probabilities, float16, (H, W, N)),\n"
-               "its crop in region-grid metres, the odometry, GPS and ground truth of the input route\n"
-               "(docs/route-format.md). seqloc localize on them gives the poses it gives on the input routes.");
+    app.footer(
+        "Writes OUT/<route>/{route.json,frames.csv,volumes/NNNNNN.npy}: each frame's volume from the built-in\n"
+        "matcher as seqloc localize scores it (calibrated, normalized log-probabilities, float16, (H, W, N)),\n"
+        "its crop in region-grid metres, the odometry, GPS and ground truth of the input route\n"
+        "(docs/route-format.md). seqloc localize on them gives the poses it gives on the input routes.");
   }
 
   void check() override {

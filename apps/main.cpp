@@ -1,10 +1,10 @@
 // seqloc: sequence localization against OpenStreetMap. Subcommands are classes in cmd_*.cpp.
 
+#include <unistd.h>
 #include <cstdio>
 #include <exception>
 #include <memory>
 #include <string>
-#include <unistd.h>
 #include <vector>
 
 #include "command.hpp"
@@ -51,17 +51,23 @@ void ProgressBar::done() {
 
 int main(int argc, char** argv) {
   namespace app = seqloc::app;
-  CLI::App cli{"seqloc: localize vehicles against OpenStreetMap with sequences of pose likelihoods.\n"
-               "Map data (c) OpenStreetMap contributors, ODbL 1.0."};
+  CLI::App cli{
+      "seqloc: localize vehicles against OpenStreetMap with sequences of pose likelihoods.\n"
+      "Map data (c) OpenStreetMap contributors, ODbL 1.0."};
   cli.name("seqloc");
   cli.require_subcommand(1);
   cli.set_version_flag("--version", std::string("seqloc ") + SEQLOC_VERSION);
   app::GlobalOptions global;
-  cli.add_flag("-v,--verbose", global.verbose, "Timestamped log lines on stderr");
+  // Global options, before the subcommand or after it (seqloc -v localize ..., seqloc localize ... -v).
+  const auto add_global_options = [&global](CLI::App& app) {
+    app.add_flag("-v,--verbose", global.verbose, "Timestamped log lines on stderr");
+  };
+  add_global_options(cli);
 
   std::vector<std::pair<CLI::App*, std::unique_ptr<app::Command>>> commands;
   auto add = [&](CLI::App* parent, const char* name, const char* description, std::unique_ptr<app::Command> command) {
     CLI::App* sub = parent->add_subcommand(name, description);
+    add_global_options(*sub);
     command->set_global(&global);
     command->declare(*sub);
     commands.emplace_back(sub, std::move(command));
@@ -76,13 +82,15 @@ int main(int argc, char** argv) {
       app::make_match_command());
   add(&cli, "calibrate", "Fit a backbone's temperature, blur and floor on routes with ground truth",
       app::make_calibrate_command());
-  add(&cli, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time", app::make_render_command());
+  add(&cli, "render", "Draw figures of a route: likelihood vs belief, entropy, error over time",
+      app::make_render_command());
   add(&cli, "serve", "Serve region caches over HTTP: tiles, crops, points, WMTS, the viewer page",
       app::make_serve_command());
   add(&cli, "export", "Export a layer of a region cache as a Cloud Optimized GeoTIFF, or the cache as a VRT",
       app::make_export_command());
   CLI::App* cache = cli.add_subcommand("cache", "Inspect and combine region caches");
   cache->require_subcommand(1);
+  add_global_options(*cache);
   add(cache, "info", "Print a cache's metadata", app::make_cache_info_command());
   add(cache, "merge", "Merge the shards of a sharded build into one cache", app::make_cache_merge_command());
 

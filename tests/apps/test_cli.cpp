@@ -47,12 +47,13 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(r.out.find("Usage"), std::string::npos) << r.out;
   }
   const auto help = run_seqloc({"preprocess", "--help"}).out;
-  for (const char* option : {"--bbox", "--max-distance", "--corridor", "--threads", "--shard", "--progress", "--overwrite",
-                             "--report", "-o"}) {
+  for (const char* option : {"--bbox", "--max-distance", "--corridor", "--threads", "--shard", "--progress",
+                             "--overwrite", "--report", "-o"}) {
     EXPECT_NE(help.find(option), std::string::npos) << option;
   }
   const auto simulate = run_seqloc({"simulate", "--help"}).out;
-  for (const char* option : {"--routes", "--frames", "--seed", "--range", "--fov", "--class-miss", "--wrong-frames", "--clean"}) {
+  for (const char* option :
+       {"--routes", "--frames", "--seed", "--range", "--fov", "--class-miss", "--wrong-frames", "--clean"}) {
     EXPECT_NE(simulate.find(option), std::string::npos) << option;
   }
   const auto render = run_seqloc({"render", "--help"}).out;
@@ -71,7 +72,8 @@ TEST(Cli, HelpOnEverySubcommand) {
     EXPECT_NE(update.find(option), std::string::npos) << option;
   }
   const auto match = run_seqloc({"match", "--help"}).out;
-  for (const char* option : {"-o", "--matcher-temperature", "--matcher-floor", "--threads", "--overwrite", "--progress"}) {
+  for (const char* option :
+       {"-o", "--matcher-temperature", "--matcher-floor", "--threads", "--overwrite", "--progress"}) {
     EXPECT_NE(match.find(option), std::string::npos) << option;
   }
   const auto serve = run_seqloc({"serve", "--help"}).out;
@@ -105,15 +107,18 @@ TEST(Cli, LocalizeHasAnOptionForEachFilterSetting) {
     EXPECT_NE(help.find(option), std::string::npos) << option;
     if (on != nullptr) continue;
     ++numeric;
-    const auto bad = run_seqloc({"localize", "/nonexistent.gpkg", "/nonexistent-route", "-o", "/tmp/never", option + "=-1"});
+    const auto bad =
+        run_seqloc({"localize", "/nonexistent.gpkg", "/nonexistent-route", "-o", "/tmp/never", option + "=-1"});
     EXPECT_EQ(bad.exit_code, 2) << option;
     EXPECT_NE(bad.err.find(name + " = -1"), std::string::npos) << option << ": " << bad.err;
   }
   EXPECT_GE(numeric, 9);
   // The names of earlier releases still work.
-  EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--epsilon", "2"}).err.find("mgr_epsilon = 2"),
+  EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--epsilon", "2"})
+                .err.find("mgr_epsilon = 2"),
             std::string::npos);
-  EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--sigma=-1"}).err.find("mgr_sigma_m = -1"),
+  EXPECT_NE(run_seqloc({"localize", "/nonexistent.gpkg", "/r", "-o", "/tmp/never", "--sigma=-1"})
+                .err.find("mgr_sigma_m = -1"),
             std::string::npos);
   // --paper sets the paper's values whatever the options say: an ETU reference of 2 is refused
   // alone, and overridden (so the run goes on to fail on the missing cache) with --paper.
@@ -153,9 +158,9 @@ TEST(Cli, UsageErrorsExitTwo) {
   EXPECT_EQ(bad_shard.exit_code, 2);
   EXPECT_NE(bad_shard.err.find("5/2"), std::string::npos) << bad_shard.err;
   // Values sscanf took (a NaN, an int overflow, trailing garbage in a field) are usage errors.
-  for (const auto& [option, value] : {std::pair{"--bbox", "1,2,3,nan"}, std::pair{"--bbox", "1,2,3,4x"},
-                                      std::pair{"--bbox", "1,,2,3,4"}, std::pair{"--shard", "99999999999/4"},
-                                      std::pair{"--shard", "1/4/2"}}) {
+  for (const auto& [option, value] :
+       {std::pair{"--bbox", "1,2,3,nan"}, std::pair{"--bbox", "1,2,3,4x"}, std::pair{"--bbox", "1,,2,3,4"},
+        std::pair{"--shard", "99999999999/4"}, std::pair{"--shard", "1/4/2"}}) {
     const auto r = run_seqloc({"preprocess", map.string(), "-o", (dir / "r.gpkg").string(), option, value});
     EXPECT_EQ(r.exit_code, 2) << option << " " << value;
     EXPECT_NE(r.err.find(value), std::string::npos) << r.err;
@@ -212,6 +217,12 @@ TEST(Cli, ProgressOnRequestAndTimestampedLogs) {
   const auto report = nlohmann::json::parse(test::read_file(dir / "report.json"));
   EXPECT_EQ(report["tiles_written"], report["tiles_total"]);
   EXPECT_GT(report["tiles_total"].get<int>(), 0);
+  // A global option after the subcommand, as osmium and git users type it; and after a nested one.
+  const auto after = run_seqloc({"preprocess", map.string(), "-o", (dir / "r2.gpkg").string(), "-v"});
+  ASSERT_EQ(after.exit_code, 0) << after.err;
+  EXPECT_NE(after.err.find("] preprocess "), std::string::npos) << "a timestamped log line: " << after.err;
+  const auto nested = run_seqloc({"cache", "info", (dir / "r2.gpkg").string(), "--verbose"});
+  EXPECT_EQ(nested.exit_code, 0) << nested.err;
 }
 
 TEST(Cli, DataErrorsExitOneWithOneLine) {
@@ -231,8 +242,7 @@ TEST(Cli, ShardsMergeIntoOneCache) {
   std::vector<std::string> merge{"cache", "merge", (dir / "merged.gpkg").string()};
   for (int i = 0; i < 3; ++i) {
     const auto shard = dir / ("s" + std::to_string(i) + ".gpkg");
-    const auto r = run_seqloc({"preprocess", map.string(), "-o", shard.string(), "--shard",
-                               std::to_string(i) + "/3"});
+    const auto r = run_seqloc({"preprocess", map.string(), "-o", shard.string(), "--shard", std::to_string(i) + "/3"});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     merge.push_back(shard.string());
   }
