@@ -51,6 +51,16 @@ namespace raster = seqloc::raster;
 
 namespace {
 
+// Usage errors that are also the builtin a Python user catches for them (seqloc.UsageTypeError is a
+// seqloc.UsageError and a TypeError, ...); register_errors makes the classes.
+py::handle usage_type_error_class, usage_key_error_class, usage_index_error_class;
+
+[[noreturn]] void raise_as(py::handle type, const std::string& message) {
+  PyErr_SetString(type.ptr(), message.c_str());
+  throw py::error_already_set();
+}
+[[noreturn]] void usage_type_error(const std::string& message) { raise_as(usage_type_error_class, message); }
+
 /// A NumPy array that takes ownership of a vector's buffer.
 template <class T>
 py::array_t<T> adopt(std::vector<T>&& values, std::vector<py::ssize_t> shape) {
@@ -68,12 +78,12 @@ py::array as_array(const py::object& value, const char* name) {
     if (py::hasattr(value, "__dlpack__")) return py::module_::import("numpy").attr("from_dlpack")(value);
     if (py::hasattr(value, "__array__")) return py::array::ensure(value);
   } catch (const py::error_already_set& e) {
-    throw py::type_error(std::string(name) + ": cannot read a " +
-                         std::string(py::str(py::type::of(value).attr("__name__"))) + " as an array in memory (" +
-                         std::string(py::str(e.value())).substr(0, 200) + ")");
+    usage_type_error(std::string(name) + ": cannot read a " +
+                     std::string(py::str(py::type::of(value).attr("__name__"))) + " as an array in memory (" +
+                     std::string(py::str(e.value())).substr(0, 200) + ")");
   }
-  throw py::type_error(std::string(name) + ": expected an array (NumPy, DLPack or __array__), got " +
-                       std::string(py::str(py::type::of(value).attr("__name__"))));
+  usage_type_error(std::string(name) + ": expected an array (NumPy, DLPack or __array__), got " +
+                   std::string(py::str(py::type::of(value).attr("__name__"))));
 }
 
 /// Three numbers from any sequence of them; a short TypeError naming the argument otherwise.
@@ -82,8 +92,8 @@ std::array<double, 3> three_numbers(const py::object& value, const char* name, c
     const auto t = value.cast<std::tuple<double, double, double>>();
     return {std::get<0>(t), std::get<1>(t), std::get<2>(t)};
   } catch (const py::cast_error&) {
-    throw py::type_error(std::string(name) + ": expected three numbers " + what + ", got a " +
-                         std::string(py::str(py::type::of(value).attr("__name__"))));
+    usage_type_error(std::string(name) + ": expected three numbers " + what + ", got a " +
+                     std::string(py::str(py::type::of(value).attr("__name__"))));
   }
 }
 
@@ -96,7 +106,7 @@ PointArgument point_argument(const py::object& lat, const py::object& lon, const
                              const char* message) {
   const bool geo = !lat.is_none() || !lon.is_none(), metres = !x.is_none() || !y.is_none();
   if (geo == metres || (geo && (lat.is_none() || lon.is_none())) || (metres && (x.is_none() || y.is_none()))) {
-    throw py::type_error(message);
+    usage_type_error(message);
   }
   return geo ? PointArgument{true, lat.cast<double>(), lon.cast<double>()}
              : PointArgument{false, x.cast<double>(), y.cast<double>()};
@@ -166,7 +176,7 @@ class PyCache {
         point_argument(lat, lon, x, y, "crop: give lat and lon (WGS84), or x and y (region CRS metres)");
     for (const auto& name : layers) {
       if (name != "classes" && name != "road_distance" && name != "road_prior") {
-        throw py::value_error("unknown layer '" + name + "' (classes, road_distance, road_prior)");
+        throw seqloc::UsageError("unknown layer '" + name + "' (classes, road_distance, road_prior)");
       }
     }
     raster::CropWindow w;
@@ -245,7 +255,7 @@ filter::FilterConfig config_from(const py::dict& d) {
   filter::FilterConfig c;
   if (d.contains("preset")) {
     const auto preset = d["preset"].cast<std::string>();
-    if (preset != "paper") throw py::value_error("preset '" + preset + "': the one preset is 'paper'");
+    if (preset != "paper") throw seqloc::UsageError("preset '" + preset + "': the one preset is 'paper'");
     c = filter::paper_config();
   }
   const auto fields = filter::filter_config_fields();
@@ -255,7 +265,7 @@ filter::FilterConfig config_from(const py::dict& d) {
     const py::handle value = item.second;
     const auto field = std::find_if(fields.begin(), fields.end(), [&](const auto& f) { return key == f.name; });
     if (field == fields.end())
-      throw py::key_error("unknown filter setting '" + key + "' (Filter.settings() lists them)");
+      raise_as(usage_key_error_class, "unknown filter setting '" + key + "' (Filter.settings() lists them)");
     std::visit([&](auto member) { c.*member = value.cast<std::remove_reference_t<decltype(c.*member)>>(); },
                field->member);
   }
@@ -291,7 +301,8 @@ py::array_t<float> marginal_array(const filter::BeliefVolume& belief) {
 filter::FrameVolume volume_view(const py::object& value, bool probabilities, double cell_m, py::array& holder) {
   const py::array volume = as_array(value, "log_volume");
   if (volume.ndim() != 3) {
-    throw py::value_error("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) + " dimensions");
+    throw seqloc::UsageError("log_volume: expected shape (H, W, N), got " + std::to_string(volume.ndim()) +
+                             " dimensions");
   }
   filter::FrameVolume view;
   if (py::isinstance<py::array_t<float>>(volume)) {
@@ -301,7 +312,8 @@ filter::FrameVolume volume_view(const py::object& value, bool probabilities, dou
     holder = py::array::ensure(volume, py::array::c_style);
     view.type = filter::VolumeType::float16;
   } else {
-    throw py::value_error("log_volume: expected float32 or float16, got dtype " + std::string(py::str(volume.dtype())));
+    throw seqloc::UsageError("log_volume: expected float32 or float16, got dtype " +
+                             std::string(py::str(volume.dtype())));
   }
   view.data = holder.data();
   view.values = probabilities ? filter::VolumeValues::prob : filter::VolumeValues::log_prob;
@@ -345,12 +357,12 @@ class PyFilter {
       distance = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(
           as_array(road_distance, "road_distance"));
       if (!distance || distance.ndim() != 2 || distance.shape(0) != c.height || distance.shape(1) != c.width) {
-        throw py::value_error("road_distance: expected a (" + std::to_string(c.height) + ", " +
-                              std::to_string(c.width) + ") float array, the window's size");
+        throw seqloc::UsageError("road_distance: expected a (" + std::to_string(c.height) + ", " +
+                                 std::to_string(c.width) + ") float array, the window's size");
       }
       distance_window = {distance.data(), static_cast<std::size_t>(distance.size())};
     } else if (c.mgr) {
-      throw py::value_error("road_distance: MGR is on and needs the window's road distance (or set mgr=False)");
+      throw seqloc::UsageError("road_distance: MGR is on and needs the window's road distance (or set mgr=False)");
     }
     filter::FrameResult r;
     {
@@ -421,7 +433,8 @@ class PyRoute {
   [[nodiscard]] RouteFrame frame(py::ssize_t i) const {
     const auto n = static_cast<py::ssize_t>(size());
     if (i < 0) i += n;
-    if (i < 0 || i >= n) throw py::index_error("frame index out of range (the route has " + std::to_string(n) + ")");
+    if (i < 0 || i >= n)
+      raise_as(usage_index_error_class, "frame index out of range (the route has " + std::to_string(n) + ")");
     return {route_, static_cast<std::size_t>(i)};
   }
   [[nodiscard]] std::vector<RouteFrame> frames() const {
@@ -512,10 +525,11 @@ class PyLocalizer {
   PyLocalizer(const std::string& cache, const py::dict& config, const std::string& mode, double volume_temperature,
               double recentre_margin, const std::optional<std::string>& calibration, int lag, const std::string& device)
       : cache_(std::make_unique<raster::CacheReader>(cache)) {
-    if (lag < 0) throw py::value_error("lag: must be >= 0 frames, got " + std::to_string(lag));
-    if (mode != "seqloc" && mode != "online") throw py::value_error("mode: 'seqloc' or 'online', got '" + mode + "'");
+    if (lag < 0) throw seqloc::UsageError("lag: must be >= 0 frames, got " + std::to_string(lag));
+    if (mode != "seqloc" && mode != "online")
+      throw seqloc::UsageError("mode: 'seqloc' or 'online', got '" + mode + "'");
     const auto where = pipeline::device_from_name(device);
-    if (!where) throw py::value_error("device: 'cpu', 'cuda' or 'cuda-host', got '" + device + "'");
+    if (!where) throw seqloc::UsageError("device: 'cpu', 'cuda' or 'cuda-host', got '" + device + "'");
     options_.filter = config_from(config);
     options_.volume_temperature = volume_temperature;
     options_.recentre_margin = recentre_margin;
@@ -670,6 +684,15 @@ void register_errors(py::module_& m) {
           .release();
   static const py::handle filter_error = make("FilterError", data, "A frame volume the filter cannot use.").release();
   static const py::handle request = make("RequestError", usage, "A crop that cannot be placed as asked.").release();
+  usage_type_error_class = make("UsageTypeError", py::make_tuple(usage, py::handle(PyExc_TypeError)),
+                                "An argument of a type seqloc cannot use.")
+                               .release();
+  usage_key_error_class = make("UsageKeyError", py::make_tuple(usage, py::handle(PyExc_KeyError)),
+                               "A name seqloc does not know (a filter setting, say).")
+                              .release();
+  usage_index_error_class =
+      make("UsageIndexError", py::make_tuple(usage, py::handle(PyExc_IndexError)), "An index outside what it indexes.")
+          .release();
   py::register_exception_translator([](std::exception_ptr p) {
     if (!p) return;
     try {
@@ -699,6 +722,15 @@ void register_errors(py::module_& m) {
           PyErr_SetString(internal.ptr(), e.what());
           break;
       }
+    } catch (const py::error_already_set&) {
+      throw;  // a Python exception already (ours, or Python's own)
+    } catch (const py::builtin_exception&) {
+      throw;  // pybind11's own (an argument that does not convert, StopIteration)
+    } catch (const std::bad_alloc&) {
+      throw;  // MemoryError
+    } catch (const std::exception& e) {
+      // Anything else escaping seqloc is a bug of ours, not a bare RuntimeError.
+      PyErr_SetString(internal.ptr(), e.what());
     }
   });
 }

@@ -99,7 +99,10 @@ class CacheCrop(unittest.TestCase):
         for cls, builtin in [(seqloc.UsageError, ValueError), (seqloc.DataError, ValueError),
                              (seqloc.IOError, OSError), (seqloc.InternalError, RuntimeError),
                              (seqloc.CacheError, OSError), (seqloc.FilterError, seqloc.DataError),
-                             (seqloc.RequestError, seqloc.UsageError)]:
+                             (seqloc.RequestError, seqloc.UsageError), (seqloc.UsageTypeError, TypeError),
+                             (seqloc.UsageTypeError, seqloc.UsageError), (seqloc.UsageKeyError, KeyError),
+                             (seqloc.UsageKeyError, seqloc.UsageError), (seqloc.UsageIndexError, IndexError),
+                             (seqloc.UsageIndexError, seqloc.UsageError)]:
             self.assertTrue(issubclass(cls, seqloc.Error), cls.__name__)
             self.assertTrue(issubclass(cls, builtin), cls.__name__)
             self.assertEqual(cls.__module__, "seqloc", cls.__name__)
@@ -427,6 +430,35 @@ class LocalizerAsLocalize(unittest.TestCase):
                 seqloc.Localizer(CACHE, calibration=calibration)
             with self.assertRaises(seqloc.DataError):  # the file's fault: its category's class
                 seqloc.Localizer(CACHE, calibration=calibration)
+
+    def test_every_misuse_is_a_seqloc_error_and_the_builtin_it_was(self):
+        # docs/python.md: every exception the module raises is a seqloc.Error; usage errors stay
+        # the built-in a handler catches for them (ValueError, TypeError, KeyError, IndexError).
+        cache = seqloc.Cache(CACHE)
+        lat, lon = cache.info.centre_lat, cache.info.centre_lon
+        f = seqloc.Filter({"width": 32, "height": 32, "headings": 8, "mgr": False})
+        loc = seqloc.Localizer(CACHE, {"width": 64, "height": 64, "headings": 16})
+        vol = np.zeros((9, 9, 16), np.float32)
+        with tempfile.TemporaryDirectory() as d:
+            route = seqloc.Route(LocalizerAsLocalize.write_route(d, frames=2)[0])
+            cases = [
+                ("mode", lambda: seqloc.Localizer(CACHE, mode="offline"), ValueError),
+                ("lag", lambda: seqloc.Localizer(CACHE, lag=-1), ValueError),
+                ("device", lambda: seqloc.Localizer(CACHE, device="tpu"), ValueError),
+                ("preset", lambda: seqloc.Filter({"preset": "fast"}), ValueError),
+                ("setting", lambda: seqloc.Filter({"widht": 32}), KeyError),
+                ("layer", lambda: cache.crop(lat, lon, 32.0, layers=["roads"]), ValueError),
+                ("both points", lambda: cache.crop(lat, lon, 32.0, x=1.0, y=2.0), TypeError),
+                ("not an array", lambda: f.step("not an array"), TypeError),
+                ("shape", lambda: f.step(np.zeros((9, 9), np.float32)), ValueError),
+                ("dtype", lambda: f.step(np.zeros((9, 9, 8), np.int32)), ValueError),
+                ("no crop", lambda: loc.step(vol), TypeError),
+                ("frame index", lambda: route[5], IndexError),
+            ]
+            for name, call, builtin in cases:
+                with self.assertRaises(builtin, msg=name) as raised:
+                    call()
+                self.assertIsInstance(raised.exception, seqloc.Error, name)
 
     def test_bad_arguments_are_short_errors(self):
         with self.assertRaises(ValueError):
