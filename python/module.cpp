@@ -121,6 +121,7 @@ struct Crop {
   double crop_x = 0, crop_y = 0, cell_m = raster::kCellM;
   py::tuple geotransform;
   std::string crs_wkt;
+  std::string cache_path;  ///< the cache it was cut from (Localizer.step(crop=) checks it)
 };
 
 /// What a cache holds (Cache.info).
@@ -243,6 +244,7 @@ class PyCache {
     out.crop_y = north - w.size * raster::kCellM / 2;
     out.geotransform = py::make_tuple(west, raster::kCellM, 0.0, north, 0.0, -raster::kCellM);
     out.crs_wkt = cache_->metadata().projection().wkt();
+    out.cache_path = std::filesystem::absolute(cache_->path()).lexically_normal().string();
     return out;
   }
 
@@ -540,9 +542,29 @@ class PyLocalizer {
                                                                  recentre_margin, lag, *where);
   }
 
+  /// A Cache.crop given as the frame's crop: its centre in region metres, so its north is grid
+  /// north, as the crop's own cells are; from this localizer's cache, and given alone.
+  [[nodiscard]] PointArgument crop_argument(const py::object& crop, const py::object& crop_lat,
+                                            const py::object& crop_lon, const py::object& crop_x,
+                                            const py::object& crop_y) const {
+    if (!crop_lat.is_none() || !crop_lon.is_none() || !crop_x.is_none() || !crop_y.is_none()) {
+      usage_type_error("step: give crop= or the crop's centre (crop_lat/crop_lon, crop_x/crop_y), not both");
+    }
+    if (!py::isinstance<Crop>(crop)) {
+      usage_type_error("crop: expected the seqloc.Crop that Cache.crop returns, got a " +
+                       std::string(py::str(py::type::of(crop).attr("__name__"))));
+    }
+    const auto& c = crop.cast<const Crop&>();
+    const auto mine = std::filesystem::absolute(cache_->path()).lexically_normal().string();
+    if (c.cache_path != mine) {
+      throw seqloc::UsageError("crop: cut from " + c.cache_path + ", not from this localizer's cache " + mine);
+    }
+    return {false, c.crop_x, c.crop_y};
+  }
+
   Pose step(const py::object& volume_in, const py::object& odometry_in, const py::object& crop_lat,
             const py::object& crop_lon, const py::object& crop_x, const py::object& crop_y, const py::object& gps,
-            bool probabilities, double cell_m) {
+            bool probabilities, double cell_m, const py::object& crop) {
     py::array holder;
     const filter::FrameVolume view = volume_view(volume_in, probabilities, cell_m, holder);
     const auto odometry = three_numbers(odometry_in, "odometry", "(forward_m, left_m, yaw_deg)");
@@ -552,8 +574,10 @@ class PyLocalizer {
     f.timestamp_s = static_cast<double>(stepped());
     f.odometry = {odometry[0], odometry[1], odometry[2]};
     const PointArgument centre =
-        point_argument(crop_lat, crop_lon, crop_x, crop_y,
-                       "step: give the crop's centre as crop_lat and crop_lon, or as crop_x and crop_y");
+        crop.is_none() ? point_argument(crop_lat, crop_lon, crop_x, crop_y,
+                                        "step: give crop= (a Cache.crop), or the crop's centre as crop_lat and "
+                                        "crop_lon, or as crop_x and crop_y")
+                       : crop_argument(crop, crop_lat, crop_lon, crop_x, crop_y);
     if (centre.geo) {
       f.crop_geo = seqloc::osm::GeoPoint{centre.a, centre.b};
     } else {
@@ -752,7 +776,8 @@ void bind_map_results(py::module_& m) {
       .def_readonly("crop_y", &Crop::crop_y, "The crop's centre, region CRS metres (north)")
       .def_readonly("cell_m", &Crop::cell_m, "Metres per cell")
       .def_readonly("geotransform", &Crop::geotransform, "GDAL's geotransform of the crop's cells")
-      .def_readonly("crs_wkt", &Crop::crs_wkt, "The region CRS as WKT");
+      .def_readonly("crs_wkt", &Crop::crs_wkt, "The region CRS as WKT")
+      .def_readonly("cache_path", &Crop::cache_path, "The cache it was cut from (absolute)");
   py::class_<CacheInfo>(m, "CacheInfo", "What a region cache holds (Cache.info)")
       .def_readonly("path", &CacheInfo::path)
       .def_readonly("source_file", &CacheInfo::source_file, "The .osm.pbf it was made from")
@@ -1064,11 +1089,13 @@ void bind_localizer(py::module_& m) {
       .def("step", &PyLocalizer::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
            py::kw_only(), py::arg("crop_lat") = py::none(), py::arg("crop_lon") = py::none(),
            py::arg("crop_x") = py::none(), py::arg("crop_y") = py::none(), py::arg("gps") = py::none(),
-           py::arg("probabilities") = false, py::arg("cell_m") = 0.5,
+           py::arg("probabilities") = false, py::arg("cell_m") = 0.5, py::arg("crop") = py::none(),
            "One frame: its (H, W, N) volume (NumPy, DLPack such as a CPU torch tensor, or __array__), the "
-           "odometry since the last frame (forward_m, left_m, yaw_deg), the crop's centre (crop_lat/crop_lon, "
-           "north-up at true north, or crop_x/crop_y in region metres, grid north), optionally gps=(lat, lon, "
-           "sigma_m). Returns the frame's filtered Pose (index and frame: its place from 0).")
+           "odometry since the last frame (forward_m, left_m, yaw_deg), and where the volume lies: crop= the "
+           "Cache.crop the backbone matched against (grid north, as its cells), or the crop's centre "
+           "(crop_lat/crop_lon, north-up at true north, or crop_x/crop_y in region metres, grid north); "
+           "optionally gps=(lat, lon, sigma_m). Returns the frame's filtered Pose (index and frame: its place "
+           "from 0).")
       .def("step_frame", &PyLocalizer::step_frame, py::arg("frame"),
            "One frame of a Route exactly as seqloc localize steps it: its volume file, crop, odometry and GPS "
            "fix. Returns the frame's filtered Pose, with its id, time and (given ground truth) errors.")

@@ -5,6 +5,7 @@ to a region cache."""
 import csv
 import math
 import os
+import shutil
 import subprocess
 import tempfile
 import unittest
@@ -308,6 +309,54 @@ class LocalizerAsLocalize(unittest.TestCase):
                 marginal = loc.belief_marginal()
                 self.assertEqual(marginal.shape, (96, 96))
                 self.assertAlmostEqual(float(marginal.sum()), 1.0, places=4)
+
+    def test_the_torch_loop_with_the_crop_object_near_the_region_edge(self):
+        # docs/python.md's loop: a volume made in the frame of the crop Cache.crop returns (grid
+        # north, as its cells), stepped with crop=crop, 150 m from the region's east edge where the
+        # meridian convergence is largest. The vehicle drives west along grid heading 270 (a bin
+        # centre), 4 m a frame; the poses must be the truth, the headings the compass heading 270
+        # minus the bearing of true north in the grid there. (Monaco's convergence is 0.014 degrees
+        # there: too small for the mix-up crop_lat/crop_lon would make to show in these poses. The
+        # test holds crop='s frame and its checks, not the size of the mix-up.)
+        try:
+            import torch
+            as_tensor = torch.from_numpy
+        except ImportError:
+            as_tensor = np.asarray
+        cache = seqloc.Cache(CACHE)
+        min_x, min_y, max_x, max_y = cache.info.extent
+        x0, y0 = max_x - 150.0, (min_y + max_y) / 2
+        lat, lon = cache.from_grid(x0, y0)
+        north = cache.to_grid(lat + 1e-3, lon)
+        true_north_bearing = math.degrees(math.atan2(north[0] - x0, north[1] - y0))
+        bins, grid_heading = 64, 270.0
+        loc = seqloc.Localizer(CACHE, {"width": 96, "height": 96, "headings": bins})
+        rng = np.random.default_rng(3)
+        for t in range(8):
+            x, y = x0 - 4.0 * t, y0
+            crop = cache.crop(x=x + rng.uniform(-3, 3), y=y + rng.uniform(-3, 3), size_m=32.0)
+            n = crop.classes.shape[0]
+            c = (np.arange(n) - (n - 1) / 2) * crop.cell_m
+            east = crop.crop_x + c[None, :] - x      # (v, u): metres east of the truth
+            south = y - (crop.crop_y - c[:, None])   # and south of it
+            k = np.arange(bins)
+            dk = np.minimum(np.abs(k - grid_heading * bins / 360), bins - np.abs(k - grid_heading * bins / 360))
+            volume = (-(east**2 + south**2)[:, :, None] / 2.0 - (dk**2)[None, None, :] / 2.0).astype(np.float32)
+            pose = loc.step(as_tensor(volume), (4.0 if t else 0.0, 0.0, 0.0), crop=crop)
+            self.assertLess(math.hypot(pose.x_m - x, pose.y_m - y), 0.5, f"frame {t}")
+            want = (grid_heading - true_north_bearing) % 360
+            self.assertAlmostEqual((pose.heading_deg - want + 180) % 360 - 180, 0.0, delta=0.01, msg=f"frame {t}")
+        self.assertNotEqual(true_north_bearing, 0.0)
+        # The crop is given alone, and from this localizer's cache.
+        with self.assertRaises(seqloc.UsageTypeError):
+            loc.step(volume, (4.0, 0.0, 0.0), crop=crop, crop_lat=lat, crop_lon=lon)
+        with self.assertRaises(seqloc.UsageTypeError):
+            loc.step(volume, (4.0, 0.0, 0.0), crop=(x, y))
+        with tempfile.TemporaryDirectory() as d:
+            other = os.path.join(d, "copy.gpkg")
+            shutil.copyfile(CACHE, other)
+            with self.assertRaisesRegex(seqloc.UsageError, "not from this localizer's cache"):
+                loc.step(volume, (4.0, 0.0, 0.0), crop=seqloc.Cache(other).crop(x=x, y=y, size_m=32.0))
 
     @unittest.skipUnless(SEQLOC, "SEQLOC_BINARY not set")
     def test_a_lagged_loop_gives_the_poses_of_seqloc_localize_with_that_lag(self):
