@@ -1,6 +1,7 @@
 // bench/filter: one full SeqLoc step (frame intake and normalization, predict, ETU, update, MGR,
-// PAS) for 128x128x256 and 256x256x256 windows with 1 and 2 threads, against a memcpy of the
-// belief volume measured in the same run. Prints ms/step, frames/s, step / memcpy, one JSON line.
+// PAS) for 128x128x256 and 256x256x256 windows with 1 and 2 threads, self-calibration off, on (the
+// one-step criterion, the default) and with its bank (--self-calibration-bank), against a memcpy of
+// the belief volume measured in the same run. Prints ms/step, frames/s, step / memcpy, one JSON line.
 
 #include <algorithm>
 #include <chrono>
@@ -25,7 +26,7 @@ double median(std::vector<double> v) {
 struct Row {
   int size;
   int threads;
-  bool calibrate;
+  bool calibrate, bank;
   double step_ms, memcpy_ms, intake_ms;
 };
 
@@ -43,12 +44,14 @@ int main() {
   std::vector<Row> rows;
   for (const int size : {128, 256}) {
     for (const int threads : {1, 2}) {
-      for (const bool calibrate : {false, true}) {
+      for (const int variant : {0, 1, 2}) {
+        const bool calibrate = variant > 0, bank = variant == 2;
         FilterConfig c;
         c.width = c.height = size;
         c.headings = 256;
         c.threads = threads;
         c.self_calibrate = calibrate;
+        c.self_calibration_bank = bank;
         seqloc::filter::SeqLocFilter filter(c);
         std::vector<float> road(static_cast<std::size_t>(size) * size);
         for (int v = 0; v < size; ++v)
@@ -60,8 +63,7 @@ int main() {
           const auto t0 = Clock::now();
           const auto frame = seqloc::filter::prepare_frame(view, c.headings, threads);
           intake_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-          const auto r =
-              filter.step(frame, {size / 2.0 + (i % 3), size / 2.0 - (i % 2), 0}, {3.7, 0.2, 4.3}, road);
+          const auto r = filter.step(frame, {size / 2.0 + (i % 3), size / 2.0 - (i % 2), 0}, {3.7, 0.2, 4.3}, road);
           step_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
           if (r.pose.u < -1e9) std::puts("");  // keep the result alive
         }
@@ -75,14 +77,18 @@ int main() {
           std::memcpy(copy.data(), b.data(), b.size() * sizeof(float));
           copy_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
         }
-        rows.push_back({size, threads, calibrate, median(step_ms), median(copy_ms), median(intake_ms)});
+        rows.push_back({size, threads, calibrate, bank, median(step_ms), median(copy_ms), median(intake_ms)});
         const Row& r = rows.back();
         std::printf(
             "%dx%dx256, %d thread%s, self-calibration %s: %.1f ms/step (volume intake %.1f ms), %.1f frames/s; memcpy "
             "of the belief "
             "(%.0f MB) %.2f ms; step / memcpy = %.1f\n",
-            size, size, threads, threads > 1 ? "s" : "", calibrate ? "on " : "off", r.step_ms, r.intake_ms,
-            1000.0 / r.step_ms, static_cast<double>(b.size()) * 4 / 1e6, r.memcpy_ms, r.step_ms / r.memcpy_ms);
+            size, size, threads, threads > 1 ? "s" : "",
+            bank        ? "bank"
+            : calibrate ? "on "
+                        : "off",
+            r.step_ms, r.intake_ms, 1000.0 / r.step_ms, static_cast<double>(b.size()) * 4 / 1e6, r.memcpy_ms,
+            r.step_ms / r.memcpy_ms);
       }
     }
   }
@@ -90,11 +96,13 @@ int main() {
   for (std::size_t i = 0; i < rows.size(); ++i) {
     char buffer[256];
     std::snprintf(buffer, sizeof buffer,
-                  "%s{\"window\": %d, \"threads\": %d, \"self_calibrate\": %s, \"ms_per_step\": %.2f, \"intake_ms\": "
+                  "%s{\"window\": %d, \"threads\": %d, \"self_calibrate\": %s, \"bank\": %s, \"ms_per_step\": %.2f, "
+                  "\"intake_ms\": "
                   "%.2f, \"frames_per_s\": %.2f, "
                   "\"memcpy_ms\": %.3f, \"step_over_memcpy\": %.2f}",
-                  i ? ", " : "", rows[i].size, rows[i].threads, rows[i].calibrate ? "true" : "false", rows[i].step_ms,
-                  rows[i].intake_ms, 1000.0 / rows[i].step_ms, rows[i].memcpy_ms, rows[i].step_ms / rows[i].memcpy_ms);
+                  i ? ", " : "", rows[i].size, rows[i].threads, rows[i].calibrate ? "true" : "false",
+                  rows[i].bank ? "true" : "false", rows[i].step_ms, rows[i].intake_ms, 1000.0 / rows[i].step_ms,
+                  rows[i].memcpy_ms, rows[i].step_ms / rows[i].memcpy_ms);
     json += buffer;
   }
   std::printf("%s]}\n", json.c_str());
