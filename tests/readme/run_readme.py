@@ -12,6 +12,7 @@ holds (one source for each figure).
 import os
 import pathlib
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -65,9 +66,18 @@ def main():
         # Debian's python3 first, as on the fresh Debian machine the README is written for (the
         # module is built for it; another interpreter earlier on PATH may lack NumPy).
         env = dict(os.environ, PATH="/usr/bin:" + os.environ.get("PATH", ""))
-        result = subprocess.run(["bash", "-c", script], cwd=work, env=env, timeout=1200)
-        if result.returncode != 0:
-            print(f"README.md: the blocks failed (exit {result.returncode}); the command is the last '+' line above")
+        # In a session of its own: a server a failing block started in the background is stopped
+        # with the rest (it would otherwise hold the port, and ctest's pipes, after the test).
+        process = subprocess.Popen(["bash", "-c", script], cwd=work, env=env, start_new_session=True)
+        try:
+            returncode = process.wait(timeout=1200)
+        finally:
+            try:
+                os.killpg(process.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        if returncode != 0:
+            print(f"README.md: the blocks failed (exit {returncode}); the command is the last '+' line above")
             return 1
     print("README.md runs as written")
     return 0 if ok else 1
