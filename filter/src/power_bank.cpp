@@ -74,8 +74,7 @@ void PowerBank::rebase(const BeliefVolume& belief) {
       }
     }
   });
-  double total = 0;
-  for (std::size_t i = 0; i < out.size(); ++i) total += out.data()[i];
+  const double total = out.total_probability();
   if (total > 0 && std::isfinite(total)) {
     const auto scale = static_cast<float>(1 / total);
     for (std::size_t i = 0; i < out.size(); ++i) out.data()[i] *= scale;

@@ -332,7 +332,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   // judges the frame on its own coarse windows after the step.
   const bool estimating = calibrating && !impl_->bank;
   FrameResult result = weigh(given, weighting, calibrating);
-  if (calibrating) retemper(impl_->bank ? false : impl_->estimator.held());
+  if (calibrating) retemper();
   const float outside = temper(given, result);
   const double total = multiply_in(given, crop, outside, gps, estimating);
   const Peak peak = normalize(total, road_distance_m);
@@ -407,7 +407,7 @@ float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result) {
   return static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
 }
 
-void SeqLocFilter::retemper(bool held) {
+void SeqLocFilter::retemper() {
   // The belief is raised to the ratio of the new power to the one the frames before went in at,
   // as if they had gone in at the new one (exact for a belief that is their product; motion and
   // MGR between them make it an approximation): an early lock at a power the route has since
@@ -423,6 +423,7 @@ void SeqLocFilter::retemper(bool held) {
     impl_->last_power = now;
   } else {
     const double now = impl_->estimator.power();
+    const bool held = impl_->estimator.held();
     if (held || !impl_->was_held) {
       impl_->last_power = now;
       return;

@@ -61,12 +61,13 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// a belief locked onto the wrong place makes every good frame look overconfident, and without
   /// it would drive the power down so that the frames could no longer correct it.
   double self_calibration_outlier_share = 0.1;
-  /// The one-step criterion's hold (self_calibration_bank off): the power stays exactly 1 while the posterior on it
-  /// keeps at least self_calibration_hold_share of its mass on powers from self_calibration_hold_below_octaves under 1
-  /// to self_calibration_hold_above_octaves over it; released, it follows the estimate for the rest of the route. A
-  /// calibrated backbone is then run as given, and a miscalibrated one is tempered once its frames show it. The band is
-  /// wider above: the estimate reads frames whose errors their neighbours share as sharper than they are. Chosen on
-  /// development routes (docs/filter.md, "Self-calibration").
+  /// The one-step criterion's hold (self_calibration_bank off): the power stays exactly 1 while
+  /// the posterior on it keeps at least self_calibration_hold_share of its mass on powers from
+  /// self_calibration_hold_below_octaves under 1 to self_calibration_hold_above_octaves over it;
+  /// released, it follows the estimate for the rest of the route. A calibrated backbone is then run
+  /// as given, and a miscalibrated one is tempered once its frames show it. The band is wider
+  /// above: the estimate reads frames whose errors their neighbours share as sharper than they
+  /// are. Chosen on development routes (docs/filter.md, "Self-calibration").
   double self_calibration_hold_below_octaves = 0.35;
   double self_calibration_hold_above_octaves = 0.75;
   double self_calibration_hold_share = 0.05;

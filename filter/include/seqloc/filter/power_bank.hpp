@@ -3,9 +3,9 @@
 //
 // A backbone's volumes may be overconfident (log-probabilities k times what they should be) or
 // timid (k < 1); the filter raises every frame to a power kappa to undo that. Which kappa? Each
-// member of the bank runs the whole SeqLoc recursion (motion, the frame raised to its own kappa,
-// MGR) on a coarse copy of the window, and scores every frame by its one-step predictive
-// likelihood under that member's own predicted belief:
+// member of the bank runs the likelihood recursion (motion, and the frame raised to its own kappa)
+// on a coarse copy of the window, and scores every frame by its one-step predictive likelihood
+// under that member's own predicted belief:
 //
 //   P_t(kappa) = sum_x b_hat_t^kappa(x) L_t^kappa(x),   S_t(kappa) = sum_{s <= t} log P_s(kappa),
 //
@@ -16,9 +16,11 @@
 // timid pays at every frame it could have predicted. The members have no MGR: its blend with the
 // road prior is a forgetting that lets a belief follow errors that drift slowly along the road, so
 // that frames too sharp never disagree with it; without it, frames far apart on the route must
-// agree through the motion alone, and those that claim more than they know are found out. Frame t is filtered with the
-// power the scores of frames before t favour (causal), refined by a parabola through the best member and its neighbours
-// in log2 kappa; with a Gaussian prior on log2 kappa around 0.
+// agree through the motion alone, and those that claim more than they know are found out.
+//
+// Frame t is filtered with the power the scores of frames before t favour (causal), refined by a
+// parabola through the best member and its neighbours in log2 kappa; with a Gaussian prior on
+// log2 kappa around 0.
 //
 // Each P_t is mixed with a small share of the same for a uniform belief (outlier_share), so that
 // one frame unlike every other (a distinctive wrong frame) cannot decide the vote alone.

@@ -195,7 +195,7 @@ class SeqLocFilter {
   // normalization and MGR's blend with the road prior, and the largest cell (normalize); PAS and
   // the sub-bin heading around it (refine).
   FrameResult weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating);
-  void retemper(bool held);
+  void retemper();
   void retemper_by(float ratio);
   float temper(const PreparedFrame& frame, FrameResult& result);
   double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
