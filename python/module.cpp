@@ -164,10 +164,16 @@ Pose make_pose(long index, const pipeline::FrameEstimate& e, const io::RouteFram
 
 std::optional<double> known(bool is, double value) { return is ? std::optional<double>(value) : std::nullopt; }
 
+/// A cache's path as Crop.cache_path holds it and Localizer.step(crop=) compares it: absolute and
+/// normalized, computed once per opened cache.
+std::string cache_identity(const raster::CacheReader& cache) {
+  return std::filesystem::absolute(cache.path()).lexically_normal().string();
+}
+
 class PyCache {
  public:
   PyCache(const std::string& path, std::size_t lru_tiles)
-      : cache_(std::make_unique<raster::CacheReader>(path, lru_tiles)) {}
+      : cache_(std::make_unique<raster::CacheReader>(path, lru_tiles)), identity_(cache_identity(*cache_)) {}
 
   /// The layers asked for ((H, W, 3) uint8 classes, (H, W) float32 road distance in metres and
   /// road prior) and the crop's georeference.
@@ -244,11 +250,12 @@ class PyCache {
     out.crop_y = north - w.size * raster::kCellM / 2;
     out.geotransform = py::make_tuple(west, raster::kCellM, 0.0, north, 0.0, -raster::kCellM);
     out.crs_wkt = cache_->metadata().projection().wkt();
-    out.cache_path = std::filesystem::absolute(cache_->path()).lexically_normal().string();
+    out.cache_path = identity_;
     return out;
   }
 
   std::unique_ptr<raster::CacheReader> cache_;
+  std::string identity_;  ///< cache_identity(*cache_)
 };
 
 // The filter's settings by name, from filter::filter_config_fields (the one list of them).
@@ -526,7 +533,7 @@ class PyLocalizer {
  public:
   PyLocalizer(const std::string& cache, const py::dict& config, const std::string& mode, double volume_temperature,
               double recentre_margin, const std::optional<std::string>& calibration, int lag, const std::string& device)
-      : cache_(std::make_unique<raster::CacheReader>(cache)) {
+      : cache_(std::make_unique<raster::CacheReader>(cache)), identity_(cache_identity(*cache_)) {
     if (lag < 0) throw seqloc::UsageError("lag: must be >= 0 frames, got " + std::to_string(lag));
     if (mode != "seqloc" && mode != "online")
       throw seqloc::UsageError("mode: 'seqloc' or 'online', got '" + mode + "'");
@@ -555,9 +562,8 @@ class PyLocalizer {
                        std::string(py::str(py::type::of(crop).attr("__name__"))));
     }
     const auto& c = crop.cast<const Crop&>();
-    const auto mine = std::filesystem::absolute(cache_->path()).lexically_normal().string();
-    if (c.cache_path != mine) {
-      throw seqloc::UsageError("crop: cut from " + c.cache_path + ", not from this localizer's cache " + mine);
+    if (c.cache_path != identity_) {
+      throw seqloc::UsageError("crop: cut from " + c.cache_path + ", not from this localizer's cache " + identity_);
     }
     return {false, c.crop_x, c.crop_y};
   }
@@ -669,6 +675,7 @@ class PyLocalizer {
   }
 
   std::unique_ptr<raster::CacheReader> cache_;
+  std::string identity_;  ///< cache_identity(*cache_)
   pipeline::LocalizeOptions options_;
   std::unique_ptr<pipeline::SequentialLocalizer> localizer_;
   std::deque<io::RouteFrame> frames_;  ///< the frames stepped and not yet final, from frame taken_ on
