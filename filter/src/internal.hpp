@@ -24,6 +24,9 @@ using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 /// buffer a block at a time, so that which elements take Eigen's scalar path (a block's last
 /// n % 8) depends on n alone, never on where out lies: results do not change with the heap or the
 /// number of threads as long as callers cut the same n.
+/// Values below the smallest normal float (1.2e-38 of the maximum) are 0 too: arithmetic on
+/// subnormals takes a hundred cycles a value on x86, and a steep frame holds a band of them around
+/// its support, which made every later pass over the frame and the belief up to seven times slower.
 inline void exp_or_zero(const float* x, std::size_t n, float scale, float shift, float* out) {
   constexpr std::size_t kBlock = 1024;
   Eigen::Array<float, static_cast<Eigen::Index>(kBlock), 1> y;
@@ -32,7 +35,10 @@ inline void exp_or_zero(const float* x, std::size_t n, float scale, float shift,
     const float* in = x + start;
     y.head(static_cast<Eigen::Index>(len)) =
         (scale * (Eigen::Map<const Eigen::ArrayXf>(in, static_cast<Eigen::Index>(len)) - shift)).exp();
-    for (std::size_t i = 0; i < len; ++i) out[start + i] = in[i] > kLogZero ? y[static_cast<Eigen::Index>(i)] : 0.0f;
+    for (std::size_t i = 0; i < len; ++i) {
+      const float e = y[static_cast<Eigen::Index>(i)];
+      out[start + i] = in[i] > kLogZero && e >= math::kSmallestNormal ? e : 0.0f;
+    }
   }
 }
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include <Eigen/Core>
 
@@ -17,6 +18,30 @@ namespace {
 
 using core::kCellM;
 using core::kDegToRad;
+
+// The columns of window row v whose cells may fall inside the frame under `map`, widened by a cell
+// on each side: every cell outside [lo, hi] is outside the frame, whatever the rounding, so the
+// exact sampler need only see the cells within (an empty range has hi < lo).
+std::pair<int, int> inside_columns(const math::CropMap& m, int v, int width) {
+  // x and y of math::crop_sample_at are affine in u: x = x0 + dx * u, y = y0 + dy * u.
+  const double dv = v - m.centre_v;
+  const double x0 = (m.vw - 1) / 2.0 + m.scale * (-m.centre_u * m.cos_r + dv * m.sin_r), dx = m.scale * m.cos_r;
+  const double y0 = (m.vh - 1) / 2.0 + m.scale * (m.centre_u * m.sin_r + dv * m.cos_r), dy = -m.scale * m.sin_r;
+  double lo = 0, hi = width - 1;
+  const auto within = [&](double at0, double slope, double extent) {
+    if (std::abs(slope) < 1e-12) {
+      if (at0 < -1 || at0 > extent + 1) hi = lo - 1;  // the whole row is outside
+      return;
+    }
+    const double a = (0 - at0) / slope, b = (extent - at0) / slope;
+    lo = std::max(lo, std::min(a, b));
+    hi = std::min(hi, std::max(a, b));
+  };
+  within(x0, dx, m.vw - 1);
+  within(y0, dy, m.vh - 1);
+  if (hi < lo) return {0, -1};
+  return {static_cast<int>(std::floor(lo)) - 1, std::min(static_cast<int>(std::ceil(hi)) + 1, width - 1)};
+}
 
 }  // namespace
 
@@ -78,8 +103,11 @@ void detail::sample_slice(const float* values, int bins, int vh, int vw, double 
   const math::CropMap map{crop.centre_u, crop.centre_v, std::cos(r), std::sin(r), scale, vw, vh};
   const auto read = [blended](std::size_t i) { return blended[i]; };
   for (int v = 0; v < height; ++v) {
-    for (int u = 0; u < width; ++u)
-      out[static_cast<std::size_t>(v) * width + u] = math::crop_sample_at(map, u, v, fill, read);
+    float* row = out + static_cast<std::size_t>(v) * width;
+    const auto [u_lo, u_hi] = inside_columns(map, v, width);
+    std::fill(row, row + std::max(u_lo, 0), fill);
+    for (int u = std::max(u_lo, 0); u <= u_hi; ++u) row[u] = math::crop_sample_at(map, u, v, fill, read);
+    std::fill(row + std::max(u_hi + 1, 0), row + width, fill);
   }
 }
 

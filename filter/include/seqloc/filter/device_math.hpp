@@ -21,9 +21,14 @@ namespace seqloc::filter::math {
 /// log(0) inside the filter (seqloc_filter.hpp's kLogZero, repeated here for device code).
 inline constexpr float kLogZeroValue = -1e30f;
 
-/// exp(scale * (x - shift)) where x > log(0), exactly 0 where x is log(0) or -inf.
+/// The smallest normal float (FLT_MIN, spelt out for device code).
+inline constexpr float kSmallestNormal = 1.17549435e-38f;
+
+/// exp(scale * (x - shift)) where x > log(0), exactly 0 where x is log(0) or -inf, and 0 where the
+/// result would be subnormal (the host's detail::exp_or_zero says why).
 SEQLOC_HD inline float exp_or_zero(float x, float scale, float shift) {
-  return x > kLogZeroValue ? ::expf(scale * (x - shift)) : 0.0f;
+  const float e = x > kLogZeroValue ? ::expf(scale * (x - shift)) : 0.0f;
+  return e >= kSmallestNormal ? e : 0.0f;
 }
 
 /// The window displacement (cells, u east / v south, `cell_m` metres a cell) of a move of
