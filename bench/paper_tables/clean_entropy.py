@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Appends the clean-observation entropy table to the paper_tables report.
+"""Appends the clean-observation entropy table to the paper_tables report, and its figures to the
+run's results.json beside it (key "clean_entropy").
 
 Reads OUT/<region>/<route>/single/poses.csv written by `seqloc localize --mode single` on routes
 simulated with --clean, and prints (and appends to REPORT) per region: frames, mean normalized
@@ -7,6 +8,7 @@ entropy, median normalized entropy, single-frame R@5m.
 usage: clean_entropy.py REPORT LOCALIZED_DIR REGION...
 """
 import csv
+import json
 import pathlib
 import sys
 
@@ -22,6 +24,7 @@ def main():
         "| region | frames | mean entropy | median entropy | single-frame R@5m |",
         "|---|---:|---:|---:|---:|",
     ]
+    figures = {}
     for region in regions:
         entropy, hits = [], 0
         for poses in sorted((localized / region).glob("*/single/poses.csv")):
@@ -34,6 +37,11 @@ def main():
             raise SystemExit(f"{localized / region}: no poses.csv found")
         median = sorted(entropy)[n // 2]
         lines.append(f"| {region} | {n} | {sum(entropy) / n:.3f} | {median:.3f} | {100 * hits / n:.1f} |")
+        figures[region] = {"frames": n, "mean": sum(entropy) / n, "median": median, "single_r5m": 100 * hits / n}
+    results_path = report.parent / "results.json"
+    results = json.loads(results_path.read_text())
+    results["clean_entropy"] = figures
+    results_path.write_text(json.dumps(results, indent=2) + "\n")
     text = "\n".join(lines) + "\n"
     with open(report, "a") as f:
         f.write(text)

@@ -268,7 +268,7 @@ int main(int argc, char** argv) {
   std::map<std::string, std::vector<pipeline::VolumeShape>> shapes;
   const auto start = Clock::now();
   double matcher_seconds = 0;
-  std::size_t frames_matched = 0;
+  std::size_t frames_matched = 0, routes_per_region = 0;
 
   for (const auto& [region, group] : regions) {
     raster::CacheReader cache(work / (region + ".gpkg"), 512);
@@ -277,6 +277,7 @@ int main(int argc, char** argv) {
       if (e.is_directory()) dirs.push_back(e.path());
     }
     std::sort(dirs.begin(), dirs.end());
+    routes_per_region = dirs.size();
     for (const auto& dir : dirs) {
       const io::Route route = io::read_route(dir);
       pipeline::LocalizeOptions options;
@@ -378,16 +379,22 @@ int main(int argc, char** argv) {
       }
       for (const auto& c : all) {
         if (c.table == table) md << row(c.name, metrics(c.name, group));
-        if (c.table == table || (table == "ablation" && c.name == "SeqLoc")) {
-          const auto m = metrics(c.name, group);
-          results[group][c.name] = {{"frames", m.frames},
-                                    {"position_recall", {m.position_recall[0], m.position_recall[1], m.position_recall[2]}},
-                                    {"heading_recall", {m.heading_recall[0], m.heading_recall[1], m.heading_recall[2]}},
-                                    {"mean_position_error_m", m.mean_position_error_m},
-                                    {"mean_heading_error_deg", m.mean_heading_error_deg}};
-        }
       }
       if (table == "ablation") md << row("+MGR+ETU+PAS (SeqLoc)", metrics("SeqLoc", group));
+    }
+  }
+  // Every configuration's metrics in every column (the groups, then the regions): the source
+  // docs/paper-tables.md's tables are written from (bench/paper_tables/write_doc.py).
+  for (const auto& c : all) {
+    for (const std::string column : {"feature-sparse", "urban", "andorra", "north-bayreuth", "monaco"}) {
+      const auto m = metrics(c.name, column);
+      results["metrics"][column][c.name] = {
+          {"table", c.table},
+          {"frames", m.frames},
+          {"position_recall", {m.position_recall[0], m.position_recall[1], m.position_recall[2]}},
+          {"heading_recall", {m.heading_recall[0], m.heading_recall[1], m.heading_recall[2]}},
+          {"mean_position_error_m", m.mean_position_error_m},
+          {"mean_heading_error_deg", m.mean_heading_error_deg}};
     }
   }
   md << "\n## Per region (overall, tempered, smoothing)\n\n" << kHeader;
@@ -507,6 +514,14 @@ int main(int argc, char** argv) {
   md << "\nRun time " << static_cast<int>(seconds) << " s; the matcher took " << static_cast<int>(matcher_seconds)
      << " s for " << frames_matched << " frames.\n";
   std::ofstream(out / "report.md") << md.str();
+  std::vector<std::string> tables_run;
+  for (const auto& c : all) {
+    if (std::find(tables_run.begin(), tables_run.end(), c.table) == tables_run.end()) tables_run.push_back(c.table);
+  }
+  results["run"] = {{"window", window},          {"threads", threads},
+                    {"tables", tables_run},      {"routes_per_region", routes_per_region},
+                    {"frames", frames_matched},  {"seconds", std::round(seconds)},
+                    {"matcher_seconds", std::round(matcher_seconds)}};
   std::ofstream(out / "results.json") << results.dump(2) << "\n";
   std::fputs(md.str().c_str(), stdout);
   // The closing line holds the figures of the configurations that ran (a table left out by
