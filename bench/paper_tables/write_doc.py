@@ -27,6 +27,16 @@ KS = [0.25, 0.5, 1, 2, 4, 8]
 NOISE = ["good (1%, 0.005 deg/m)", "medium (2%, 0.010 deg/m)", "poor (5%, 0.020 deg/m)", "very poor (10%, 0.050 deg/m)"]
 
 
+def row(*cells):
+    """A Markdown table row."""
+    return "| " + " | ".join(cells) + " |"
+
+
+def header(*names, left=1):
+    """A Markdown table's header and alignment rows: the first `left` columns left-aligned, the rest right."""
+    return row(*names), "|" + "---|" * left + "---:|" * (len(names) - left)
+
+
 def tempered(name, k):
     return name if k == 1 and name == "SeqLoc" else f"{name}, k = {k:g}"
 
@@ -71,7 +81,7 @@ class Page:
 
     def columns_header(self, first, unit=""):
         sizes = [f"{c} ({self.frames(c)})" if i < 2 else c for i, c in enumerate(COLUMNS)]
-        self.out(f"| {first} | " + " | ".join(sizes) + " |", "|---|" + "---:|" * len(COLUMNS))
+        self.out(*header(first, *sizes))
 
     def overall(self):
         self.out("### Overall (table 1)", "")
@@ -85,7 +95,7 @@ class Page:
             if not self.has(config):
                 continue
             cells = [f"{self.r5(config, c):.1f} ({self.r1(config, c):.1f})" for c in COLUMNS]
-            self.out(f"| {label} | " + " | ".join(cells) + " |")
+            self.out(row(label, *cells))
         self.out("")
 
     def tempered(self):
@@ -94,22 +104,22 @@ class Page:
         self.out("### Backbones out of calibration (table 5)", "",
                  "The matcher's volumes tempered by k (k log p, renormalized; k > 1 is an overconfident backbone), "
                  "SeqLoc with self-calibration / without it, R@5m:", "")
-        self.out("| k | " + " | ".join(COLUMNS) + " |", "|---:|" + "---:|" * len(COLUMNS))
+        self.out(*header("k", *COLUMNS, left=0))
         for k in KS:
             on, off = tempered("SeqLoc", k), tempered("SeqLoc without self-calibration", k)
             cells = [f"{self.r5(on, c):.1f} / {self.r5(off, c):.1f}" for c in COLUMNS]
-            self.out(f"| {k:g} | " + " | ".join(cells) + " |")
+            self.out(row(f"{k:g}", *cells))
         self.out("")
         naive, paper = tempered("online (naive recursion)", 4), tempered("SeqLoc, paper's configuration", 4)
         self.out(f"At k = 4 the naive recursion gives {self.r5(naive, 'feature-sparse'):.1f} feature-sparse "
                  f"({self.r5(naive, 'urban'):.1f} urban) and the paper's configuration "
                  f"{self.r5(paper, 'feature-sparse'):.1f} ({self.r5(paper, 'urban'):.1f}).", "")
         self.out("Self-calibration's power at each route's last frame (median over the routes) against 1 / k:", "")
-        self.out("| k | 1 / k | " + " | ".join(COLUMNS) + " |", "|---:|---:|" + "---:|" * len(COLUMNS))
+        self.out(*header("k", "1 / k", *COLUMNS, left=0))
         powers = self.r["self_calibration"]
         for k in KS:
             key = f"{k:.6f}"
-            self.out(f"| {k:g} | {1 / k:.3f} | " + " | ".join(f"{powers[c][key]:.3f}" for c in COLUMNS) + " |")
+            self.out(row(f"{k:g}", f"{1 / k:.3f}", *(f"{powers[c][key]:.3f}" for c in COLUMNS)))
         self.out("")
 
     def smoothing(self):
@@ -122,7 +132,7 @@ class Page:
         rows.append((SMOOTH, "**smooth**"))
         for config, label in rows:
             cells = [f"{self.r5(config, c):.1f} ({self.metric(config, c)['mean_position_error_m']:.2f})" for c in COLUMNS]
-            self.out(f"| {label} | " + " | ".join(cells) + " |")
+            self.out(row(label, *cells))
         self.out("")
 
     def uncertainty(self):
@@ -132,14 +142,14 @@ class Page:
                  "Coverage: the share of frames whose truth lies inside the reported 95 % ellipse (target 95). "
                  "ECE: the reported mass within 5 m, binned by tenths, against the share of frames truly within 5 m, "
                  "averaged over frames (points; target at most 5).", "")
-        self.out("| configuration | feature-sparse: coverage | ECE | urban: coverage | ECE |", "|---|---:|---:|---:|---:|")
+        self.out(*header("configuration", "feature-sparse: coverage", "ECE", "urban: coverage", "ECE"))
         u = self.r["uncertainty"]
         for name in u["feature-sparse"]:
             cells = []
             for group in ("feature-sparse", "urban"):
                 c = u[group].get(name)
                 cells += [f"{c['coverage_95_pct']:.1f}", f"{c['mass_5m_ece_pts']:.1f}"] if c else ["", ""]
-            self.out(f"| {name} | " + " | ".join(cells) + " |")
+            self.out(row(name, *cells))
         self.out("", "![Reported mass within 5 m against the share of frames truly within 5 m (SeqLoc and smooth, "
                      "both groups)](img/reliability_mass_5m.png)", "")
 
@@ -147,59 +157,59 @@ class Page:
         if not self.has("+MGR"):
             return
         self.out("### Ablation (table 2)", "", "R@1m / R@3m / R@5m, mean position error (m):", "")
-        self.out("| configuration | feature-sparse | mean m | urban | mean m |", "|---|---:|---:|---:|---:|")
+        self.out(*header("configuration", "feature-sparse", "mean m", "urban", "mean m"))
         for config, label in [("online (naive recursion)", "naive recursion"), ("+MGR", "+MGR"),
                               ("+MGR+ETU", "+MGR+ETU"), ("SeqLoc", "+MGR+ETU+PAS (SeqLoc)")]:
             cells = []
             for group in ("feature-sparse", "urban"):
                 m = self.metric(config, group)
                 cells += ["{:.1f} / {:.1f} / {:.1f}".format(*m["position_recall"]), f"{m['mean_position_error_m']:.2f}"]
-            self.out(f"| {label} | " + " | ".join(cells) + " |")
+            self.out(row(label, *cells))
         self.out("")
 
     def settings(self):
         if not self.has("eps = 0.02"):
             return
         self.out("### MGR's eps and PAS's radius (table 3)", "", "R@5m (R@1m), %:", "")
-        self.out("| setting | feature-sparse | urban |", "|---|---:|---:|")
+        self.out(*header("setting", "feature-sparse", "urban"))
         rows = [("SeqLoc", "eps 0.01, r = 3 (the defaults)")]
         rows += [(f"eps = {e:.2f}", f"eps {e:.2f}") for e in (0.02, 0.03, 0.04, 0.05)]
         rows += [(f"r = {r}", f"PAS r = {r}") for r in (1, 5, 10)]
         for config, label in rows:
             cells = [f"{self.r5(config, g):.1f} ({self.r1(config, g):.1f})" for g in ("feature-sparse", "urban")]
-            self.out(f"| {label} | " + " | ".join(cells) + " |")
+            self.out(row(label, *cells))
         self.out("")
 
     def noise(self):
         if not self.has(NOISE[0]):
             return
         self.out("### Odometry noise (table 4)", "", "SeqLoc, R@5m (R@1m), %:", "")
-        self.out("| odometry | feature-sparse | urban |", "|---|---:|---:|")
+        self.out(*header("odometry", "feature-sparse", "urban"))
         for config in ["SeqLoc"] + NOISE:
             label = "exact" if config == "SeqLoc" else config.replace(" deg/m", " °/m")
             cells = [f"{self.r5(config, g):.1f} ({self.r1(config, g):.1f})" for g in ("feature-sparse", "urban")]
-            self.out(f"| {label} | " + " | ".join(cells) + " |")
+            self.out(row(label, *cells))
         self.out("")
 
     def extras(self):
         if not self.has("+sub-bin heading"):
             return
         self.out("### Beyond the paper (table 6)", "", "R@5m / R@1m / heading R@1°, %:", "")
-        self.out("| configuration | feature-sparse | urban |", "|---|---:|---:|")
+        self.out(*header("configuration", "feature-sparse", "urban"))
         for config in ["SeqLoc", "+sub-bin heading", "+motion noise", "+GPS term (first frame's fix)"]:
             cells = []
             for g in ("feature-sparse", "urban"):
                 m = self.metric(config, g)
                 cells.append(f"{m['position_recall'][2]:.1f} / {m['position_recall'][0]:.1f} / {m['heading_recall'][0]:.1f}")
-            self.out(f"| {config} | " + " | ".join(cells) + " |")
+            self.out(row(config, *cells))
         self.out("")
 
     def entropy(self):
         if "entropy" not in self.r:
             return
         self.out("### Does entropy predict error? (table 7, single frames)", "")
-        self.out("| region | median entropy | R@5m, flattest third | middle third | sharpest third | "
-                 "Spearman(entropy, error) |", "|---|---:|---:|---:|---:|---:|")
+        self.out(*header("region", "median entropy", "R@5m, flattest third", "middle third", "sharpest third",
+                        "Spearman(entropy, error)"))
         for region, _ in REGIONS:
             e = self.r["entropy"][region]
             sharpest, middle, flattest = e["r5m_by_tercile_sharpest_first"]
@@ -209,7 +219,7 @@ class Page:
         self.out(*[f"![{region}](img/entropy_scatter_{region}.png)" for region, _ in REGIONS], "")
         if "clean_entropy" in self.r:
             self.out("Clean observations (routes simulated with `--clean`: what the scenes alone leave ambiguous):", "")
-            self.out("| region | frames | median entropy | single-frame R@5m |", "|---|---:|---:|---:|")
+            self.out(*header("region", "frames", "median entropy", "single-frame R@5m"))
             for region, _ in REGIONS:
                 c = self.r["clean_entropy"][region]
                 self.out(f"| {region} | {c['frames']} | {c['median']:.3f} | {c['single_r5m']:.1f} |")
@@ -219,8 +229,8 @@ class Page:
         if "shape" not in self.r:
             return
         self.out("### Ridge or peak (table 8, `pipeline::volume_shape`)", "")
-        self.out("| region | median elongation | ridges along the heading (elongation >= 2, +-30°) | "
-                 "elongated across (>= 60°) |", "|---|---:|---:|---:|")
+        self.out(*header("region", "median elongation", "ridges along the heading (elongation >= 2, +-30°)",
+                        "elongated across (>= 60°)"))
         for region, group in REGIONS:
             s = self.r["shape"][region]
             self.out(f"| {region} ({group}) | {s['median_elongation']:.2f} | {100 * s['ridge_share']:.1f} % | "
