@@ -54,6 +54,12 @@ function(seqloc_module name)
   target_include_directories(seqloc_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include
                                             PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
   target_link_libraries(seqloc_${name} PUBLIC ${ARG_PUBLIC} PRIVATE ${ARG_PRIVATE} seqloc_compile_options)
+  # Unity builds: files of a library compiled eight to a translation unit, so that the headers they
+  # share (Eigen, libosmium, GDAL, the JSON library) are parsed and their inline functions compiled
+  # once per batch; a third less build time, more under the sanitizers. A file that cannot share a
+  # unit (GCC's -Wsubobject-linkage takes a class of one file holding a type from its anonymous
+  # namespace for a header's) is marked SKIP_UNITY_BUILD_INCLUSION beside its library.
+  set_target_properties(seqloc_${name} PROPERTIES UNITY_BUILD ON UNITY_BUILD_BATCH_SIZE 8)
   # A public header compiles on its own: one translation unit per header checks it.
   file(GLOB_RECURSE headers CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/include/*.hpp)
   set(checks)
