@@ -20,7 +20,7 @@
 #include "seqloc/raster/cache.hpp"
 #include "support/test_support.hpp"
 
-namespace seqloc::ingest {
+namespace seqloc::ingest::change_footprint_tests {
 namespace {
 
 constexpr double kLat0 = 47.5, kLon0 = 10.5;
@@ -238,4 +238,4 @@ TEST(UpdateRefusal, AWrongBaseOrABadChangeFileLeavesTheCacheAsItWas) {
 }
 
 }  // namespace
-}  // namespace seqloc::ingest
+}  // namespace seqloc::ingest::change_footprint_tests

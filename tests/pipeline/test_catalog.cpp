@@ -16,7 +16,7 @@
 #include "seqloc/pipeline/sequential_localizer.hpp"
 #include "support/test_support.hpp"
 
-namespace seqloc::pipeline {
+namespace seqloc::pipeline::catalog_tests {
 namespace {
 
 constexpr double kLat0 = 47.5, kLon0 = 10.5;
@@ -347,4 +347,4 @@ TEST(RegionCatalog, CropsOutsideEveryRegionAreNamed) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc::pipeline::catalog_tests

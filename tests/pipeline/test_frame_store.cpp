@@ -17,7 +17,7 @@
 #include "seqloc/pipeline/frame_store.hpp"
 #include "support/test_support.hpp"
 
-namespace seqloc::pipeline {
+namespace seqloc::pipeline::frame_store_tests {
 namespace {
 
 constexpr int kH = 6, kW = 7, kBins = 8;
@@ -169,4 +169,4 @@ TEST(FrameStore, AnErrorReachesEveryReaderOfThatFrameAndNoOther) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc::pipeline::frame_store_tests

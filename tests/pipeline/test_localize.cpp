@@ -19,7 +19,7 @@
 #include "seqloc/pipeline/region_window.hpp"
 #include "support/test_support.hpp"
 
-namespace seqloc::pipeline {
+namespace seqloc::pipeline::localize_tests {
 namespace {
 
 constexpr int kSide = 15, kBins = 64;  // volumes: odd side, so the centre cell is the crop centre
@@ -269,9 +269,9 @@ TEST(Metrics, RecallsMeansMediansAndBodyFrameErrors) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc::pipeline::localize_tests
 
-namespace seqloc::pipeline {
+namespace seqloc::pipeline::localize_tests {
 namespace {
 
 // Ridge-shaped volumes along a straight road (the paper's failure case of single frames): every
@@ -414,9 +414,9 @@ TEST(Smooth, FixedLagAgreesWithSmoothAndLagZeroWithTheFilter) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc::pipeline::localize_tests
 
-namespace seqloc::pipeline {
+namespace seqloc::pipeline::localize_tests {
 namespace {
 
 TEST(Localize, MemoryStaysConstantAlongA20KmRoute) {
@@ -666,4 +666,4 @@ TEST(FramePrefetcher, GivesEachFrameOnceInOrderAndRethrowsItsError) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc::pipeline::localize_tests

@@ -5,7 +5,7 @@
 
 #include "seqloc/pipeline/volume_shape.hpp"
 
-namespace seqloc::pipeline {
+namespace seqloc::pipeline::volume_shape_tests {
 namespace {
 
 // A prob volume (H, W, N): a Gaussian in the plane, sigma_major along the axis at `axis_deg`
@@ -53,4 +53,4 @@ TEST(VolumeShape, ARidgeIsLongAlongItsAxisAndAPeakIsRound) {
 }
 
 }  // namespace
-}  // namespace seqloc::pipeline
+}  // namespace seqloc::pipeline::volume_shape_tests
