@@ -1,5 +1,7 @@
 // Self-calibration's evidence on the coarse grid (internal.hpp).
 
+#include "seqloc/filter/calibration_evidence.hpp"
+
 #include <algorithm>
 #include <vector>
 

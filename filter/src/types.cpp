@@ -21,7 +21,8 @@ float half_to_float(std::uint16_t h) {
 
 std::uint16_t float_to_half(float f) {
 #if defined(__F16C__)
-  return _cvtss_sh(f, _MM_FROUND_TO_NEAREST_INT);  // ties to even, overflow to infinity
+  // Ties to even, overflow to infinity. (Not _cvtss_sh: clang's macro is a C99 compound literal.)
+  return static_cast<std::uint16_t>(_mm_extract_epi16(_mm_cvtps_ph(_mm_set_ss(f), _MM_FROUND_TO_NEAREST_INT), 0));
 #else
   return detail::float_to_half_portable(f);
 #endif
