@@ -56,7 +56,8 @@ def main():
     if not run:
         print("README: no block to run")
         return 1
-    script = "set -euo pipefail\nset -x\n" + "\n".join(run)
+    # Each command echoed with the seconds since the start, so a slow or failing one is found.
+    script = "set -euo pipefail\nPS4='+ [${SECONDS} s] '\nset -x\n" + "\n".join(run)
     with tempfile.TemporaryDirectory(prefix="seqloc-readme-") as scratch:
         work = pathlib.Path(scratch)
         os.symlink(build, work / "build")
