@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -85,6 +86,38 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
   f.argmax_u = static_cast<int>(static_cast<std::size_t>(best) % static_cast<std::size_t>(W));
 }
 
+/// Bins j0 .. j1 of an (H, W, N) volume into heading-major `log_prob` (N slices of H x W), one
+/// source row at a time (it stays in cache). float16 rows are converted at once
+/// (halves_to_floats, eight values to an instruction) and gathered from that float copy.
+void transpose_bins(const FrameVolume& volume, int j0, int j1, float* log_prob) {
+  const int H = volume.height, W = volume.width, N = volume.bins;
+  const std::size_t slice = static_cast<std::size_t>(H) * W, n = static_cast<std::size_t>(N);
+  const auto nb = static_cast<std::size_t>(j1 - j0);
+  std::vector<float> converted(volume.type == VolumeType::float16 ? static_cast<std::size_t>(W) * nb : 0);
+  for (int v = 0; v < H; ++v) {
+    const std::size_t row = static_cast<std::size_t>(v) * W * n;
+    const float* src_row = static_cast<const float*>(volume.data) + row + j0;
+    std::size_t stride = n;
+    if (volume.type == VolumeType::float16) {
+      const std::uint16_t* halves = static_cast<const std::uint16_t*>(volume.data) + row;
+      if (nb == n) {
+        halves_to_floats({halves, converted.size()}, converted);
+      } else {
+        for (std::size_t u = 0; u < static_cast<std::size_t>(W); ++u) {
+          halves_to_floats({halves + u * n + static_cast<std::size_t>(j0), nb}, {converted.data() + u * nb, nb});
+        }
+      }
+      src_row = converted.data();
+      stride = nb;
+    }
+    for (int j = j0; j < j1; ++j) {
+      float* dst = log_prob + static_cast<std::size_t>(j) * slice + static_cast<std::size_t>(v) * W;
+      const float* src = src_row + (j - j0);
+      for (int u = 0; u < W; ++u) dst[u] = src[static_cast<std::size_t>(u) * stride];
+    }
+  }
+}
+
 }  // namespace
 
 PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads) {
@@ -109,27 +142,15 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   const std::size_t cells = slice * static_cast<std::size_t>(N);
   f.log_cells = std::log(static_cast<double>(cells));
   f.log_prob.resize(cells);
-  // Per chunk of bins, in parallel: transpose (H, W, N) to heading-major one source row at a
-  // time (it stays in cache), convert, check, map -inf to kLogZero and find the chunk's maximum.
+  // Per chunk of bins, in parallel: convert and transpose (H, W, N) to heading-major, check, map
+  // -inf to kLogZero and find the chunk's maximum.
   constexpr float kInf = std::numeric_limits<float>::infinity();
   const bool is_prob = volume.values == VolumeValues::prob;
   const int chunks = std::max(1, std::min(threads, N));
   std::vector<float> chunk_max(static_cast<std::size_t>(chunks), -kInf);
   std::vector<char> chunk_bad(static_cast<std::size_t>(chunks), 0);
   core::parallel_chunks(N, chunks, [&](int j0, int j1, int t) {
-    for (int v = 0; v < H; ++v) {
-      const std::size_t row = static_cast<std::size_t>(v) * W * N;
-      for (int j = j0; j < j1; ++j) {
-        float* dst = f.log_prob.data() + static_cast<std::size_t>(j) * slice + static_cast<std::size_t>(v) * W;
-        if (volume.type == VolumeType::float32) {
-          const float* src = static_cast<const float*>(volume.data) + row + j;
-          for (int u = 0; u < W; ++u) dst[u] = src[static_cast<std::size_t>(u) * N];
-        } else {
-          const std::uint16_t* src = static_cast<const std::uint16_t*>(volume.data) + row + j;
-          for (int u = 0; u < W; ++u) dst[u] = half_to_float(src[static_cast<std::size_t>(u) * N]);
-        }
-      }
-    }
+    transpose_bins(volume, j0, j1, f.log_prob.data());
     const std::size_t begin = static_cast<std::size_t>(j0) * slice, end = static_cast<std::size_t>(j1) * slice;
     ArrayMap x(f.log_prob.data() + begin, static_cast<Eigen::Index>(end - begin));
     bool bad = false;

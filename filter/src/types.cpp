@@ -5,11 +5,81 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/types.hpp"
 
-#if defined(__F16C__)
+#if defined(__x86_64__)
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 
 namespace seqloc::filter {
+namespace {
+
+#if defined(__x86_64__)
+// The array conversions with F16C, compiled for it whatever the build's -march (a function's
+// target attribute) and called only where the CPU has it (has_f16c).
+constexpr bool kHasF16cPath = true;
+
+__attribute__((target("avx,f16c"))) void halves_to_floats_f16c(const std::uint16_t* in, std::size_t n, float* out) {
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    _mm256_storeu_ps(out + i, _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(in + i))));
+  }
+  for (; i < n; ++i) out[i] = _cvtsh_ss(in[i]);
+}
+
+__attribute__((target("avx,f16c"))) void floats_to_halves_f16c(const float* in, std::size_t n, std::uint16_t* out) {
+  std::size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i),
+                     _mm256_cvtps_ph(_mm256_loadu_ps(in + i), _MM_FROUND_TO_NEAREST_INT));
+  }
+  for (; i < n; ++i) {
+    out[i] =
+        static_cast<std::uint16_t>(_mm_extract_epi16(_mm_cvtps_ph(_mm_set_ss(in[i]), _MM_FROUND_TO_NEAREST_INT), 0));
+  }
+}
+
+// AVX as the compiler's runtime asks it (the OS saves the YMM registers too), F16C from CPUID
+// leaf 1 (clang 14's __builtin_cpu_supports does not know "f16c").
+bool has_f16c() {
+  static const bool yes = [] {
+    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+    return __builtin_cpu_supports("avx") && __get_cpuid(1, &eax, &ebx, &ecx, &edx) != 0 && (ecx & bit_F16C) != 0;
+  }();
+  return yes;
+}
+#else
+constexpr bool kHasF16cPath = false;
+void halves_to_floats_f16c(const std::uint16_t*, std::size_t, float*) {}
+void floats_to_halves_f16c(const float*, std::size_t, std::uint16_t*) {}
+bool has_f16c() { return false; }
+#endif
+
+void require_same_length(std::size_t in, std::size_t out, const char* what) {
+  if (in != out) {
+    throw FilterError(std::string(what) + ": " + std::to_string(in) + " values in, room for " + std::to_string(out),
+                      ErrorCategory::internal);
+  }
+}
+
+}  // namespace
+
+void halves_to_floats(std::span<const std::uint16_t> halves, std::span<float> out) {
+  require_same_length(halves.size(), out.size(), "halves_to_floats");
+  if (kHasF16cPath && has_f16c()) {
+    halves_to_floats_f16c(halves.data(), halves.size(), out.data());
+    return;
+  }
+  for (std::size_t i = 0; i < halves.size(); ++i) out[i] = half_to_float(halves[i]);
+}
+
+void floats_to_halves(std::span<const float> values, std::span<std::uint16_t> out) {
+  require_same_length(values.size(), out.size(), "floats_to_halves");
+  if (kHasF16cPath && has_f16c()) {
+    floats_to_halves_f16c(values.data(), values.size(), out.data());
+    return;
+  }
+  for (std::size_t i = 0; i < values.size(); ++i) out[i] = float_to_half(values[i]);
+}
 
 float half_to_float(std::uint16_t h) {
 #if defined(__F16C__)

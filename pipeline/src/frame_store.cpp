@@ -101,7 +101,9 @@ void FrameStore::release(Slot& slot) {
 }
 
 void round_like_frame_store(filter::PreparedFrame& frame) {
-  for (float& v : frame.log_prob) v = filter::half_to_float(filter::float_to_half(v));
+  std::vector<std::uint16_t> halves(frame.log_prob.size());
+  filter::floats_to_halves(frame.log_prob, halves);
+  filter::halves_to_floats(halves, frame.log_prob);
   filter::summarize_frame(frame);
 }
 
@@ -118,7 +120,7 @@ void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
     round_like_frame_store(*rounded);
     frame = std::move(rounded);
     halves.resize(values_of(*frame));
-    std::transform(frame->log_prob.begin(), frame->log_prob.end(), halves.begin(), filter::float_to_half);
+    filter::floats_to_halves(frame->log_prob, halves);
   } catch (...) {
     lock.lock();
     slot.state = State::empty;
@@ -195,7 +197,7 @@ std::shared_ptr<const filter::PreparedFrame> FrameStore::take(std::size_t i) {
   ++slot.copying;
   lock.unlock();
   frame->log_prob.resize(values_of(*frame));
-  std::transform(halves, halves + frame->log_prob.size(), frame->log_prob.begin(), filter::half_to_float);
+  filter::halves_to_floats({halves, frame->log_prob.size()}, frame->log_prob);
   lock.lock();
   --slot.copying;
   if (slot.taken >= readers_ && slot.copying == 0) {

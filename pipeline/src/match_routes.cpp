@@ -28,7 +28,7 @@ void write_volume_route(const io::Route& route, raster::CacheReader& cache, cons
     // The values are float16 already (the frame store's rounding): back to half bits exactly.
     const std::vector<float> values = hwn_values(*frame);
     halves.resize(values.size());
-    std::transform(values.begin(), values.end(), halves.begin(), filter::float_to_half);
+    filter::floats_to_halves(values, halves);
     char name[32];
     std::snprintf(name, sizeof name, "%06zu.npy", i);
     const std::filesystem::path path = dir / "volumes" / name;

@@ -7,8 +7,10 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <span>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -537,6 +539,45 @@ TEST(Half, PortableConversionsMatch) {
   }
   EXPECT_EQ(detail::float_to_half_portable(std::numeric_limits<float>::infinity()), 0x7C00);
   EXPECT_TRUE(std::isnan(detail::half_to_float_portable(detail::float_to_half_portable(std::nanf("")))));
+}
+
+// The array conversions give the one-value ones' results for every half and for random floats,
+// at every offset and length (the vector loop's remainder), and refuse arrays of unequal length.
+TEST(Half, ArrayConversionsMatchTheOneValueOnes) {
+  std::vector<std::uint16_t> halves(0x10000);
+  for (std::uint32_t h = 0; h < 0x10000; ++h) halves[h] = static_cast<std::uint16_t>(h);
+  std::vector<float> floats(halves.size());
+  halves_to_floats(halves, floats);
+  for (std::uint32_t h = 0; h < 0x10000; ++h) {
+    const float one = half_to_float(static_cast<std::uint16_t>(h));
+    if (std::isnan(one)) {
+      EXPECT_TRUE(std::isnan(floats[h])) << h;
+      continue;
+    }
+    ASSERT_EQ(std::memcmp(&one, &floats[h], 4), 0) << h;
+  }
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<std::uint32_t> any_bits;
+  std::vector<float> values(4099);
+  for (float& f : values) {
+    std::uint32_t bits = any_bits(rng);
+    if ((bits & 0x7F800000u) == 0x7F800000u) bits &= 0xBFFFFFFFu;  // no inf or NaN: their payloads may differ
+    bits = (bits & 0x80FFFFFFu) | ((95u + bits % 50u) << 23);
+    std::memcpy(&f, &bits, 4);
+  }
+  for (std::size_t offset : {0, 1, 3}) {
+    for (std::size_t n : {0, 1, 7, 8, 9, 4096}) {
+      const std::span<const float> in(values.data() + offset, n);
+      std::vector<std::uint16_t> out(n);
+      floats_to_halves(in, out);
+      for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(out[i], float_to_half(in[i])) << offset << " " << n << " " << i;
+      std::vector<float> back(n);
+      halves_to_floats(out, back);
+      for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(back[i], half_to_float(out[i])) << offset << " " << n << " " << i;
+    }
+  }
+  std::vector<std::uint16_t> short_out(3);
+  EXPECT_THROW(floats_to_halves(std::span<const float>(values.data(), 4), short_out), FilterError);
 }
 
 TEST(Config, ValidateNamesTheField) {

@@ -4,6 +4,7 @@
 // headings are grid headings, degrees clockwise from the window's north.
 
 #include <cstdint>
+#include <span>
 #include <stdexcept>
 #include <string>
 
@@ -67,6 +68,13 @@ float half_to_float(std::uint16_t h);
 /// Float to the nearest 16-bit IEEE half, ties to even (as NumPy's astype(float16)): magnitudes
 /// from 65520 up become infinity, below 2^-25 zero (keeping the sign); NaN stays NaN.
 std::uint16_t float_to_half(float f);
+
+/// half_to_float and float_to_half over whole arrays (`out` as long as the input), eight values
+/// to an instruction where the CPU has F16C, which is asked at run time: a build for any x86-64
+/// uses it where it is there. The results are those of the one-value functions, bit for bit but
+/// for the payload bits of a NaN.
+void halves_to_floats(std::span<const std::uint16_t> halves, std::span<float> out);
+void floats_to_halves(std::span<const float> values, std::span<std::uint16_t> out);
 
 namespace detail {
 /// The same two conversions in plain integer code: what half_to_float and float_to_half run where
