@@ -87,28 +87,26 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
 }
 
 /// Bins j0 .. j1 of an (H, W, N) volume into heading-major `log_prob` (N slices of H x W), one
-/// source row at a time (it stays in cache). float16 rows are converted at once
-/// (halves_to_floats, eight values to an instruction) and gathered from that float copy.
+/// source row at a time (it stays in cache). A float16 row's bins j0 .. j1 are converted first
+/// (halves_to_floats, eight values to an instruction) into a float copy, which the gather reads.
 void transpose_bins(const FrameVolume& volume, int j0, int j1, float* log_prob) {
   const int H = volume.height, W = volume.width, N = volume.bins;
   const std::size_t slice = static_cast<std::size_t>(H) * W, n = static_cast<std::size_t>(N);
   const auto nb = static_cast<std::size_t>(j1 - j0);
   std::vector<float> converted(volume.type == VolumeType::float16 ? static_cast<std::size_t>(W) * nb : 0);
   for (int v = 0; v < H; ++v) {
-    const std::size_t row = static_cast<std::size_t>(v) * W * n;
-    const float* src_row = static_cast<const float*>(volume.data) + row + j0;
-    std::size_t stride = n;
-    if (volume.type == VolumeType::float16) {
+    const std::size_t row = static_cast<std::size_t>(v) * W * n + static_cast<std::size_t>(j0);
+    // Bin j0 of cell u of this row is at src_row[u * stride].
+    const float* src_row = converted.data();
+    std::size_t stride = nb;
+    if (volume.type == VolumeType::float32) {
+      src_row = static_cast<const float*>(volume.data) + row;
+      stride = n;
+    } else {
       const std::uint16_t* halves = static_cast<const std::uint16_t*>(volume.data) + row;
-      if (nb == n) {
-        halves_to_floats({halves, converted.size()}, converted);
-      } else {
-        for (std::size_t u = 0; u < static_cast<std::size_t>(W); ++u) {
-          halves_to_floats({halves + u * n + static_cast<std::size_t>(j0), nb}, {converted.data() + u * nb, nb});
-        }
+      for (std::size_t u = 0; u < static_cast<std::size_t>(W); ++u) {
+        halves_to_floats({halves + u * n, nb}, {converted.data() + u * nb, nb});
       }
-      src_row = converted.data();
-      stride = nb;
     }
     for (int j = j0; j < j1; ++j) {
       float* dst = log_prob + static_cast<std::size_t>(j) * slice + static_cast<std::size_t>(v) * W;

@@ -14,16 +14,22 @@ namespace seqloc::filter {
 namespace {
 
 #if defined(__x86_64__)
-// The array conversions with F16C, compiled for it whatever the build's -march (a function's
-// target attribute) and called only where the CPU has it (has_f16c).
-constexpr bool kHasF16cPath = true;
+// F16C, compiled for it whatever the build's -march (a function's target attribute): the
+// one-value conversions where the build targets F16C, and the array ones where the CPU has it
+// (has_f16c). Ties to even, overflow to infinity. (Not _cvtss_sh: clang's macro is a C99
+// compound literal.)
+__attribute__((target("f16c"))) float f16c_half_to_float(std::uint16_t h) { return _cvtsh_ss(h); }
+
+__attribute__((target("f16c"))) std::uint16_t f16c_float_to_half(float f) {
+  return static_cast<std::uint16_t>(_mm_extract_epi16(_mm_cvtps_ph(_mm_set_ss(f), _MM_FROUND_TO_NEAREST_INT), 0));
+}
 
 __attribute__((target("avx,f16c"))) void halves_to_floats_f16c(const std::uint16_t* in, std::size_t n, float* out) {
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
     _mm256_storeu_ps(out + i, _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(in + i))));
   }
-  for (; i < n; ++i) out[i] = _cvtsh_ss(in[i]);
+  for (; i < n; ++i) out[i] = f16c_half_to_float(in[i]);
 }
 
 __attribute__((target("avx,f16c"))) void floats_to_halves_f16c(const float* in, std::size_t n, std::uint16_t* out) {
@@ -32,10 +38,7 @@ __attribute__((target("avx,f16c"))) void floats_to_halves_f16c(const float* in, 
     _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i),
                      _mm256_cvtps_ph(_mm256_loadu_ps(in + i), _MM_FROUND_TO_NEAREST_INT));
   }
-  for (; i < n; ++i) {
-    out[i] =
-        static_cast<std::uint16_t>(_mm_extract_epi16(_mm_cvtps_ph(_mm_set_ss(in[i]), _MM_FROUND_TO_NEAREST_INT), 0));
-  }
+  for (; i < n; ++i) out[i] = f16c_float_to_half(in[i]);
 }
 
 // AVX as the compiler's runtime asks it (the OS saves the YMM registers too), F16C from CPUID
@@ -47,11 +50,6 @@ bool has_f16c() {
   }();
   return yes;
 }
-#else
-constexpr bool kHasF16cPath = false;
-void halves_to_floats_f16c(const std::uint16_t*, std::size_t, float*) {}
-void floats_to_halves_f16c(const float*, std::size_t, std::uint16_t*) {}
-bool has_f16c() { return false; }
 #endif
 
 void require_same_length(std::size_t in, std::size_t out, const char* what) {
@@ -65,25 +63,23 @@ void require_same_length(std::size_t in, std::size_t out, const char* what) {
 
 void halves_to_floats(std::span<const std::uint16_t> halves, std::span<float> out) {
   require_same_length(halves.size(), out.size(), "halves_to_floats");
-  if (kHasF16cPath && has_f16c()) {
-    halves_to_floats_f16c(halves.data(), halves.size(), out.data());
-    return;
-  }
+#if defined(__x86_64__)
+  if (has_f16c()) return halves_to_floats_f16c(halves.data(), halves.size(), out.data());
+#endif
   for (std::size_t i = 0; i < halves.size(); ++i) out[i] = half_to_float(halves[i]);
 }
 
 void floats_to_halves(std::span<const float> values, std::span<std::uint16_t> out) {
   require_same_length(values.size(), out.size(), "floats_to_halves");
-  if (kHasF16cPath && has_f16c()) {
-    floats_to_halves_f16c(values.data(), values.size(), out.data());
-    return;
-  }
+#if defined(__x86_64__)
+  if (has_f16c()) return floats_to_halves_f16c(values.data(), values.size(), out.data());
+#endif
   for (std::size_t i = 0; i < values.size(); ++i) out[i] = float_to_half(values[i]);
 }
 
 float half_to_float(std::uint16_t h) {
 #if defined(__F16C__)
-  return _cvtsh_ss(h);  // one instruction, exact (F16C: x86-64-v3)
+  return f16c_half_to_float(h);  // one instruction, exact (F16C: x86-64-v3)
 #else
   return detail::half_to_float_portable(h);
 #endif
@@ -91,8 +87,7 @@ float half_to_float(std::uint16_t h) {
 
 std::uint16_t float_to_half(float f) {
 #if defined(__F16C__)
-  // Ties to even, overflow to infinity. (Not _cvtss_sh: clang's macro is a C99 compound literal.)
-  return static_cast<std::uint16_t>(_mm_extract_epi16(_mm_cvtps_ph(_mm_set_ss(f), _MM_FROUND_TO_NEAREST_INT), 0));
+  return f16c_float_to_half(f);
 #else
   return detail::float_to_half_portable(f);
 #endif

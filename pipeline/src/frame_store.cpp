@@ -100,11 +100,12 @@ void FrameStore::release(Slot& slot) {
   std::vector<std::uint16_t>().swap(slot.memory);
 }
 
-void round_like_frame_store(filter::PreparedFrame& frame) {
+std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame) {
   std::vector<std::uint16_t> halves(frame.log_prob.size());
   filter::floats_to_halves(frame.log_prob, halves);
   filter::halves_to_floats(halves, frame.log_prob);
   filter::summarize_frame(frame);
+  return halves;
 }
 
 void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
@@ -117,10 +118,13 @@ void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
     // The header describes the rounded values (their entropy, peak and argmax), so that a frame
     // written out as float16 and read back is the same frame.
     auto rounded = std::make_shared<filter::PreparedFrame>(*source_(i));
-    round_like_frame_store(*rounded);
+    halves = round_like_frame_store(*rounded);
+    if (halves.size() != values_of(*rounded)) {
+      throw Error(ErrorCategory::internal, "frame store: frame " + std::to_string(i) + " holds " +
+                                               std::to_string(halves.size()) + " values for its shape's " +
+                                               std::to_string(values_of(*rounded)));
+    }
     frame = std::move(rounded);
-    halves.resize(values_of(*frame));
-    filter::floats_to_halves(frame->log_prob, halves);
   } catch (...) {
     lock.lock();
     slot.state = State::empty;

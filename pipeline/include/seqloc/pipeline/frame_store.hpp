@@ -81,7 +81,8 @@ class FrameStore {
 
 /// What a frame becomes in a FrameStore: its log-probabilities rounded to float16 (NumPy's
 /// rounding) and its entropy, peak and argmax those of the rounded values. A loop that feeds
-/// frames itself applies this to get localize's poses exactly.
-void round_like_frame_store(filter::PreparedFrame& frame);
+/// frames itself applies this to get localize's poses exactly. Returns the float16 bits the
+/// values now hold (what the store keeps).
+std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame);
 
 }  // namespace seqloc::pipeline
