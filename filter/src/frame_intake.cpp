@@ -5,11 +5,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <vector>
 
 #include <Eigen/Core>
+
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
@@ -86,39 +93,345 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
   f.argmax_u = static_cast<int>(static_cast<std::size_t>(best) % static_cast<std::size_t>(W));
 }
 
-/// Bins j0 .. j1 of an (H, W, N) volume into heading-major `log_prob` (N slices of H x W), one
-/// source row at a time (it stays in cache). A float16 row's bins j0 .. j1 are converted first
-/// (halves_to_floats, eight values to an instruction) into a float copy, which the gather reads.
-void transpose_bins(const FrameVolume& volume, int j0, int j1, float* log_prob) {
-  const int H = volume.height, W = volume.width, N = volume.bins;
-  const std::size_t slice = static_cast<std::size_t>(H) * W, n = static_cast<std::size_t>(N);
-  const auto nb = static_cast<std::size_t>(j1 - j0);
-  std::vector<float> converted(volume.type == VolumeType::float16 ? static_cast<std::size_t>(W) * nb : 0);
-  for (int v = 0; v < H; ++v) {
-    const std::size_t row = static_cast<std::size_t>(v) * W * n + static_cast<std::size_t>(j0);
-    // Bin j0 of cell u of this row is at src_row[u * stride].
-    const float* src_row = converted.data();
-    std::size_t stride = nb;
-    if (volume.type == VolumeType::float32) {
-      src_row = static_cast<const float*>(volume.data) + row;
-      stride = n;
+/// x as the filter's log-probabilities, in place, in loops that vectorize: logs of probabilities,
+/// values at or below kLogZero (-inf, zero probabilities) as kLogZero, then raised to `power`.
+/// Returns whether a value was bad (NaN, +inf, a negative probability); `check` false: the values
+/// are known to be good (they were checked before).
+bool to_log_prob(float* x, std::size_t n, bool is_prob, float power, bool check = true) {
+  ArrayMap m(x, static_cast<Eigen::Index>(n));
+  if (is_prob && check) {
+    // A negative number or NaN has the sign bit or an all-ones exponent with a mantissa; +inf
+    // the all-ones exponent: every bad value's pattern is 0x7F800000 or more.
+    std::uint32_t bad = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, x + i, sizeof bits);
+      bad |= static_cast<std::uint32_t>(bits >= 0x7F800000u && bits != 0x80000000u);  // -0 is a zero
+    }
+    if (bad != 0) return true;
+  }
+  if (is_prob) {
+    m = (m > 0).select(m.log(), kLogZero);
+  } else if (check) {
+    // NaN and +inf: 0x7F800000 .. 0x7FFFFFFF, or a negative NaN above 0xFF800000 (-inf).
+    std::uint32_t bad = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      std::uint32_t bits = 0;
+      std::memcpy(&bits, x + i, sizeof bits);
+      bad |=
+          static_cast<std::uint32_t>(bits - 0x7F800000u < 0x00800000u) | static_cast<std::uint32_t>(bits > 0xFF800000u);
+    }
+    if (bad != 0) return true;
+  }
+  // Everything at or below kLogZero is a zero to every reader of the frame. (A loop, not Eigen
+  // 3.4's select, which does not vectorize.)
+  for (std::size_t i = 0; i < n; ++i) x[i] = x[i] > kLogZero ? x[i] * power : kLogZero;
+  return false;
+}
+
+/// Bins j0 .. j1 of every cell of row v of a volume as floats, as given, in `row` ([u][j - j0]):
+/// float16 converted (halves_to_floats, eight values to an instruction).
+void convert_row(const FrameVolume& volume, int v, int j0, int j1, float* row) {
+  const std::size_t n = static_cast<std::size_t>(volume.bins), nb = static_cast<std::size_t>(j1 - j0);
+  const auto W = static_cast<std::size_t>(volume.width);
+  const std::size_t first = static_cast<std::size_t>(v) * W * n + static_cast<std::size_t>(j0);
+  if (volume.type == VolumeType::float16) {
+    const std::uint16_t* halves = static_cast<const std::uint16_t*>(volume.data) + first;
+    if (nb == n) {
+      halves_to_floats({halves, W * n}, {row, W * n});
     } else {
-      const std::uint16_t* halves = static_cast<const std::uint16_t*>(volume.data) + row;
-      for (std::size_t u = 0; u < static_cast<std::size_t>(W); ++u) {
-        halves_to_floats({halves + u * n, nb}, {converted.data() + u * nb, nb});
+      for (std::size_t u = 0; u < W; ++u) halves_to_floats({halves + u * n, nb}, {row + u * nb, nb});
+    }
+  } else {
+    const float* floats = static_cast<const float*>(volume.data) + first;
+    for (std::size_t u = 0; u < W; ++u) std::copy(floats + u * n, floats + u * n + nb, row + u * nb);
+  }
+}
+
+/// convert_row, then the values as the filter's log-probabilities raised to `power` (to_log_prob).
+/// Returns whether a value was bad (NaN, +inf, a negative probability); the row is then not to be
+/// used.
+bool read_row(const FrameVolume& volume, int v, int j0, int j1, float power, float* row) {
+  convert_row(volume, v, j0, j1, row);
+  const std::size_t len = static_cast<std::size_t>(volume.width) * static_cast<std::size_t>(j1 - j0);
+  return to_log_prob(row, len, volume.values == VolumeValues::prob, power);
+}
+
+/// The log-softmax's sums of each heading bin, in the manner of an online softmax: with M_j the
+/// largest value of bin j seen so far, sum_j = sum e and ex_j = sum e x, e = exp(x - M_j) (zero
+/// cells and values under the smallest normal float count 0), rescaled whenever M_j grows. Each
+/// bin's sums see its cells in the same order whichever worker holds it, so the frame is the same
+/// for any number of threads.
+struct BinSums {
+  Eigen::ArrayXf max;      ///< M_j of bins j0 .. j1
+  Eigen::ArrayXd sum, ex;  ///< of bins j0 .. j1
+  Eigen::ArrayXf row_max, row_sum, row_ex, padded, e;
+
+  explicit BinSums(int bins)
+      : max(Eigen::ArrayXf::Constant(bins, kLogZero)),
+        sum(Eigen::ArrayXd::Zero(bins)),
+        ex(Eigen::ArrayXd::Zero(bins)),
+        row_max(bins),
+        row_sum(bins),
+        row_ex(bins),
+        padded(Eigen::ArrayXf::Zero((bins + 7) / 8 * 8)),
+        e(padded.size()) {}
+
+  /// Adds a row of cells ([u][j - j0], `width` cells).
+  void add_row(const float* row, int width) {
+    const Eigen::Index nb = max.size();
+    row_max = ConstArrayMap(row, nb);
+    for (int u = 1; u < width; ++u) row_max = row_max.max(ConstArrayMap(row + static_cast<std::size_t>(u) * nb, nb));
+    for (Eigen::Index j = 0; j < nb; ++j) {
+      if (row_max[j] > max[j]) {
+        const double rescale = max[j] > kLogZero ? std::exp(double{max[j]} - row_max[j]) : 0.0;
+        sum[j] *= rescale;
+        ex[j] *= rescale;
+        max[j] = row_max[j];
       }
     }
-    for (int j = j0; j < j1; ++j) {
-      float* dst = log_prob + static_cast<std::size_t>(j) * slice + static_cast<std::size_t>(v) * W;
-      const float* src = src_row + (j - j0);
-      for (int u = 0; u < W; ++u) dst[u] = src[static_cast<std::size_t>(u) * stride];
+    row_sum.setZero();
+    row_ex.setZero();
+    float* __restrict s = row_sum.data();
+    float* __restrict sx = row_ex.data();
+    const float* __restrict ex_u = e.data();
+    for (int u = 0; u < width; ++u) {
+      const float* __restrict x = row + static_cast<std::size_t>(u) * nb;
+      // exp over whole packets (the bins padded to a multiple of eight): a value's exp is the
+      // packet one whichever bins share its worker, not a scalar tail's in one split and a
+      // packet's in another.
+      padded.head(nb) = ConstArrayMap(x, nb) - max;
+      e = padded.exp();
+      for (Eigen::Index j = 0; j < nb; ++j) {
+        const float ej = x[j] > kLogZero && ex_u[j] >= math::kSmallestNormal ? ex_u[j] : 0.0f;
+        s[j] += ej;
+        sx[j] += ej * x[j];  // x > kLogZero where ej > 0
+      }
+    }
+    sum += row_sum.cast<double>();
+    ex += row_ex.cast<double>();
+  }
+};
+
+/// The log-softmax's normalizer and the frame's entropy from every bin's sums (in bin order).
+struct Softmax {
+  float max = kLogZero;
+  double lse = 0, entropy = 0;
+};
+
+Softmax combine(const std::vector<std::optional<BinSums>>& chunks, double log_cells) {
+  Softmax s;
+  for (const auto& c : chunks) s.max = std::max(s.max, c->max.maxCoeff());
+  if (s.max <= kLogZero) return s;
+  double sum = 0, ex = 0;
+  for (const auto& chunk : chunks) {
+    const BinSums& c = *chunk;
+    for (Eigen::Index j = 0; j < c.max.size(); ++j) {
+      if (c.max[j] <= kLogZero) continue;
+      const double scale = std::exp(double{c.max[j]} - s.max);
+      sum += c.sum[j] * scale;
+      ex += c.ex[j] * scale;
+    }
+  }
+  s.lse = s.max + std::log(sum);
+  s.entropy = std::clamp((s.lse - ex / sum) / log_cells, 0.0, 1.0);
+  return s;
+}
+
+/// Writes row v of bins j0 .. j1 (`row`, [u][j - j0]) into heading-major `log_prob` as x - lse
+/// (values at or below kLogZero, -inf among them, as kLogZero): the portable version, in tiles that
+/// keep both sides in the first-level cache.
+void write_row_portable(const float* row, int v, int j0, int j1, int height, int width, float lse, float* log_prob) {
+  constexpr int kTileBins = 8, kTileCells = 32;
+  const std::size_t slice = static_cast<std::size_t>(height) * width;
+  const int nb = j1 - j0;
+  for (int b0 = 0; b0 < nb; b0 += kTileBins) {
+    const int b1 = std::min(nb, b0 + kTileBins);
+    for (int u0 = 0; u0 < width; u0 += kTileCells) {
+      const int u1 = std::min(width, u0 + kTileCells);
+      for (int b = b0; b < b1; ++b) {
+        float* dst = log_prob + static_cast<std::size_t>(j0 + b) * slice + static_cast<std::size_t>(v) * width;
+        const float* src = row + b;
+        for (int u = u0; u < u1; ++u) {
+          const float x = src[static_cast<std::size_t>(u) * static_cast<std::size_t>(nb)];
+          dst[u] = x > kLogZero ? x - lse : kLogZero;
+        }
+      }
     }
   }
 }
 
+#if defined(__x86_64__)
+/// Cells u .. u + 7 of bins b .. b + 7 of a row ([u][b], nb bins a cell) as x - lse (cells at or
+/// below kLogZero, -inf among them, as kLogZero) and transposed in registers: out[i] holds bin
+/// b + i of the eight cells.
+__attribute__((target("avx"))) inline void transpose_block(const float* row, int nb, int u, int b, __m256 shift,
+                                                           __m256* out) {
+  const __m256 zero = _mm256_set1_ps(kLogZero);
+  __m256 r[8];
+  for (int i = 0; i < 8; ++i) {
+    const __m256 x = _mm256_loadu_ps(row + static_cast<std::size_t>(u + i) * nb + b);
+    r[i] = _mm256_blendv_ps(zero, _mm256_sub_ps(x, shift), _mm256_cmp_ps(x, zero, _CMP_GT_OQ));
+  }
+  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+  const __m256 s0 = _mm256_shuffle_ps(t0, t2, 0x44), s1 = _mm256_shuffle_ps(t0, t2, 0xEE);
+  const __m256 s2 = _mm256_shuffle_ps(t1, t3, 0x44), s3 = _mm256_shuffle_ps(t1, t3, 0xEE);
+  const __m256 s4 = _mm256_shuffle_ps(t4, t6, 0x44), s5 = _mm256_shuffle_ps(t4, t6, 0xEE);
+  const __m256 s6 = _mm256_shuffle_ps(t5, t7, 0x44), s7 = _mm256_shuffle_ps(t5, t7, 0xEE);
+  out[0] = _mm256_permute2f128_ps(s0, s4, 0x20);
+  out[1] = _mm256_permute2f128_ps(s1, s5, 0x20);
+  out[2] = _mm256_permute2f128_ps(s2, s6, 0x20);
+  out[3] = _mm256_permute2f128_ps(s3, s7, 0x20);
+  out[4] = _mm256_permute2f128_ps(s0, s4, 0x31);
+  out[5] = _mm256_permute2f128_ps(s1, s5, 0x31);
+  out[6] = _mm256_permute2f128_ps(s2, s6, 0x31);
+  out[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
+}
+
+/// write_row_portable with AVX: 8 x 8 blocks transposed in registers, two side by side so that
+/// each bin's row gets whole 64-byte lines (the cells and bins beyond whole blocks by the portable
+/// loop's arithmetic).
+__attribute__((target("avx"))) void write_row_avx(const float* row, int v, int j0, int j1, int height, int width,
+                                                  float lse, float* log_prob) {
+  const std::size_t slice = static_cast<std::size_t>(height) * width;
+  const int nb = j1 - j0, whole_u = width / 16 * 16, whole_b = nb / 8 * 8;
+  const __m256 shift = _mm256_set1_ps(lse);
+  // Where every line's destination is 64-byte aligned, the stores bypass the cache: the frame
+  // (16 MB at 128 x 128 x 256) does not stay there anyway, and its lines need not be read first.
+  const bool stream = width % 16 == 0 && reinterpret_cast<std::uintptr_t>(log_prob) % 64 == 0;
+  for (int b = 0; b < whole_b; b += 8) {
+    for (int u = 0; u < whole_u; u += 16) {
+      __m256 left[8], right[8];
+      transpose_block(row, nb, u, b, shift, left);
+      transpose_block(row, nb, u + 8, b, shift, right);
+      for (int i = 0; i < 8; ++i) {
+        float* dst = log_prob + static_cast<std::size_t>(j0 + b + i) * slice + static_cast<std::size_t>(v) * width + u;
+        if (stream) {
+          _mm256_stream_ps(dst, left[i]);
+          _mm256_stream_ps(dst + 8, right[i]);
+        } else {
+          _mm256_storeu_ps(dst, left[i]);
+          _mm256_storeu_ps(dst + 8, right[i]);
+        }
+      }
+    }
+  }
+  auto rest = [&](int b, int u0, int u1) {
+    float* dst = log_prob + static_cast<std::size_t>(j0 + b) * slice + static_cast<std::size_t>(v) * width;
+    for (int u = u0; u < u1; ++u) {
+      const float x = row[static_cast<std::size_t>(u) * nb + b];
+      dst[u] = x > kLogZero ? x - lse : kLogZero;
+    }
+  };
+  for (int b = whole_b; b < nb; ++b) rest(b, 0, width);
+  for (int b = 0; b < whole_b; ++b) rest(b, whole_u, width);
+  if (stream) _mm_sfence();  // the streamed stores visible before the worker reports its part done
+}
+#endif
+
+/// Writes row v of bins j0 .. j1 (`row`, [u][j - j0]) into heading-major `log_prob` as x - lse
+/// (values at or below kLogZero as kLogZero): with AVX where the CPU has it (asked once), portable
+/// elsewhere; both write the same values.
+void write_row(const float* row, int v, int j0, int j1, int height, int width, float lse, float* log_prob) {
+#if defined(__x86_64__)
+  static const bool avx = __builtin_cpu_supports("avx");
+  if (avx) return write_row_avx(row, v, j0, j1, height, width, lse, log_prob);
+#endif
+  write_row_portable(row, v, j0, j1, height, width, lse, log_prob);
+}
+
+/// The first cell of heading-major `log_prob` (bins j0 .. j1, row v) holding `top`, or `none`.
+std::size_t find_in_row(const float* log_prob, int v, int j0, int j1, int height, int width, float top,
+                        std::size_t none) {
+  const std::size_t slice = static_cast<std::size_t>(height) * width;
+  for (int j = j0; j < j1; ++j) {
+    const std::size_t begin = static_cast<std::size_t>(j) * slice + static_cast<std::size_t>(v) * width;
+    const float* at = std::find(log_prob + begin, log_prob + begin + width, top);
+    if (at != log_prob + begin + width) return static_cast<std::size_t>(at - log_prob);
+  }
+  return none;
+}
+
+/// Names the first bad cell of a volume (by its index in the file's (H, W, N) order).
+[[noreturn]] void throw_bad_cell(const FrameVolume& volume, const std::string& where) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  const bool is_prob = volume.values == VolumeValues::prob;
+  const std::size_t cells =
+      static_cast<std::size_t>(volume.height) * static_cast<std::size_t>(volume.width) * volume.bins;
+  for (std::size_t i = 0; i < cells; ++i) {
+    const float raw = volume.type == VolumeType::float32
+                          ? static_cast<const float*>(volume.data)[i]
+                          : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
+    std::string what;
+    if (std::isnan(raw)) what = "NaN";
+    if (raw == kInf) what = is_prob ? "probability +inf" : "log-probability +inf";
+    if (is_prob && raw < 0) what = "probability " + std::to_string(raw) + " < 0";
+    if (!what.empty()) throw FilterError(where + ": " + what + " at cell " + std::to_string(i));
+  }
+  throw FilterError(where + ": a bad value", ErrorCategory::internal);
+}
+
 }  // namespace
 
-PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads) {
+namespace {
+
+/// The first pass: each worker's bins checked (throws FilterError naming the first bad cell) and
+/// summed; the log-softmax's normalizer and the entropy of the whole volume raised to `power`.
+Softmax sum_pass(const FrameVolume& volume, float power, int chunks, double log_cells, const std::string& where) {
+  std::vector<std::optional<BinSums>> chunk_sums(static_cast<std::size_t>(chunks));
+  std::vector<char> chunk_bad(static_cast<std::size_t>(chunks), 0);
+  core::parallel_chunks(volume.bins, chunks, [&](int j0, int j1, int t) {
+    AlignedVector<float> row(static_cast<std::size_t>(volume.width) * static_cast<std::size_t>(j1 - j0));
+    BinSums& sums = chunk_sums[static_cast<std::size_t>(t)].emplace(j1 - j0);
+    for (int v = 0; v < volume.height; ++v) {
+      if (read_row(volume, v, j0, j1, power, row.data())) {
+        chunk_bad[static_cast<std::size_t>(t)] = 1;
+        return;
+      }
+      sums.add_row(row.data(), volume.width);
+    }
+  });
+  if (std::find(chunk_bad.begin(), chunk_bad.end(), 1) != chunk_bad.end()) throw_bad_cell(volume, where);
+  return combine(chunk_sums, log_cells);
+}
+
+/// The second pass: the volume raised to `power` written heading-major into `log_prob`, shifted by
+/// -shift. Returns the first cell (heading-major) holding `top`, the largest value shifted as the
+/// write shifts it (log_prob's size if none does).
+std::size_t write_pass(const FrameVolume& volume, float power, int chunks, float shift, float top, float* log_prob) {
+  const int H = volume.height, W = volume.width;
+  const std::size_t slice = static_cast<std::size_t>(H) * static_cast<std::size_t>(W);
+  const std::size_t cells = slice * static_cast<std::size_t>(volume.bins);
+  const bool is_prob = volume.values == VolumeValues::prob;
+  std::vector<std::size_t> chunk_first(static_cast<std::size_t>(chunks), cells);
+  core::parallel_chunks(volume.bins, chunks, [&](int j0, int j1, int t) {
+    const std::size_t len = static_cast<std::size_t>(W) * static_cast<std::size_t>(j1 - j0);
+    AlignedVector<float> row(len);
+    std::size_t& first = chunk_first[static_cast<std::size_t>(t)];
+    for (int v = 0; v < H; ++v) {
+      // Log-probabilities at power 1 go in as converted (the write takes the zeros); otherwise
+      // the values are made as the first pass made them.
+      convert_row(volume, v, j0, j1, row.data());
+      if (is_prob || power != 1.0f) (void)to_log_prob(row.data(), len, is_prob, power, /*check=*/false);
+      write_row(row.data(), v, j0, j1, H, W, shift, log_prob);
+      // Rounding is monotonic: only a row whose largest value lands on `top` can hold it, and a
+      // cell of a later row comes first only in a bin before the one found.
+      const float row_max = ConstArrayMap(row.data(), static_cast<Eigen::Index>(len)).maxCoeff();
+      const int last_bin = first < cells ? std::min(j1, static_cast<int>(first / slice)) : j1;
+      if (row_max > kLogZero && row_max - shift == top && last_bin > j0) {
+        first = std::min(first, find_in_row(log_prob, v, j0, last_bin, H, W, top, cells));
+      }
+    }
+  });
+  return *std::min_element(chunk_first.begin(), chunk_first.end());
+}
+
+}  // namespace
+
+PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads, double power) {
   std::ostringstream where;
   where << "volume of shape (" << volume.height << ", " << volume.width << ", " << volume.bins << ")";
   if (volume.data == nullptr || volume.height <= 0 || volume.width <= 0 || volume.bins <= 0) {
@@ -130,58 +443,39 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
                       std::to_string(window_headings));
   }
   if (!(volume.cell_m > 0)) throw FilterError(where.str() + ": cell size must be > 0");
+  if (!(power > 0) || !std::isfinite(power)) {
+    throw FilterError("prepare_frame: the power must be finite and > 0, not " + std::to_string(power),
+                      ErrorCategory::usage);
+  }
   PreparedFrame f;
   f.height = volume.height;
   f.width = volume.width;
   f.bins = volume.bins;
   f.cell_m = volume.cell_m;
-  const int H = volume.height, W = volume.width, N = volume.bins;
-  const std::size_t slice = static_cast<std::size_t>(H) * W;
-  const std::size_t cells = slice * static_cast<std::size_t>(N);
+  const std::size_t slice = static_cast<std::size_t>(volume.height) * static_cast<std::size_t>(volume.width);
+  const std::size_t cells = slice * static_cast<std::size_t>(volume.bins);
   f.log_cells = std::log(static_cast<double>(cells));
   f.log_prob.resize(cells);
-  // Per chunk of bins, in parallel: convert and transpose (H, W, N) to heading-major, check, map
-  // -inf to kLogZero and find the chunk's maximum.
-  constexpr float kInf = std::numeric_limits<float>::infinity();
-  const bool is_prob = volume.values == VolumeValues::prob;
-  const int chunks = std::max(1, std::min(threads, N));
-  std::vector<float> chunk_max(static_cast<std::size_t>(chunks), -kInf);
-  std::vector<char> chunk_bad(static_cast<std::size_t>(chunks), 0);
-  core::parallel_chunks(N, chunks, [&](int j0, int j1, int t) {
-    transpose_bins(volume, j0, j1, f.log_prob.data());
-    const std::size_t begin = static_cast<std::size_t>(j0) * slice, end = static_cast<std::size_t>(j1) * slice;
-    ArrayMap x(f.log_prob.data() + begin, static_cast<Eigen::Index>(end - begin));
-    bool bad = false;
-    if (is_prob) {
-      bad = !(x >= 0).all() || (x == kInf).any();  // NaN fails x >= 0
-      if (!bad) x = (x > 0).select(x.log(), kLogZero);
-    } else {
-      bad = x.isNaN().any() || (x == kInf).any();
-      if (!bad) x = (x == -kInf).select(kLogZero, x);
-    }
-    chunk_bad[static_cast<std::size_t>(t)] = static_cast<char>(bad);
-    if (!bad) chunk_max[static_cast<std::size_t>(t)] = x.maxCoeff();
-  });
-  const bool bad = std::find(chunk_bad.begin(), chunk_bad.end(), 1) != chunk_bad.end();
-  const float max = *std::max_element(chunk_max.begin(), chunk_max.end());
-  if (bad) {
-    // Name the first offending cell by its index in the file's (H, W, N) order.
-    for (int v = 0; v < H; ++v)
-      for (int u = 0; u < W; ++u)
-        for (int j = 0; j < N; ++j) {
-          const std::size_t i = (static_cast<std::size_t>(v) * W + u) * N + j;
-          const float raw = volume.type == VolumeType::float32
-                                ? static_cast<const float*>(volume.data)[i]
-                                : half_to_float(static_cast<const std::uint16_t*>(volume.data)[i]);
-          std::string what;
-          if (std::isnan(raw)) what = "NaN";
-          if (raw == kInf) what = is_prob ? "probability +inf" : "log-probability +inf";
-          if (is_prob && raw < 0) what = "probability " + std::to_string(raw) + " < 0";
-          if (!what.empty()) throw FilterError(where.str() + ": " + what + " at cell " + std::to_string(i));
-        }
+  // Two passes over the volume as given, each a row of cells at a time in a worker's chunk of
+  // bins (a row's values stay in cache between the steps of a pass): the first checks the values
+  // and sums the log-softmax (an online softmax); the second converts them again and writes them
+  // heading-major, shifted. Reading float16 twice costs less than writing float32 twice.
+  const int chunks = std::max(1, std::min(threads, volume.bins));
+  const auto k = static_cast<float>(power);
+  const Softmax softmax = sum_pass(volume, k, chunks, f.log_cells, where.str());
+  if (softmax.max <= kLogZero) throw FilterError(where.str() + ": no probability mass (every cell is zero)");
+  f.entropy = softmax.entropy;
+  const auto shift = static_cast<float>(softmax.lse);
+  f.max_log_prob = softmax.max - shift;  // the argmax's value, computed as write_row computes it
+  std::size_t best = write_pass(volume, k, chunks, shift, f.max_log_prob, f.log_prob.data());
+  if (best >= cells) {  // cannot happen (the largest value lands on top); the first largest value then
+    best = static_cast<std::size_t>(std::max_element(f.log_prob.begin(), f.log_prob.end()) - f.log_prob.begin());
+    f.max_log_prob = f.log_prob[best];
   }
-  if (max <= kLogZero) throw FilterError(where.str() + ": no probability mass (every cell is zero)");
-  normalize(f, max, chunks);
+  // The argmax, first in heading-major order.
+  f.argmax_bin = static_cast<int>(best / slice);
+  f.argmax_v = static_cast<int>(best % slice / static_cast<std::size_t>(f.width));
+  f.argmax_u = static_cast<int>(best % static_cast<std::size_t>(f.width));
   return f;
 }
 
@@ -196,6 +490,12 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads) {
   x = (x > kLogZero).select(x * static_cast<float>(power), kLogZero);
   const float max = x.maxCoeff();
   normalize(frame, max, std::max(1, std::min(threads, frame.bins)));
+}
+
+void normalize_frame(PreparedFrame& frame, int threads) {
+  if (frame.log_prob.empty()) throw FilterError("normalize_frame: the frame has no cells");
+  ConstArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
+  normalize(frame, x.maxCoeff(), std::max(1, std::min(threads, frame.bins)));
 }
 
 void summarize_frame(PreparedFrame& frame, int threads) {

@@ -41,22 +41,29 @@ inline constexpr float kLogZero = -1e30f;
 struct PreparedFrame {
   int height = 0, width = 0, bins = 0;
   double cell_m = 0.5;
-  AlignedVector<float> log_prob;  ///< [bin][v][u]
-  double log_cells = 0;           ///< log M
-  double entropy = 0;             ///< H_hat = -sum p log p / log M, in [0, 1]
-  float max_log_prob = 0;         ///< the largest normalized log-probability
+  UninitializedAlignedVector<float> log_prob;  ///< [bin][v][u]; resize leaves new values unwritten
+  double log_cells = 0;                        ///< log M
+  double entropy = 0;                          ///< H_hat = -sum p log p / log M, in [0, 1]
+  float max_log_prob = 0;                      ///< the largest normalized log-probability
   int argmax_v = 0, argmax_u = 0, argmax_bin = 0;
 };
 
-/// Checks and normalizes a volume (with `threads` workers). Throws FilterError for a wrong shape,
-/// NaN, +inf, negative probabilities or a volume without mass (naming the first bad cell by its
-/// index in (H, W, N) order); a -inf log-probability is a valid zero.
-[[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1);
+/// Checks and normalizes a volume (with `threads` workers), raised to `power` first (temper_frame's
+/// power, in the same passes: p^power / sum p^power). Throws FilterError for a wrong shape, NaN,
+/// +inf, negative probabilities or a volume without mass (naming the first bad cell by its index in
+/// (H, W, N) order), or a power that is not finite and > 0; a -inf log-probability is a valid zero.
+/// Two passes over the volume as given and one write of the frame (docs/localize.md, "Speed").
+[[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1,
+                                          double power = 1.0);
 
 /// Recomputes a frame's entropy, max_log_prob and argmax from its values as they stand (after
 /// they were rounded, say), leaving the values untouched: what the filter reads of a frame then
 /// describes the values it multiplies in.
 void summarize_frame(PreparedFrame& frame, int threads = 1);
+
+/// The log-softmax of the frame's values in place, with its entropy, max_log_prob and argmax:
+/// for values changed after prepare_frame (a backbone calibration's blur and floor, say).
+void normalize_frame(PreparedFrame& frame, int threads = 1);
 
 /// temper_frame in place (the frame's storage is reused).
 void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
