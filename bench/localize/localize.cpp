@@ -1,8 +1,10 @@
-// bench/localize: frames/s end to end on a 1,000-frame route of 128x128x256 float16 volumes with
-// the default 256x256x256 window (seqloc mode), with the split by stage (reading and preparing
-// volumes on a background task, the filter, writing the outputs) and peak memory; then the same
-// route without self-calibration, and in smooth mode (time per frame against seqloc's, peak memory). The volumes are
-// 16 distinct random ones cycled along the route (128 MB, so the page cache holds them).
+// bench/localize: a frame's intake on one thread against its floor (mapping the file and
+// converting float16 to float32); then frames/s end to end on a 1,000-frame route of 128x128x256
+// float16 volumes with the default 256x256x256 window (seqloc mode), with the split by stage
+// (reading and preparing volumes on a background task, the filter, writing the outputs) and peak
+// memory; then the same route without self-calibration, with a backbone calibration, and in
+// smooth mode (time per frame against seqloc's, peak memory). The volumes are 16 distinct random
+// ones cycled along the route (128 MB, so the page cache holds them). --intake: the intake alone.
 //
 // Then routes of observations (the demo's path): 2 simulated routes x 20 frames of the sample
 // region, scored by the built-in matcher, window 192; each mode alone, then all four at once
@@ -10,9 +12,11 @@
 //
 // With --device cuda (or cuda-host) the 1,000-frame route alone, on that device (device_run).
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -23,10 +27,12 @@
 #include <thread>
 #include <vector>
 
+#include "seqloc/core/units.hpp"
 #include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/io/npy.hpp"
 #include "seqloc/io/route.hpp"
 #include "seqloc/io/run_folder.hpp"
+#include "seqloc/matcher/calibration.hpp"
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
@@ -75,8 +81,7 @@ std::string observation_routes(const fs::path& work) {
     const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     const double mb = static_cast<double>(peak_kb()) / 1024.0;
     std::printf("  %-8s %6.1f s  %5.2f frames/s per mode  peak %4.0f MB  (%zu volumes made)\n", name, seconds,
-                frames / seconds, mb,
-                batch.frames_made);
+                frames / seconds, mb, batch.frames_made);
     return std::pair{seconds, mb};
   };
   std::printf("observation routes: 2 x 20 frames of the sample region, matcher 128x128x256, window 192, %d threads\n",
@@ -99,8 +104,10 @@ std::string observation_routes(const fs::path& work) {
                   frames / r.first, mode.c_str(), r.second);
     json += field;
   }
-  std::snprintf(field, sizeof field, R"(, "obs_all_s": %.1f, "obs_alone_sum_s": %.1f, "obs_all_over_alone": %.3f, )"
-                R"("obs_all_peak_mb": %.0f)", all.first, sum, all.first / sum, all.second);
+  std::snprintf(field, sizeof field,
+                R"(, "obs_all_s": %.1f, "obs_alone_sum_s": %.1f, "obs_all_over_alone": %.3f, )"
+                R"("obs_all_peak_mb": %.0f)",
+                all.first, sum, all.first / sum, all.second);
   return json + field;
 }
 
@@ -138,6 +145,67 @@ double hand_over_ms(const seqloc::ingest::PreprocessOptions& pre, const seqloc::
   const auto t0 = Clock::now();
   for (int i = 0; i < kTimes; ++i) localizer.hand_over(i % 2 == 0 ? east : west);
   return 1000.0 * std::chrono::duration<double>(Clock::now() - t0).count() / kTimes;
+}
+
+// The backbone calibration the calibrated runs use (a temperature, a blur and a floor).
+struct BenchCalibration {
+  double temperature;
+  seqloc::matcher::VolumeCalibration volume;
+};
+const BenchCalibration kCalibration{1.5, {1.5, 1.0, 0.05}};
+
+// A frame's intake on one thread against its floor, over the route's distinct volumes (the best of
+// five rounds each, ms a frame): the floor maps the .npy file and converts its float16 values to
+// float32 in one plain pass into a buffer allocated as a frame is (no transposition, no
+// log-softmax); the intake maps it and prepares it as localize does (read, convert, transpose,
+// check, normalize), and once more tempered by a volume temperature of 2.
+struct Intake {
+  double floor_ms = 0, intake_ms = 0, tempered_ms = 0, calibrated_ms = 0;
+};
+
+Intake time_intake(const fs::path& dir, int distinct) {
+  seqloc::pipeline::LocalizeOptions one;
+  one.filter.threads = 1;
+  auto tempered = one;
+  tempered.volume_temperature = 2;
+  auto calibrated = one;
+  calibrated.volume_temperature = kCalibration.temperature;
+  calibrated.volume_calibration = kCalibration.volume;
+  // Rounds over all the files in turn, so that a file is not still in the processor's caches
+  // from its last round (16 volumes of 8 MB, each made into 16 MB): each file's best round.
+  auto best_ms = [&](auto&& work) {
+    std::vector<double> best(static_cast<std::size_t>(distinct), 1e300);
+    for (int round = 0; round < 5; ++round) {
+      for (int k = 0; k < distinct; ++k) {
+        const auto t0 = Clock::now();
+        const seqloc::io::NpyVolume npy(dir / ("v" + std::to_string(k) + ".npy"));
+        work(npy);
+        auto& b = best[static_cast<std::size_t>(k)];
+        b = std::min(b, std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+      }
+    }
+    double sum = 0;
+    for (const double b : best) sum += b;
+    return sum / distinct;
+  };
+  Intake r;
+  r.floor_ms = best_ms([&](const seqloc::io::NpyVolume& npy) {
+    const std::size_t n = static_cast<std::size_t>(npy.height()) * npy.width() * npy.bins();
+    seqloc::filter::UninitializedAlignedVector<float> floats(n);  // allocated as a prepared frame is
+    seqloc::filter::halves_to_floats({static_cast<const std::uint16_t*>(npy.data()), n}, floats);
+    if (!(floats[n / 2] > -1e30f)) std::abort();
+  });
+  auto prepared = [&](const seqloc::pipeline::LocalizeOptions& options) {
+    return [&options](const seqloc::io::NpyVolume& npy) {
+      const auto frame = seqloc::pipeline::prepare_volume(
+          npy.view(seqloc::filter::VolumeValues::log_prob, seqloc::core::kCellM), options);
+      if (!(frame.entropy >= 0)) std::abort();
+    };
+  };
+  r.intake_ms = best_ms(prepared(one));
+  r.tempered_ms = best_ms(prepared(tempered));
+  r.calibrated_ms = best_ms(prepared(calibrated));
+  return r;
 }
 
 }  // namespace
@@ -191,8 +259,9 @@ std::string device_run(const seqloc::io::Route& route, seqloc::raster::CacheRead
 int main(int argc, char** argv) {
   std::optional<seqloc::pipeline::Device> device;
   if (argc == 3 && std::string(argv[1]) == "--device") device = seqloc::pipeline::device_from_name(argv[2]);
-  if (argc != 1 && (!device || *device == seqloc::pipeline::Device::cpu)) {
-    std::fprintf(stderr, "usage: bench_localize [--device cuda|cuda-host]\n");
+  const bool intake_only = argc == 2 && std::string(argv[1]) == "--intake";
+  if (argc != 1 && !intake_only && (!device || *device == seqloc::pipeline::Device::cpu)) {
+    std::fprintf(stderr, "usage: bench_localize [--device cuda|cuda-host | --intake]\n");
     return 2;
   }
   if (device) {
@@ -249,6 +318,21 @@ int main(int argc, char** argv) {
     fs::remove_all(work);
     return 0;
   }
+  const Intake intake = time_intake(work / "route", distinct);
+  std::printf(
+      "intake of one frame, 1 thread: %.1f ms (tempered: %.1f ms; calibrated: %.1f ms) against a floor of "
+      "%.1f ms (map the file, float16 to float32): %.2fx (target <= 3)\n",
+      intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms, intake.intake_ms / intake.floor_ms);
+  if (intake_only) {
+    std::printf(
+        "{\"benchmark\": \"localize_intake\", \"intake_ms_per_frame\": %.2f, "
+        "\"intake_tempered_ms_per_frame\": %.2f, \"intake_calibrated_ms_per_frame\": %.2f, "
+        "\"intake_floor_ms\": %.2f, \"intake_over_floor\": %.2f}\n",
+        intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms,
+        intake.intake_ms / intake.floor_ms);
+    fs::remove_all(work);
+    return 0;
+  }
   const auto t0 = Clock::now();
   const auto result = seqloc::pipeline::localize_route(route, cache, options, seqloc::io::Mode::seqloc);
   const double run_s = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -259,9 +343,10 @@ int main(int argc, char** argv) {
   const double total = run_s + write_s;
   std::printf("1000 frames, 128x128x256 float16 volumes, 256x256x256 window, %d threads\n", options.filter.threads);
   std::printf("end to end %.1f s = %.1f frames/s (target >= 10)\n", total, frames / total);
-  std::printf("stages: read+prepare %.1f s (background, overlapping the filter), filter %.1f s, waiting for the next "
-              "volume %.1f s, writing outputs %.2f s; %d window re-centres\n",
-              result.prepare_seconds, result.filter_seconds, result.wait_seconds, write_s, result.recentres);
+  std::printf(
+      "stages: read+prepare %.1f s (background, overlapping the filter), filter %.1f s, waiting for the next "
+      "volume %.1f s, writing outputs %.2f s; %d window re-centres\n",
+      result.prepare_seconds, result.filter_seconds, result.wait_seconds, write_s, result.recentres);
   std::printf("peak memory %.0f MB\n", static_cast<double>(peak_kb()) / 1024.0);
   const double peak_mb = static_cast<double>(peak_kb()) / 1024.0;
   // The same route without self-calibration: what it costs per frame.
@@ -270,10 +355,25 @@ int main(int argc, char** argv) {
   const auto t2 = Clock::now();
   const auto without = seqloc::pipeline::localize_route(route, cache, plain, seqloc::io::Mode::seqloc);
   const double plain_s = std::chrono::duration<double>(Clock::now() - t2).count();
-  std::printf("without self-calibration: %.1f s = %.1f frames/s, filter %.1f s (self-calibration adds %.1f ms a frame "
-              "to the filter)\n",
-              plain_s, frames / plain_s, without.filter_seconds,
-              1000.0 * (result.filter_seconds - without.filter_seconds) / frames);
+  std::printf(
+      "without self-calibration: %.1f s = %.1f frames/s, filter %.1f s (self-calibration adds %.1f ms a frame "
+      "to the filter)\n",
+      plain_s, frames / plain_s, without.filter_seconds,
+      1000.0 * (result.filter_seconds - without.filter_seconds) / frames);
+  // The same route with a backbone calibration (temperature, blur and floor, as a calibration.json
+  // gives them): the frames calibrated on their way in.
+  auto calibrated = options;
+  calibrated.volume_temperature = kCalibration.temperature;
+  calibrated.volume_calibration = kCalibration.volume;
+  const auto t4 = Clock::now();
+  const auto with_calibration = seqloc::pipeline::localize_route(route, cache, calibrated, seqloc::io::Mode::seqloc);
+  const double calibrated_s = std::chrono::duration<double>(Clock::now() - t4).count();
+  std::printf(
+      "with a backbone calibration (temperature %.1f, blur %.1f cells and %.1f bins, floor %.2f): %.1f s = %.1f "
+      "frames/s, read+prepare %.1f s, filter %.1f s, waiting for volumes %.1f s\n",
+      kCalibration.temperature, kCalibration.volume.blur_cells, kCalibration.volume.blur_bins,
+      kCalibration.volume.floor, calibrated_s, frames / calibrated_s, with_calibration.prepare_seconds,
+      with_calibration.filter_seconds, with_calibration.wait_seconds);
   // Smooth on the same route: its time per frame against seqloc's (issue target: at most 3x) and
   // its own peak memory (target: under 2 GB).
   reset_peak();
@@ -281,22 +381,26 @@ int main(int argc, char** argv) {
   const auto smooth = seqloc::pipeline::localize_route(route, cache, options, seqloc::io::Mode::smooth);
   const double smooth_s = std::chrono::duration<double>(Clock::now() - t3).count();
   const double smooth_peak_mb = static_cast<double>(peak_kb()) / 1024.0;
-  std::printf("smooth: %.1f s = %.1f frames/s, %.2fx seqloc's time per frame (target <= 3); filter %.1f s, "
-              "read+prepare %.1f s (every volume read twice); peak memory %.0f MB (target < 2048)\n",
-              smooth_s, frames / smooth_s, smooth_s / run_s, smooth.filter_seconds, smooth.prepare_seconds,
-              smooth_peak_mb);
+  std::printf(
+      "smooth: %.1f s = %.1f frames/s, %.2fx seqloc's time per frame (target <= 3); filter %.1f s, "
+      "read+prepare %.1f s (every volume read twice); peak memory %.0f MB (target < 2048)\n",
+      smooth_s, frames / smooth_s, smooth_s / run_s, smooth.filter_seconds, smooth.prepare_seconds, smooth_peak_mb);
   const double hand_over = hand_over_ms(pre, options, work);
   std::printf("hand-over at a seam between two regions: %.0f ms once per crossing (%.1f frames' filter time)\n",
               hand_over, hand_over / (1000.0 * result.filter_seconds / frames));
   const std::string observations = observation_routes(work);
-  std::printf("{\"benchmark\": \"localize\", \"frames\": %d, \"frames_per_s\": %.2f, \"total_s\": %.2f, "
-              "\"prepare_s\": %.2f, \"filter_s\": %.2f, \"wait_s\": %.2f, \"write_s\": %.3f, \"peak_mb\": %.0f, "
-              "\"no_self_calibration_frames_per_s\": %.2f, \"no_self_calibration_filter_s\": %.2f, "
-              "\"smooth_frames_per_s\": %.2f, \"smooth_time_ratio_to_seqloc\": %.2f, \"smooth_peak_mb\": %.0f, "
-              "\"hand_over_ms\": %.1f%s}\n",
-              frames, frames / total, total, result.prepare_seconds, result.filter_seconds, result.wait_seconds,
-              write_s, peak_mb, frames / plain_s, without.filter_seconds, frames / smooth_s, smooth_s / run_s,
-              smooth_peak_mb, hand_over, observations.c_str());
+  std::printf(
+      "{\"benchmark\": \"localize\", \"frames\": %d, \"frames_per_s\": %.2f, \"total_s\": %.2f, "
+      "\"prepare_s\": %.2f, \"filter_s\": %.2f, \"wait_s\": %.2f, \"write_s\": %.3f, \"peak_mb\": %.0f, "
+      "\"no_self_calibration_frames_per_s\": %.2f, \"no_self_calibration_filter_s\": %.2f, "
+      "\"smooth_frames_per_s\": %.2f, \"smooth_time_ratio_to_seqloc\": %.2f, \"smooth_peak_mb\": %.0f, "
+      "\"hand_over_ms\": %.1f, \"intake_ms_per_frame\": %.2f, \"intake_tempered_ms_per_frame\": %.2f, "
+      "\"intake_calibrated_ms_per_frame\": %.2f, \"intake_floor_ms\": %.2f, \"intake_over_floor\": %.2f, "
+      "\"calibrated_frames_per_s\": %.2f, \"calibrated_wait_s\": %.2f%s}\n",
+      frames, frames / total, total, result.prepare_seconds, result.filter_seconds, result.wait_seconds, write_s,
+      peak_mb, frames / plain_s, without.filter_seconds, frames / smooth_s, smooth_s / run_s, smooth_peak_mb, hand_over,
+      intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms, intake.intake_ms / intake.floor_ms,
+      frames / calibrated_s, with_calibration.wait_seconds, observations.c_str());
   fs::remove_all(work);
   return 0;
 }

@@ -1,6 +1,7 @@
 #include "seqloc/matcher/calibration.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -122,6 +123,34 @@ std::vector<float> float_taps(double sigma) {
   return {taps.begin(), taps.end()};
 }
 
+// The first step of a calibration, either layout. The identity: the volume becomes its
+// log-softmax (exact in the log domain) and true is returned. Otherwise, in place and in float,
+// p = exp(v - top): the volume is the only large buffer (a 128 x 128 x 256 one is 16 MB). Scores
+// more than 40 nats under the top count as 40 under it: e^-40 times the smallest tap of three
+// blurs (sigma <= 64) stays a normal float, so no denormal arises (its arithmetic is two orders of
+// magnitude slower, and threads that flush denormals to zero, as OpenCV's callers may, would give
+// other bits); a probability of e^-40 relative to the peak is nothing beside any floor.
+bool start_calibration(std::span<float> volume, const VolumeCalibration& c, int threads) {
+  const float top = ConstArrayMap(volume.data(), static_cast<Eigen::Index>(volume.size())).maxCoeff();
+  if (c.floor == 0 && c.blur_bins == 0 && c.blur_cells == 0) {
+    const double lse = log_sum_exp(volume, top, 1.0);
+    for (float& v : volume) v = static_cast<float>(static_cast<double>(v) - lse);
+    return true;
+  }
+  vectorized(volume.data(), volume.size(), threads,
+             [top](const Eigen::ArrayXf& x) { return ((x - top).max(-40.0f)).exp().eval(); });
+  return false;
+}
+
+// The last step: the blurred probabilities (summing to `sum`) mixed with the floor a, back to logs.
+void finish_calibration(std::span<float> volume, double a, double sum, int threads) {
+  const auto scale = static_cast<float>((1 - a) / sum);
+  const auto uniform = static_cast<float>(a / static_cast<double>(volume.size()));
+  vectorized(volume.data(), volume.size(), threads, [scale, uniform](const Eigen::ArrayXf& x) {
+    return (x * scale + uniform).max(std::numeric_limits<float>::min()).log().eval();
+  });
+}
+
 }  // namespace
 
 void VolumeCalibration::validate() const {
@@ -157,21 +186,8 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
       cells == 0) {
     throw UsageError("calibrate_volume: the volume's size is not height * width * bins");
   }
-  const float top = *std::max_element(volume.begin(), volume.end());
-  const double a = c.floor;
-  if (a == 0 && c.blur_bins == 0 && c.blur_cells == 0) {  // a log-softmax, exact in the log domain
-    const double lse = log_sum_exp(volume, top, 1.0);
-    for (float& v : volume) v = static_cast<float>(static_cast<double>(v) - lse);
-    return;
-  }
-  // In place and in float: p = exp(v - top), blurred, mixed with the floor, back to logs. The
-  // volume is the only large buffer (a 128 x 128 x 256 one is 16 MB). Scores more than 40 nats
-  // under the top count as 40 under it: e^-40 times the smallest tap of three blurs (sigma <= 64)
-  // stays a normal float, so no denormal arises (its arithmetic is two orders of magnitude slower,
-  // and threads that flush denormals to zero, as OpenCV's callers may, would give other bits); a
-  // probability of e^-40 relative to the peak is nothing beside any floor.
+  if (start_calibration(volume, c, threads)) return;
   float* p = volume.data();
-  vectorized(p, cells, threads, [top](const Eigen::ArrayXf& x) { return ((x - top).max(-40.0f)).exp().eval(); });
   const auto H = static_cast<std::size_t>(height), W = static_cast<std::size_t>(width),
              N = static_cast<std::size_t>(bins);
   if (c.blur_bins > 0) {
@@ -200,10 +216,92 @@ void calibrate_volume(std::span<float> volume, int height, int width, int bins, 
   // A plain loop: a vectorized reduction would group the terms by the buffer's address.
   double sum = 0;
   for (std::size_t i = 0; i < cells; ++i) sum += static_cast<double>(p[i]);
-  const auto scale = static_cast<float>((1 - a) / sum), uniform = static_cast<float>(a / static_cast<double>(cells));
-  vectorized(p, cells, threads, [scale, uniform](const Eigen::ArrayXf& x) {
-    return (x * scale + uniform).max(std::numeric_limits<float>::min()).log().eval();
+  finish_calibration(volume, c.floor, sum, threads);
+}
+
+namespace {
+
+// The blur across heading bins of a heading-major volume: slice j = sum_k taps[k] slice (j + k -
+// radius), circularly, each value's terms in the order convolve_circular adds them. Cells in
+// strips of 1,024, all bins of a strip copied out first.
+void blur_bins_heading_major(float* p, int bins, std::size_t slice, const std::vector<float>& taps, int threads) {
+  constexpr std::size_t kStrip = 1024;
+  const int radius = static_cast<int>(taps.size() / 2);
+  const std::size_t strips = (slice + kStrip - 1) / kStrip;
+  const auto N = static_cast<std::size_t>(bins);
+  core::parallel_chunks(strips, threads, [&](std::size_t s0, std::size_t s1, int) {
+    std::vector<float> strip(N * kStrip);
+    for (std::size_t s = s0; s < s1; ++s) {
+      const std::size_t c0 = s * kStrip, w = std::min(kStrip, slice - c0);
+      for (std::size_t j = 0; j < N; ++j) std::copy(p + j * slice + c0, p + j * slice + c0 + w, strip.data() + j * w);
+      for (int j = 0; j < bins; ++j) {
+        float* o = p + static_cast<std::size_t>(j) * slice + c0;
+        std::fill(o, o + w, 0.0f);
+        for (int k = 0; k <= 2 * radius; ++k) {
+          const float weight = taps[static_cast<std::size_t>(k)];
+          const auto source = static_cast<std::size_t>(((j + k - radius) % bins + bins) % bins);
+          const float* x = strip.data() + source * w;
+          for (std::size_t c = 0; c < w; ++c) o[c] += weight * x[c];
+        }
+      }
+    }
   });
+}
+
+// The blur along u of every row of a heading-major volume (`rows` rows of `width`), each value's
+// terms in the order convolve_blocks adds them, values past either end left out.
+void blur_rows(float* p, std::size_t rows, int width, const std::vector<float>& taps, int threads) {
+  const int radius = static_cast<int>(taps.size() / 2);
+  core::parallel_chunks(rows, threads, [&](std::size_t r0, std::size_t r1, int) {
+    std::vector<float> row(static_cast<std::size_t>(width));
+    for (std::size_t r = r0; r < r1; ++r) {
+      float* o = p + r * static_cast<std::size_t>(width);
+      std::copy(o, o + width, row.begin());
+      std::fill(o, o + width, 0.0f);
+      for (int j = -radius; j <= radius; ++j) {
+        const float weight = taps[static_cast<std::size_t>(j + radius)];
+        const int u0 = std::max(0, -j), u1 = std::min(width, width - j);
+        for (int u = u0; u < u1; ++u) o[u] += weight * row[static_cast<std::size_t>(u + j)];
+      }
+    }
+  });
+}
+
+}  // namespace
+
+void calibrate_heading_major(std::span<float> volume, int bins, int height, int width, const VolumeCalibration& c,
+                             int threads) {
+  c.validate();
+  const std::size_t cells = volume.size();
+  const std::size_t slice = static_cast<std::size_t>(height) * static_cast<std::size_t>(width);
+  if (cells != slice * static_cast<std::size_t>(bins) || cells == 0) {
+    throw UsageError("calibrate_heading_major: the volume's size is not bins * height * width");
+  }
+  if (start_calibration(volume, c, threads)) return;
+  float* p = volume.data();
+  if (c.blur_bins > 0) blur_bins_heading_major(p, bins, slice, float_taps(c.blur_bins), threads);
+  if (c.blur_cells > 0) {
+    const auto taps = float_taps(c.blur_cells);
+    blur_rows(p, static_cast<std::size_t>(bins) * static_cast<std::size_t>(height), width, taps, threads);
+    // Along v: each slice is `height` blocks of a row.
+    core::parallel_chunks(static_cast<std::size_t>(bins), threads, [&](std::size_t j0, std::size_t j1, int) {
+      for (std::size_t j = j0; j < j1; ++j) {
+        convolve_blocks_in_place(p + j * slice, height, static_cast<std::size_t>(width), 0,
+                                 static_cast<std::size_t>(width), taps);
+      }
+    });
+  }
+  // Eight sums, value i in sum i % 8, then added in order: a grouping set by the index alone (not
+  // the buffer's address), which vectorizes.
+  std::array<double, 8> lanes{};
+  const std::size_t whole = cells / lanes.size() * lanes.size();
+  for (std::size_t i = 0; i < whole; i += lanes.size()) {
+    for (std::size_t k = 0; k < lanes.size(); ++k) lanes[k] += static_cast<double>(p[i + k]);
+  }
+  for (std::size_t i = whole; i < cells; ++i) lanes[i % lanes.size()] += static_cast<double>(p[i]);
+  double sum = 0;
+  for (const double lane : lanes) sum += lane;
+  finish_calibration(volume, c.floor, sum, threads);
 }
 
 CalibrationFit::CalibrationFit() : CalibrationFit(Grid{}) {}

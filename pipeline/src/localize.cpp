@@ -68,18 +68,14 @@ std::vector<float> hwn_values(const filter::PreparedFrame& frame) {
 
 filter::PreparedFrame prepare_volume(const filter::FrameVolume& volume, const LocalizeOptions& options) {
   const int threads = options.filter.threads;
-  // temper_frame passes power 1 through.
-  filter::PreparedFrame frame = filter::temper_frame(filter::prepare_frame(volume, options.filter.headings, threads),
-                                                     1.0 / options.volume_temperature, threads);
+  filter::PreparedFrame frame =
+      filter::prepare_frame(volume, options.filter.headings, threads, 1.0 / options.volume_temperature);
   if (options.volume_calibration.identity()) return frame;
-  // Blur and floor work on (H, W, N) log-probabilities: the prepared frame's [bin][v][u] turned
-  // back, calibrated, and prepared again.
-  const int H = frame.height, W = frame.width, N = frame.bins;
-  std::vector<float> hwn = hwn_values(frame);
-  matcher::calibrate_volume(hwn, H, W, N, options.volume_calibration, threads);
-  return filter::prepare_frame({hwn.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob, H, W, N,
-                                frame.cell_m},
-                               options.filter.headings, threads);
+  // Blur and floor on the prepared frame where it lies ([bin][v][u]), then its log-softmax again.
+  matcher::calibrate_heading_major(frame.log_prob, frame.bins, frame.height, frame.width, options.volume_calibration,
+                                   threads);
+  filter::normalize_frame(frame, threads);
+  return frame;
 }
 
 namespace {
@@ -112,8 +108,13 @@ FrameSource frames_from(const io::Route& route, std::function<raster::CacheReade
     if (!calibration.identity()) {
       matcher::calibrate_volume(values, size, size, matcher->config().headings, calibration, matcher->config().threads);
     }
-    const filter::FrameVolume volume{values.data(), filter::VolumeType::float32, filter::VolumeValues::log_prob,
-                                     size, size, matcher->config().headings, kCellM};
+    const filter::FrameVolume volume{values.data(),
+                                     filter::VolumeType::float32,
+                                     filter::VolumeValues::log_prob,
+                                     size,
+                                     size,
+                                     matcher->config().headings,
+                                     kCellM};
     return prepared(volume);
   };
 }
@@ -121,7 +122,8 @@ FrameSource frames_from(const io::Route& route, std::function<raster::CacheReade
 }  // namespace
 
 FrameSource route_frames(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options) {
-  return frames_from(route, [&cache](std::size_t) -> raster::CacheReader& { return cache; }, options);
+  return frames_from(
+      route, [&cache](std::size_t) -> raster::CacheReader& { return cache; }, options);
 }
 
 FrameSource stored_route_frames(const io::Route& route, raster::CacheReader& cache, const LocalizeOptions& options,
@@ -395,9 +397,9 @@ BatchResult localize_routes(const std::vector<io::Route>& routes, const RegionCa
       auto cache_of = [&catalog, &regions, r](std::size_t i) -> raster::CacheReader& {
         return catalog.cache(regions[r][i]);
       };
-      shared[r].store = std::make_shared<FrameStore>(frames_from(routes[r], cache_of, job_options),
-                                                     routes[r].frames.size(), readers(routes[r]), budget,
-                                                     options.spill_dir);
+      shared[r].store =
+          std::make_shared<FrameStore>(frames_from(routes[r], cache_of, job_options), routes[r].frames.size(),
+                                       readers(routes[r]), budget, options.spill_dir);
     }
     return shared[r].store;
   };

@@ -35,6 +35,44 @@ TEST(CalibrateVolume, IdentityIsALogSoftmax) {
   }
 }
 
+// The heading-major calibration (a prepared frame's layout) against calibrate_volume of the same
+// volume turned to (H, W, N): the same values to float rounding for each kind of calibration, on a
+// shape whose sides differ, and the same bits for any number of threads.
+TEST(CalibrateVolume, HeadingMajorEqualsTheVolumeLayout) {
+  const int H = 9, W = 13, N = 12;
+  std::mt19937 rng(5);
+  std::normal_distribution<float> d(0.0F, 4.0F);
+  std::vector<float> hwn(static_cast<std::size_t>(H) * W * N);
+  for (auto& v : hwn) v = d(rng);
+  const std::size_t slice = static_cast<std::size_t>(H) * W;
+  auto heading_major = [&](const std::vector<float>& from) {
+    std::vector<float> out(from.size());
+    for (int v = 0; v < H; ++v)
+      for (int u = 0; u < W; ++u)
+        for (int b = 0; b < N; ++b)
+          out[static_cast<std::size_t>(b) * slice + static_cast<std::size_t>(v) * W + u] = from[at(v, u, b, W, N)];
+    return out;
+  };
+  for (const VolumeCalibration c : {VolumeCalibration{1.5, 0, 0}, VolumeCalibration{0, 2.0, 0},
+                                    VolumeCalibration{0, 0, 0.3}, VolumeCalibration{2.5, 1.0, 0.05},
+                                    VolumeCalibration{}}) {
+    auto expected = hwn;
+    calibrate_volume(expected, H, W, N, c);
+    const auto want = heading_major(expected);
+    auto got = heading_major(hwn);
+    calibrate_heading_major(got, N, H, W, c);
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      ASSERT_NEAR(got[i], want[i], 1e-6 * std::max(1.0f, std::abs(want[i])))
+          << i << " blur " << c.blur_cells << " / " << c.blur_bins << " floor " << c.floor;
+    }
+    auto threaded = heading_major(hwn);
+    calibrate_heading_major(threaded, N, H, W, c, 3);
+    EXPECT_EQ(threaded, got);
+  }
+  std::vector<float> wrong(10);
+  EXPECT_THROW(calibrate_heading_major(wrong, N, H, W, {}), UsageError);
+}
+
 TEST(CalibrateVolume, TheSameBitsForAnyNumberOfThreads) {
   // Every stage works on separate cells (the blocks of exp and log, the heading blur per cell, the
   // row and column blurs): however the shared pool splits them, each value is computed alike.

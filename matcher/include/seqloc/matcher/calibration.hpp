@@ -31,6 +31,13 @@ struct VolumeCalibration {
 void calibrate_volume(std::span<float> volume, int height, int width, int bins, const VolumeCalibration& calibration,
                       int threads = 1);
 
+/// calibrate_volume for a volume stored heading-major ([bin][v][u], a prepared frame's layout):
+/// the same blurs, floor and logs, so that a frame is calibrated where it is, not turned back to
+/// (H, W, N) and prepared again. Equal to calibrate_volume of the same volume to float rounding
+/// (the sum that normalizes it is taken in this layout's order); the same for any `threads`.
+void calibrate_heading_major(std::span<float> volume, int bins, int height, int width,
+                             const VolumeCalibration& calibration, int threads = 1);
+
 /// The discrete Gaussian used by calibrate_volume: 2 * ceil(3 sigma) + 1 taps summing to 1
 /// (one tap of 1 for sigma 0).
 [[nodiscard]] std::vector<double> gaussian_taps(double sigma);
