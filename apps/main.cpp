@@ -86,7 +86,9 @@ int main(int argc, char** argv) {
       app::make_render_command());
   add(&cli, "serve", "Serve region caches over HTTP: tiles, crops, points, WMTS, the viewer page",
       app::make_serve_command());
-  add(&cli, "export", "Export a layer of a region cache as a Cloud Optimized GeoTIFF, or the cache as a VRT",
+  add(&cli, "export",
+      "Export a layer of a region cache as a Cloud Optimized GeoTIFF or as a PMTiles or MBTiles map, or the cache as a "
+      "VRT",
       app::make_export_command());
   CLI::App* cache = cli.add_subcommand("cache", "Inspect and combine region caches");
   cache->require_subcommand(1);

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <optional>
 
+#include "seqloc/serve/tile_archive.hpp"
 #include "service_internal.hpp"
 
 namespace seqloc::serve {
@@ -14,7 +15,8 @@ void ServiceOptions::validate() const {
   auto fail = [](const std::string& field, const std::string& value, const char* constraint) {
     throw ServiceError("service options: " + field + " = " + value + ": " + constraint, ErrorCategory::usage);
   };
-  if (!(max_crop_m > 0) || !std::isfinite(max_crop_m)) fail("max_crop_m", std::to_string(max_crop_m), "must be finite and > 0");
+  if (!(max_crop_m > 0) || !std::isfinite(max_crop_m))
+    fail("max_crop_m", std::to_string(max_crop_m), "must be finite and > 0");
   if (tile_lru < 1) fail("tile_lru", std::to_string(tile_lru), "must be >= 1");
   if (tile_max_age_s < 0) fail("tile_max_age_s", std::to_string(tile_max_age_s), "must be >= 0");
   if (std::isnan(reload_check_s)) fail("reload_check_s", "nan", "must be a number (< 0: never)");
@@ -54,26 +56,11 @@ std::shared_ptr<Service::Region> Service::open_region(const std::string& id, con
   region->file = detail::identity_of(path).value_or(detail::FileIdentity{});
   region->cache = std::make_shared<raster::CacheReader>(path, options_.tile_lru);
   const auto& m = region->cache->metadata();
-  region->build_tag = detail::hex(detail::fnv1a(m.source_sha256 + "|" + m.created_utc + "|" + m.software_version + "|" +
-                                std::to_string(m.format_version) + "|" + SEQLOC_VERSION + "|" +
-                                detail::fixed(options_.layers.prior_sigma_m, 6) + "|" + std::to_string(region->file.inode) +
-                                "|" + std::to_string(region->file.mtime_ns)));
-  const auto projection = m.projection();
-  const auto& g = m.grid;
-  // The lon/lat extent of the raster's outline (its edges are not meridians or parallels).
-  region->bounds = {180, 90, -180, -90};
-  constexpr int kSamples = 16;
-  for (int i = 0; i <= kSamples; ++i) {
-    const double f = static_cast<double>(i) / kSamples;
-    const double x = g.min_x() + f * (g.max_x() - g.min_x()), y = g.min_y() + f * (g.max_y() - g.min_y());
-    for (const osm::GridPoint p : {osm::GridPoint{x, g.min_y()}, osm::GridPoint{x, g.max_y()},
-                                   osm::GridPoint{g.min_x(), y}, osm::GridPoint{g.max_x(), y}}) {
-      const auto q = projection.reverse(p);
-      auto& b = region->bounds;
-      b.min_lon = std::min(b.min_lon, q.lon_deg), b.max_lon = std::max(b.max_lon, q.lon_deg);
-      b.min_lat = std::min(b.min_lat, q.lat_deg), b.max_lat = std::max(b.max_lat, q.lat_deg);
-    }
-  }
+  region->build_tag = detail::hex(detail::fnv1a(
+      m.source_sha256 + "|" + m.created_utc + "|" + m.software_version + "|" + std::to_string(m.format_version) + "|" +
+      SEQLOC_VERSION + "|" + detail::fixed(options_.layers.prior_sigma_m, 6) + "|" +
+      std::to_string(region->file.inode) + "|" + std::to_string(region->file.mtime_ns)));
+  region->bounds = region_geo_bounds(m);
   return region;
 }
 

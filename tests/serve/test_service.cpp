@@ -27,24 +27,13 @@
 #include "seqloc/serve/geotiff.hpp"
 #include "seqloc/serve/server.hpp"
 #include "seqloc/serve/service.hpp"
+#include "serve/monaco_cache.hpp"
 #include "support/test_support.hpp"
 
 namespace seqloc::serve {
 namespace {
 
-std::filesystem::path monaco_cache() {
-  static test::ScratchDir dir;
-  static std::filesystem::path built;
-  if (built.empty()) {
-    ingest::PreprocessOptions options;
-    options.input = test::osm_extract("monaco.osm.pbf");
-    options.output = dir / "monaco.gpkg";
-    options.threads = 2;
-    ingest::preprocess_region(options);
-    built = options.output;
-  }
-  return built;
-}
+using test_data::monaco_cache;
 
 // An HttpServer on a free port, listening in its own thread; stopped and joined on every way out
 // of a test, an ASSERT's early return included (a joinable std::thread would abort the binary).
