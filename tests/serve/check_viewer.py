@@ -1,16 +1,20 @@
 """The viewer page in headless Chromium: `seqloc serve` with the built page, a track from
 `seqloc localize` on the sample region; the page must load the region's tiles without errors and
 draw every frame of the track, and the screenshot must show the map, the ground truth and the
-frames coloured by position error. Twice:
-in the region's own projection, and over a Web Mercator view from the server's XYZ tiles (?web=1)."""
+frames coloured by position error. Three times: in the region's own projection, over a Web
+Mercator view from the server's XYZ tiles (?web=1), and with no seqloc server at all: the page as
+static files beside a PMTiles archive of the region (?pmtiles=), read by HTTP range requests from a
+plain static file server (one written here, as a CDN or object store answers them)."""
 
 import argparse
+import http.server
 import os
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 
 from osgeo import gdal
 
@@ -51,9 +55,66 @@ def main():
         finally:
             server.terminate()
             server.wait(timeout=20)
+        # No seqloc server: the built page as static files (index.html, the bundle under static/),
+        # the archive and the track beside it.
+        site = os.path.join(d, "site")
+        os.makedirs(os.path.join(site, "static"))
+        for name in os.listdir(a.web):
+            target = site if name == "index.html" else os.path.join(site, "static")
+            shutil.copy(os.path.join(a.web, name), target)
+        run(a.seqloc, "export", cache, "-o", os.path.join(site, "sample.pmtiles"), "--no-progress")
+        shutil.copy(os.path.join(d, "out", "route_000", "seqloc", "track.geojson"), site)
+        static = http.server.ThreadingHTTPServer(("127.0.0.1", 0), lambda *args: RangeHandler(*args, directory=site))
+        threading.Thread(target=static.serve_forever, daemon=True).start()
+        try:
+            url = f"http://127.0.0.1:{static.server_address[1]}/index.html?pmtiles=sample.pmtiles&track=track.geojson"
+            failures += [f"static pmtiles: {f}" for f in check_page(a.chromium, url, d, "static pmtiles")]
+        finally:
+            static.shutdown()
         if failures:
             sys.exit("; ".join(failures))
-        print("2 passed, 0 failed")
+        print("3 passed, 0 failed")
+
+
+class RangeHandler(http.server.SimpleHTTPRequestHandler):
+    """Static files with single byte ranges (Range: bytes=A-B), as object stores and CDNs serve them."""
+
+    def send_head(self):
+        self.range_left = None
+        wanted = re.fullmatch(r"bytes=(\d+)-(\d*)", self.headers.get("Range", ""))
+        path = self.translate_path(self.path)
+        if not wanted or not os.path.isfile(path):
+            return super().send_head()
+        size = os.path.getsize(path)
+        start = int(wanted.group(1))
+        end = min(size - 1, int(wanted.group(2)) if wanted.group(2) else size - 1)
+        if start >= size:
+            self.send_error(416)
+            return None
+        f = open(path, "rb")
+        f.seek(start)
+        self.send_response(206)
+        self.send_header("Content-Type", self.guess_type(path))
+        self.send_header("Content-Range", f"bytes {start}-{end}/{size}")
+        self.send_header("Content-Length", str(end - start + 1))
+        self.send_header("Accept-Ranges", "bytes")
+        self.end_headers()
+        self.range_left = end - start + 1
+        return f
+
+    def copyfile(self, source, outputfile):
+        left = self.range_left
+        if left is None:
+            return super().copyfile(source, outputfile)
+        while left > 0:
+            chunk = source.read(min(65536, left))
+            if not chunk:
+                break
+            outputfile.write(chunk)
+            left -= len(chunk)
+
+    def log_message(self, *args):
+        pass
 
 
 def check_page(chromium_binary, url, d, label):

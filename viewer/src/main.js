@@ -4,6 +4,8 @@
 // overview) or by its entropy, and the ground truth dashed beside it. Everything comes
 // from `seqloc serve`: /catalog, a region's tilejson.json (its CRS and tile matrix) and its tiles.
 // With ?web=1 the same layers come as the server's Web Mercator XYZ tiles, as in any web map.
+// With ?pmtiles=FILE.pmtiles no server is needed: the page, served as static files, shows that
+// archive (`seqloc export --format pmtiles`) over Web Mercator, read by HTTP range requests.
 
 import Map from 'ol/Map.js';
 import View from 'ol/View.js';
@@ -23,6 +25,8 @@ import { Circle, Fill, Stroke, Style } from 'ol/style.js';
 import { register } from 'ol/proj/proj4.js';
 import { get as getProjection, toLonLat, transform, transformExtent } from 'ol/proj.js';
 import proj4 from 'proj4';
+import { PMTilesRasterSource } from 'ol-pmtiles';
+import { PMTiles } from 'pmtiles';
 import 'ol/ol.css';
 import './app.css';
 
@@ -226,8 +230,36 @@ async function showRegion(region) {
   showStatus();
 }
 
+// A PMTiles archive beside the page, without a server: its header gives the zooms and bounds.
+async function showArchive(url) {
+  const source = new PMTilesRasterSource({ url, attributions: [], crossOrigin: 'anonymous' });
+  source.on('tileloadend', () => { status.tilesLoaded++; showStatus(); });
+  source.on('tileloaderror', () => { status.tileErrors++; showStatus(); });
+  status.region = url;
+  const view = new View({ maxZoom: 24 });
+  map = new Map({ target: 'map', layers: [new TileLayer({ source }), new VectorLayer({ source: trackSource, style: trackStyle })],
+                  view, controls: defaultControls().extend([new ScaleLine({ units: 'metric' })]) });
+  regionCode = 'EPSG:3857';
+  const header = await new PMTiles(url).getHeader();
+  trackMaxZoom = header.maxZoom;
+  view.fit(transformExtent([header.minLon, header.minLat, header.maxLon, header.maxLat], 'EPSG:4326', 'EPSG:3857'));
+  view.setZoom(Math.max(view.getZoom(), header.minZoom));
+  for (const id of ['region', 'show-classes', 'show-distance', 'distance-opacity']) document.getElementById(id).disabled = true;
+  showStatus();
+}
+
 async function main() {
   const params = new URLSearchParams(window.location.search);
+  if (params.get('pmtiles')) {
+    try {
+      await showArchive(params.get('pmtiles'));
+      if (params.get('track')) await loadTrack(params.get('track'));
+    } catch (e) {
+      status.error = e.message;
+      showStatus();
+    }
+    return;
+  }
   try {
     const catalog = await fetchJson('catalog');
     const select = document.getElementById('region');
