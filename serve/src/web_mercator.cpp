@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -35,16 +36,44 @@ struct PixelWindow {
   [[nodiscard]] bool empty() const { return u1 <= u0 || v1 <= v0; }
 };
 
+// EPSG:3857 as WKT, made once: naming it by its code looks it up in PROJ's database (SQLite) for
+// every tile.
+const std::string& web_mercator_wkt() {
+  static const std::string wkt = [] {
+    OGRSpatialReference mercator;
+    mercator.importFromEPSG(3857);
+    char* text = nullptr;
+    mercator.exportToWkt(&text);
+    std::string out = text != nullptr ? text : "";
+    CPLFree(text);
+    return out;
+  }();
+  return wkt;
+}
+
+// Web Mercator to a region CRS (given by its WKT), made once per thread and region: creating a
+// transformation searches PROJ's database, more than the transforms of a tile cost.
+OGRCoordinateTransformation& to_region_crs(const std::string& region_wkt) {
+  thread_local std::map<std::string, std::unique_ptr<OGRCoordinateTransformation>> made;
+  auto& slot = made[region_wkt];
+  if (!slot) {
+    OGRSpatialReference mercator, region;
+    mercator.importFromWkt(web_mercator_wkt().c_str());
+    region.importFromWkt(region_wkt.c_str());
+    mercator.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    region.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
+    slot.reset(OGRCreateCoordinateTransformation(&mercator, &region));
+    if (!slot) {
+      made.erase(region_wkt);
+      throw Error(ErrorCategory::internal,
+                  "GDAL cannot transform EPSG:3857 to the region CRS: " + detail::gdal_message());
+    }
+  }
+  return *slot;
+}
+
 PixelWindow region_pixels_under(const raster::CacheReader& cache, const WebBounds& b) {
-  OGRSpatialReference mercator, region;
-  mercator.importFromEPSG(3857);
-  region.importFromWkt(cache.metadata().projection().wkt().c_str());
-  mercator.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-  region.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-  const std::unique_ptr<OGRCoordinateTransformation> to_region(OGRCreateCoordinateTransformation(&mercator, &region));
-  if (!to_region)
-    throw Error(ErrorCategory::internal,
-                "GDAL cannot transform EPSG:3857 to the region CRS: " + detail::gdal_message());
+  OGRCoordinateTransformation* to_region = &to_region_crs(cache.metadata().projection().wkt());
   constexpr int kSteps = 16;
   double min_x = std::numeric_limits<double>::infinity(), max_x = -min_x, min_y = min_x, max_y = -min_x;
   for (int i = 0; i <= kSteps; ++i) {
@@ -62,9 +91,11 @@ PixelWindow region_pixels_under(const raster::CacheReader& cache, const WebBound
   const auto& g = cache.grid();
   PixelWindow w;
   w.u0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((min_x - g.min_x()) / raster::kCellM)) - 2);
-  w.u1 = std::min<std::int64_t>(g.width_px(), static_cast<std::int64_t>(std::ceil((max_x - g.min_x()) / raster::kCellM)) + 2);
+  w.u1 = std::min<std::int64_t>(g.width_px(),
+                                static_cast<std::int64_t>(std::ceil((max_x - g.min_x()) / raster::kCellM)) + 2);
   w.v0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((g.max_y() - max_y) / raster::kCellM)) - 2);
-  w.v1 = std::min<std::int64_t>(g.height_px(), static_cast<std::int64_t>(std::ceil((g.max_y() - min_y) / raster::kCellM)) + 2);
+  w.v1 = std::min<std::int64_t>(g.height_px(),
+                                static_cast<std::int64_t>(std::ceil((g.max_y() - min_y) / raster::kCellM)) + 2);
   return w;
 }
 
@@ -116,8 +147,12 @@ detail::Dataset region_dataset(raster::CacheReader& cache, const PixelWindow& w,
   detail::Dataset src(GDALCreate(GDALGetDriverByName("MEM"), "", width, height, band_count, type, nullptr));
   if (!src) throw Error(ErrorCategory::internal, "GDAL cannot create an in-memory raster: " + detail::gdal_message());
   const auto& g = cache.grid();
-  double transform[6] = {g.min_x() + static_cast<double>(w.u0) * raster::kCellM, raster::kCellM, 0,
-                         g.max_y() - static_cast<double>(w.v0) * raster::kCellM, 0, -raster::kCellM};
+  double transform[6] = {g.min_x() + static_cast<double>(w.u0) * raster::kCellM,
+                         raster::kCellM,
+                         0,
+                         g.max_y() - static_cast<double>(w.v0) * raster::kCellM,
+                         0,
+                         -raster::kCellM};
   GDALSetGeoTransform(src.get(), transform);
   GDALSetProjection(src.get(), cache.metadata().projection().wkt().c_str());
   for (int b = 0; b < band_count; ++b) {
@@ -195,7 +230,7 @@ WebTile read_web_tile(raster::CacheReader& cache, MapLayer layer, int z, std::in
 
   // The source as an in-memory GDAL dataset in the region CRS, warped by gdalwarp's own code.
   const detail::Dataset src = region_dataset(cache, w, source);
-  const WarpOptions warp({"-of", "MEM", "-t_srs", "EPSG:3857", "-te", number(bounds.west), number(bounds.south),
+  const WarpOptions warp({"-of", "MEM", "-t_srs", web_mercator_wkt(), "-te", number(bounds.west), number(bounds.south),
                           number(bounds.east), number(bounds.north), "-ts", std::to_string(tile_px),
                           std::to_string(tile_px), "-r", layer == MapLayer::classes ? "near" : "bilinear", "-dstalpha",
                           "-q"});
