@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <map>
 #include <memory>
 #include <string>
 
@@ -51,29 +50,18 @@ const std::string& web_mercator_wkt() {
   return wkt;
 }
 
-// Web Mercator to a region CRS (given by its WKT), made once per thread and region: creating a
-// transformation searches PROJ's database, more than the transforms of a tile cost.
-OGRCoordinateTransformation& to_region_crs(const std::string& region_wkt) {
-  thread_local std::map<std::string, std::unique_ptr<OGRCoordinateTransformation>> made;
-  auto& slot = made[region_wkt];
-  if (!slot) {
-    OGRSpatialReference mercator, region;
-    mercator.importFromWkt(web_mercator_wkt().c_str());
-    region.importFromWkt(region_wkt.c_str());
-    mercator.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    region.SetAxisMappingStrategy(OAMS_TRADITIONAL_GIS_ORDER);
-    slot.reset(OGRCreateCoordinateTransformation(&mercator, &region));
-    if (!slot) {
-      made.erase(region_wkt);
-      throw Error(ErrorCategory::internal,
-                  "GDAL cannot transform EPSG:3857 to the region CRS: " + detail::gdal_message());
-    }
-  }
-  return *slot;
+// The region-CRS point of a Web Mercator point (spherical Mercator's inverse, then the region's
+// own projection): closed forms, where a GDAL transformation costs a search of PROJ's database
+// each time it is made.
+osm::GridPoint mercator_to_region(const osm::RegionProjection& projection, double x, double y) {
+  constexpr double kEarthRadiusM = 6378137.0;
+  const double lon = x / kEarthRadiusM * 180.0 / M_PI;
+  const double lat = std::atan(std::sinh(y / kEarthRadiusM)) * 180.0 / M_PI;
+  return projection.forward(osm::GeoPoint{lat, lon});
 }
 
 PixelWindow region_pixels_under(const raster::CacheReader& cache, const WebBounds& b) {
-  OGRCoordinateTransformation* to_region = &to_region_crs(cache.metadata().projection().wkt());
+  const osm::RegionProjection projection = cache.metadata().projection();
   constexpr int kSteps = 16;
   double min_x = std::numeric_limits<double>::infinity(), max_x = -min_x, min_y = min_x, max_y = -min_x;
   for (int i = 0; i <= kSteps; ++i) {
@@ -81,10 +69,9 @@ PixelWindow region_pixels_under(const raster::CacheReader& cache, const WebBound
     const double xs[4] = {b.west + t * (b.east - b.west), b.west + t * (b.east - b.west), b.west, b.east};
     const double ys[4] = {b.south, b.north, b.south + t * (b.north - b.south), b.south + t * (b.north - b.south)};
     for (int k = 0; k < 4; ++k) {
-      double x = xs[k], y = ys[k];
-      if (!to_region->Transform(1, &x, &y)) continue;
-      min_x = std::min(min_x, x), max_x = std::max(max_x, x);
-      min_y = std::min(min_y, y), max_y = std::max(max_y, y);
+      const osm::GridPoint p = mercator_to_region(projection, xs[k], ys[k]);
+      min_x = std::min(min_x, p.x_m), max_x = std::max(max_x, p.x_m);
+      min_y = std::min(min_y, p.y_m), max_y = std::max(max_y, p.y_m);
     }
   }
   if (!(min_x <= max_x && min_y <= max_y)) return {};
