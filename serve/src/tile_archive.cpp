@@ -19,6 +19,7 @@
 #include <sqlite3.h>
 #include <nlohmann/json.hpp>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/error.hpp"
 #include "seqloc/core/files.hpp"
 #include "seqloc/core/thread_pool.hpp"
@@ -140,8 +141,8 @@ std::vector<TileKey> tiles_under(const osm::GeoBox& box, int z) {
   const double n = std::ldexp(1.0, z);
   auto column = [n](double lon) { return std::clamp(std::floor((lon + 180.0) / 360.0 * n), 0.0, n - 1); };
   auto row = [n](double lat) {
-    const double r = lat * M_PI / 180.0;
-    return std::clamp(std::floor((1 - std::asinh(std::tan(r)) / M_PI) / 2 * n), 0.0, n - 1);
+    const double r = lat * core::kPi / 180.0;
+    return std::clamp(std::floor((1 - std::asinh(std::tan(r)) / core::kPi) / 2 * n), 0.0, n - 1);
   };
   std::vector<TileKey> keys;
   for (auto y = static_cast<std::int64_t>(row(box.max_lat)); y <= static_cast<std::int64_t>(row(box.min_lat)); ++y)
