@@ -238,21 +238,22 @@ Softmax combine(const std::vector<std::optional<BinSums>>& chunks, double log_ce
   return s;
 }
 
-/// Writes row v of bins j0 .. j1 (`row`, [u][j - j0]) into heading-major `log_prob` as x - lse
-/// (values at or below kLogZero, -inf among them, as kLogZero): the portable version, in tiles that
-/// keep both sides in the first-level cache.
-void write_row_portable(const float* row, int v, int j0, int j1, int height, int width, float lse, float* log_prob) {
+/// Writes cells u0 .. u1 of bins j0 + b0 .. j0 + b1 of row v (`row`, [u][b], nb bins a cell) into
+/// heading-major `log_prob` as x - lse (values at or below kLogZero, -inf among them, as kLogZero):
+/// the portable version, in tiles that keep both sides in the first-level cache, and the AVX
+/// version's edges.
+void write_cells(const float* row, int nb, int v, int j0, int b0, int b1, int u0, int u1, int height, int width,
+                 float lse, float* log_prob) {
   constexpr int kTileBins = 8, kTileCells = 32;
   const std::size_t slice = static_cast<std::size_t>(height) * width;
-  const int nb = j1 - j0;
-  for (int b0 = 0; b0 < nb; b0 += kTileBins) {
-    const int b1 = std::min(nb, b0 + kTileBins);
-    for (int u0 = 0; u0 < width; u0 += kTileCells) {
-      const int u1 = std::min(width, u0 + kTileCells);
-      for (int b = b0; b < b1; ++b) {
+  for (int tb = b0; tb < b1; tb += kTileBins) {
+    const int tb1 = std::min(b1, tb + kTileBins);
+    for (int tu = u0; tu < u1; tu += kTileCells) {
+      const int tu1 = std::min(u1, tu + kTileCells);
+      for (int b = tb; b < tb1; ++b) {
         float* dst = log_prob + static_cast<std::size_t>(j0 + b) * slice + static_cast<std::size_t>(v) * width;
         const float* src = row + b;
-        for (int u = u0; u < u1; ++u) {
+        for (int u = tu; u < tu1; ++u) {
           const float x = src[static_cast<std::size_t>(u) * static_cast<std::size_t>(nb)];
           dst[u] = x > kLogZero ? x - lse : kLogZero;
         }
@@ -291,9 +292,8 @@ __attribute__((target("avx"))) inline void transpose_block(const float* row, int
   out[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
 }
 
-/// write_row_portable with AVX: 8 x 8 blocks transposed in registers, two side by side so that
-/// each bin's row gets whole 64-byte lines (the cells and bins beyond whole blocks by the portable
-/// loop's arithmetic).
+/// write_row with AVX: 8 x 8 blocks transposed in registers, two side by side so that each bin's
+/// row gets whole 64-byte lines (the cells and bins beyond whole blocks by write_cells).
 __attribute__((target("avx"))) void write_row_avx(const float* row, int v, int j0, int j1, int height, int width,
                                                   float lse, float* log_prob) {
   const std::size_t slice = static_cast<std::size_t>(height) * width;
@@ -319,15 +319,8 @@ __attribute__((target("avx"))) void write_row_avx(const float* row, int v, int j
       }
     }
   }
-  auto rest = [&](int b, int u0, int u1) {
-    float* dst = log_prob + static_cast<std::size_t>(j0 + b) * slice + static_cast<std::size_t>(v) * width;
-    for (int u = u0; u < u1; ++u) {
-      const float x = row[static_cast<std::size_t>(u) * nb + b];
-      dst[u] = x > kLogZero ? x - lse : kLogZero;
-    }
-  };
-  for (int b = whole_b; b < nb; ++b) rest(b, 0, width);
-  for (int b = 0; b < whole_b; ++b) rest(b, whole_u, width);
+  write_cells(row, nb, v, j0, whole_b, nb, 0, width, height, width, lse, log_prob);
+  write_cells(row, nb, v, j0, 0, whole_b, whole_u, width, height, width, lse, log_prob);
   if (stream) _mm_sfence();  // the streamed stores visible before the worker reports its part done
 }
 #endif
@@ -340,7 +333,7 @@ void write_row(const float* row, int v, int j0, int j1, int height, int width, f
   static const bool avx = __builtin_cpu_supports("avx");
   if (avx) return write_row_avx(row, v, j0, j1, height, width, lse, log_prob);
 #endif
-  write_row_portable(row, v, j0, j1, height, width, lse, log_prob);
+  write_cells(row, j1 - j0, v, j0, 0, j1 - j0, 0, width, height, width, lse, log_prob);
 }
 
 /// The first cell of heading-major `log_prob` (bins j0 .. j1, row v) holding `top`, or `none`.
@@ -373,10 +366,6 @@ std::size_t find_in_row(const float* log_prob, int v, int j0, int j1, int height
   }
   throw FilterError(where + ": a bad value", ErrorCategory::internal);
 }
-
-}  // namespace
-
-namespace {
 
 /// The first pass: each worker's bins checked (throws FilterError naming the first bad cell) and
 /// summed; the log-softmax's normalizer and the entropy of the whole volume raised to `power`.
