@@ -208,17 +208,20 @@ class PmtilesSink : public ArchiveSink {
       return;
     }
     // Contents seen before (the region's empty and uniform tiles): stored once. Small contents are
-    // kept to be compared whole; a large one is written again (they are seldom equal).
+    // kept to be compared whole; a large one is written again (they are seldom equal), without a
+    // look-up.
+    const bool small = bytes.size() <= kRememberBytes;
     const std::string_view view(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+    const auto seen = small ? stored_.find(std::string(view)) : stored_.end();
     std::uint64_t offset = 0;
-    if (const auto seen = stored_.find(std::string(view)); seen != stored_.end()) {
+    if (seen != stored_.end()) {
       offset = seen->second;
     } else {
       offset = data_bytes_;
       write_all(scratch_, bytes.data(), bytes.size(), partial_);
       data_bytes_ += bytes.size();
       ++contents_;
-      if (bytes.size() <= kRememberBytes) stored_.emplace(std::string(view), offset);
+      if (small) stored_.emplace(std::string(view), offset);
     }
     entries_.push_back({key.id, offset, static_cast<std::uint32_t>(bytes.size()), 1});
     last_ = std::move(bytes);
