@@ -3,11 +3,12 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cstring>
 #include <optional>
 #include <utility>
 
-#include "seqloc/raster/png_codec.hpp"
 #include "cache_format.hpp"
+#include "seqloc/raster/png_codec.hpp"
 #include "sqlite.hpp"
 
 #ifndef SEQLOC_VERSION
@@ -148,7 +149,7 @@ void CacheWriter::discard() {
   insert_distance_.reset();
   insert_ancillary_.reset();
   in_transaction_ = false;
-  db_.reset();  // closing rolls back what was not committed
+  db_.reset();                                                        // closing rolls back what was not committed
   if (!resumed_ || updating_) detail::remove_sqlite_files(partial_);  // an update's copy is ours alone
 }
 
@@ -360,10 +361,12 @@ void CacheWriter::write_tile(const EncodedTile& tile) {
     insert_classes_ = std::make_unique<detail::Statement>(
         *db_, "INSERT OR REPLACE INTO classes (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
     insert_distance_ = std::make_unique<detail::Statement>(
-        *db_, "INSERT OR REPLACE INTO road_distance (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
+        *db_,
+        "INSERT OR REPLACE INTO road_distance (zoom_level, tile_column, tile_row, tile_data) VALUES (0, ?, ?, ?)");
     insert_ancillary_ = std::make_unique<detail::Statement>(
-        *db_, "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, scale, offset, min, max, "
-              "mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
+        *db_,
+        "INSERT OR REPLACE INTO gpkg_2d_gridded_tile_ancillary (tpudt_name, tpudt_id, scale, offset, min, max, "
+        "mean) VALUES ('road_distance', ?, 1.0, 0.0, ?, ?, ?)");
   }
   if (updating_) forget_tile(tile.col, tile.row, tile.classes_png.empty());
   if (!tile.classes_png.empty()) {
@@ -377,10 +380,7 @@ void CacheWriter::write_tile(const EncodedTile& tile) {
   insert_distance_->run();
   const std::int64_t id = sqlite3_last_insert_rowid(db_->get());
   detail::Statement& ancillary = *insert_ancillary_;
-  ancillary.bind(1, id)
-      .bind(2, tile.distance_min_m)
-      .bind(3, tile.distance_max_m)
-      .bind(4, tile.distance_mean_m);
+  ancillary.bind(1, id).bind(2, tile.distance_min_m).bind(3, tile.distance_max_m).bind(4, tile.distance_mean_m);
   ancillary.run();
   if (!updating_) ++stored_;
   if (++pending_ >= detail::kTilesPerTransaction) commit();
@@ -417,14 +417,32 @@ void CacheWriter::finish() {
 // ---------------------------------------------------------------------------------------------
 // Encoder
 
+namespace {
+
+// The one colour of a tile whose pixels are all the same (packed 0xRRGGBB), if they are: the
+// bytes then repeat with the period of a pixel.
+std::optional<std::uint32_t> uniform_colour(const std::vector<std::uint8_t>& rgb) {
+  if (rgb.size() < 3 || std::memcmp(rgb.data(), rgb.data() + 3, rgb.size() - 3) != 0) return std::nullopt;
+  return (std::uint32_t{rgb[0]} << 16) | (std::uint32_t{rgb[1]} << 8) | rgb[2];
+}
+
+// The key of the empty tile among the colours: outside 0xRRGGBB.
+constexpr std::uint32_t kEmptyClasses = 0x1000000;
+
+}  // namespace
+
 EncodedTile TileEncoder::encode(std::int64_t col, std::int64_t row, const std::vector<std::uint8_t>& rgb,
                                 bool classes_empty, const std::vector<std::uint16_t>& cm) {
   EncodedTile tile;
   tile.col = col;
   tile.row = row;
-  if (classes_empty) {
-    if (empty_classes_.empty()) empty_classes_ = encode_png_rgb8(rgb, kTilePx, kTilePx);
-    tile.classes_png = empty_classes_;
+  // An empty tile, or one a single class covers (forest, water), is encoded once per colour.
+  const std::optional<std::uint32_t> colour =
+      classes_empty ? std::optional<std::uint32_t>(kEmptyClasses) : uniform_colour(rgb);
+  if (colour) {
+    auto& blob = uniform_classes_[*colour];
+    if (blob.empty()) blob = encode_png_rgb8(rgb, kTilePx, kTilePx);
+    tile.classes_png = blob;
   } else {
     tile.classes_png = encode_png_rgb8(rgb, kTilePx, kTilePx);
   }
@@ -440,19 +458,24 @@ EncodedTile TileEncoder::encode_distance(std::int64_t col, std::int64_t row, con
   EncodedTile tile;
   tile.col = col;
   tile.row = row;
-  const auto [lo, hi] = std::minmax_element(cm.begin(), cm.end());
-  tile.distance_min_m = *lo * 0.01;
-  tile.distance_max_m = *hi * 0.01;
-  if (*lo == *hi) {
-    auto& blob = constant_distance_[*lo];
+  // One pass for the three statistics (integer min, max and sum vectorize).
+  std::uint16_t lo = 0xffff, hi = 0;
+  std::uint64_t sum = 0;
+  for (const std::uint16_t v : cm) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+    sum += v;
+  }
+  tile.distance_min_m = lo * 0.01;
+  tile.distance_max_m = hi * 0.01;
+  if (lo == hi) {
+    auto& blob = constant_distance_[lo];
     if (blob.empty()) blob = encode_png_gray16(cm, kTilePx, kTilePx);
     tile.distance_png = blob;
     tile.distance_mean_m = tile.distance_min_m;
   } else {
     tile.distance_png = encode_png_gray16(cm, kTilePx, kTilePx);
-    double sum = 0;
-    for (auto v : cm) sum += v;
-    tile.distance_mean_m = sum / static_cast<double>(cm.size()) * 0.01;
+    tile.distance_mean_m = static_cast<double>(sum) / static_cast<double>(cm.size()) * 0.01;
   }
   return tile;
 }

@@ -1,7 +1,7 @@
 #include "seqloc/raster/png_codec.hpp"
 
-#include <cstdlib>
 #include <csetjmp>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <optional>
@@ -86,12 +86,24 @@ void put_chunk(std::vector<std::uint8_t>& out, const char* type, const std::uint
   put_u32(out, libdeflate_crc32(0, out.data() + start, size + 4));
 }
 
+// A buffer of `size` bytes kept by the thread from one image to the next, its contents unspecified:
+// a tile's filtered rows and deflated stream are larger than malloc's mmap threshold, and fresh
+// buffers cost a zero fill and a page fault per 4 KB, a quarter of a tile's encoding.
+std::span<std::uint8_t> reused_buffer(std::vector<std::uint8_t>& buffer, std::size_t size) {
+  if (buffer.size() < size) buffer.resize(size);
+  return {buffer.data(), size};
+}
+
+thread_local std::vector<std::uint8_t> png_filtered, png_deflated;
+
 // `filtered` holds height rows of (filter byte + stride bytes).
-std::vector<std::uint8_t> assemble(const std::vector<std::uint8_t>& filtered, int width, int height, int bit_depth,
+std::vector<std::uint8_t> assemble(std::span<const std::uint8_t> filtered, int width, int height, int bit_depth,
                                    int color_type, int level) {
   libdeflate_compressor* compressor = thread_compressor(level);
-  std::vector<std::uint8_t> idat(libdeflate_zlib_compress_bound(compressor, filtered.size()));
-  const std::size_t n = libdeflate_zlib_compress(compressor, filtered.data(), filtered.size(), idat.data(), idat.size());
+  const std::span<std::uint8_t> idat =
+      reused_buffer(png_deflated, libdeflate_zlib_compress_bound(compressor, filtered.size()));
+  const std::size_t n =
+      libdeflate_zlib_compress(compressor, filtered.data(), filtered.size(), idat.data(), idat.size());
   if (n == 0) throw PngError("deflate failed");
   std::vector<std::uint8_t> out(std::begin(kSignature), std::end(kSignature));
   out.reserve(n + 64);
@@ -293,11 +305,12 @@ namespace {
 std::vector<std::uint8_t> encode_png8(std::span<const std::uint8_t> pixels, int width, int height, int channels,
                                       const char* what) {
   if (width <= 0 || height <= 0 ||
-      pixels.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * static_cast<std::size_t>(channels)) {
+      pixels.size() !=
+          static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * static_cast<std::size_t>(channels)) {
     throw PngError(std::string(what) + ": buffer size does not match the image size");
   }
   const std::size_t stride = static_cast<std::size_t>(width) * static_cast<std::size_t>(channels);
-  std::vector<std::uint8_t> filtered((stride + 1) * static_cast<std::size_t>(height));
+  const std::span<std::uint8_t> filtered = reused_buffer(png_filtered, (stride + 1) * static_cast<std::size_t>(height));
   for (int r = 0; r < height; ++r) {
     std::uint8_t* row = filtered.data() + static_cast<std::size_t>(r) * (stride + 1);
     row[0] = 0;
@@ -322,7 +335,7 @@ std::vector<std::uint8_t> encode_png_gray16(std::span<const std::uint16_t> value
   }
   // Filter "sub" on the big-endian samples: the smooth distance ramps become small residuals.
   const std::size_t stride = static_cast<std::size_t>(width) * 2;
-  std::vector<std::uint8_t> filtered((stride + 1) * static_cast<std::size_t>(height));
+  const std::span<std::uint8_t> filtered = reused_buffer(png_filtered, (stride + 1) * static_cast<std::size_t>(height));
   for (int r = 0; r < height; ++r) {
     std::uint8_t* row = filtered.data() + static_cast<std::size_t>(r) * (stride + 1);
     const std::uint16_t* v = values.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(width);

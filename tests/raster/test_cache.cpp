@@ -9,6 +9,7 @@
 
 #include "seqloc/raster/cache.hpp"
 #include "seqloc/raster/crop_window.hpp"
+#include "seqloc/raster/png_codec.hpp"
 #include "seqloc/raster/tile_renderer.hpp"
 #include "support/test_support.hpp"
 
@@ -94,6 +95,33 @@ void build(const std::filesystem::path& path, const TileRenderer& renderer, cons
     }
   }
   writer.finish();
+}
+
+// Tiles one class covers are encoded once per colour: each still decodes to its own pixels, a tile
+// that differs in one pixel is not taken for a uniform one, and the empty tile keeps its own blob.
+TEST(TileEncoder, UniformTilesEncodedOncePerColourDecodeToTheirOwnPixels) {
+  const std::size_t n = static_cast<std::size_t>(kTilePx) * kTilePx;
+  const std::vector<std::uint16_t> cm(n, 1234);
+  auto uniform = [&](std::uint8_t r, std::uint8_t g, std::uint8_t b) {
+    std::vector<std::uint8_t> rgb(3 * n);
+    for (std::size_t i = 0; i < n; ++i) {
+      rgb[3 * i] = r;
+      rgb[3 * i + 1] = g;
+      rgb[3 * i + 2] = b;
+    }
+    return rgb;
+  };
+  const auto forest = uniform(0, 128, 0), water = uniform(0, 0, 200), empty = uniform(0, 0, 0);
+  auto almost = forest;
+  almost[3 * (n - 1) + 2] = 1;  // the last pixel's blue
+  TileEncoder encoder;
+  const std::vector<std::pair<const std::vector<std::uint8_t>*, bool>> tiles{
+      {&forest, false}, {&water, false}, {&forest, false}, {&almost, false}, {&empty, true}, {&empty, false}};
+  for (const auto& [rgb, is_empty] : tiles) {
+    const EncodedTile tile = encoder.encode(0, 0, *rgb, is_empty, cm);
+    EXPECT_EQ(tile.classes_png, encode_png_rgb8(*rgb, kTilePx, kTilePx));
+    EXPECT_EQ(decode_png(tile.classes_png, "tile").pixels8, *rgb);
+  }
 }
 
 class CacheTest : public ::testing::Test {

@@ -181,7 +181,7 @@ class TileEncoder {
   [[nodiscard]] EncodedTile encode_distance(std::int64_t col, std::int64_t row, const std::vector<std::uint16_t>& cm);
 
  private:
-  std::vector<std::uint8_t> empty_classes_;
+  std::unordered_map<std::uint32_t, std::vector<std::uint8_t>> uniform_classes_;  ///< by colour (0xRRGGBB), and the empty tile
   std::unordered_map<std::uint16_t, std::vector<std::uint8_t>> constant_distance_;
 };
 
