@@ -15,11 +15,13 @@
 #include <gtest/gtest.h>
 
 #include "seqloc/filter/offline.hpp"
-#include "seqloc/filter/reference.hpp"
+#include "filter/reference_filter.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 
 namespace seqloc::filter {
 namespace {
+
+using test::ReferenceFilter;
 
 FilterConfig small_config() {
   FilterConfig c;

@@ -2,7 +2,7 @@
 // SeqLoc: online test-time aggregation of pose likelihood volumes (conventions.md section 6), with
 // Entropy-Tempered Uncertainty, Map-Guided Relocalization and Peak-Anchored Smoothing.
 //
-// Interpolation (the same in the reference implementation, reference.hpp):
+// Interpolation (the same in the tests' reference implementation, tests/filter/reference_filter.hpp):
 // - Predict warps backwards: b_hat(x, th) = b(x - d(th + yaw), th + yaw), d(h) being the odometry's
 //   displacement for heading h. Each source heading slice is translated by its own sub-cell
 //   displacement with bilinear interpolation, then the slices are blended linearly along the

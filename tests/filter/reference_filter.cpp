@@ -1,4 +1,4 @@
-#include "seqloc/filter/reference.hpp"
+#include "filter/reference_filter.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "seqloc/core/angles.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::filter::test {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -278,4 +278,4 @@ void ReferenceFilter::estimate(FrameResult& r) const {
 }
 
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::filter::test

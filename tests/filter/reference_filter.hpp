@@ -11,7 +11,7 @@
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/types.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::filter::test {
 
 class ReferenceFilter {
  public:
@@ -47,4 +47,4 @@ class ReferenceFilter {
   bool first_ = true;
 };
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::filter::test
