@@ -14,13 +14,13 @@
 #include <optional>
 #include <string>
 #include <string_view>
-#include <thread>
 #include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "seqloc/core/error.hpp"
+#include "seqloc/core/thread_pool.hpp"
 #include "seqloc/filter/config.hpp"
 #include "seqloc/osm/features.hpp"
 
@@ -40,11 +40,7 @@ struct LocalizeOptions;
 
 namespace seqloc::app {
 
-/// Worker threads when the user names none: the machine's cores (1 when unknown, at most 64).
-[[nodiscard]] inline int default_threads() {
-  const unsigned n = std::thread::hardware_concurrency();
-  return n == 0 ? 1 : static_cast<int>(std::min(n, 64u));
-}
+using core::default_threads;
 
 /// Exit codes: 0 success, 1 failure (bad data, I/O), 2 usage.
 inline constexpr int kExitOk = 0;

@@ -1066,7 +1066,7 @@ void bind_filter(py::module_& m) {
            "Start a sequence: uniform belief, or gps=(u, v, sigma_m) in window cells")
       .def("step", &PyFilter::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
            py::arg("crop_pose") = py::none(), py::arg("road_distance") = py::none(), py::arg("probabilities") = false,
-           py::arg("cell_m") = 0.5,
+           py::arg("cell_m") = raster::kCellM,
            "One frame: log_volume (H, W, N) float32/float16 (NumPy, DLPack such as a CPU torch tensor, or "
            "__array__; read in place when C-contiguous), odometry (forward_m, left_m, yaw_deg), crop_pose "
            "(centre_u, centre_v, rotation_deg) in window cells (default: the window's centre, north-up), "
@@ -1096,7 +1096,7 @@ void bind_localizer(py::module_& m) {
       .def("step", &PyLocalizer::step, py::arg("log_volume"), py::arg("odometry") = py::make_tuple(0.0, 0.0, 0.0),
            py::kw_only(), py::arg("crop_lat") = py::none(), py::arg("crop_lon") = py::none(),
            py::arg("crop_x") = py::none(), py::arg("crop_y") = py::none(), py::arg("gps") = py::none(),
-           py::arg("probabilities") = false, py::arg("cell_m") = 0.5, py::arg("crop") = py::none(),
+           py::arg("probabilities") = false, py::arg("cell_m") = raster::kCellM, py::arg("crop") = py::none(),
            "One frame: its (H, W, N) volume (NumPy, DLPack such as a CPU torch tensor, or __array__), the "
            "odometry since the last frame (forward_m, left_m, yaw_deg), and where the volume lies: crop= the "
            "Cache.crop the backbone matched against (grid north, as its cells), or the crop's centre "

@@ -24,9 +24,9 @@
 #include <optional>
 #include <random>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 #include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/io/npy.hpp"
@@ -72,7 +72,7 @@ std::string observation_routes(const fs::path& work) {
   for (const char* name : {"route_000", "route_001"}) routes.push_back(seqloc::io::read_route(work / "routes" / name));
   pl::LocalizeOptions options;
   options.filter.width = options.filter.height = 192;
-  options.filter.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.filter.threads = seqloc::core::default_threads();
   const double frames = 2 * 20;
   auto run = [&](const std::vector<seqloc::io::Mode>& modes, const char* name) {
     reset_peak();
@@ -311,7 +311,7 @@ int main(int argc, char** argv) {
   const auto route = seqloc::io::read_route(work / "route");
   seqloc::raster::CacheReader cache(pre.output, 256);
   seqloc::pipeline::LocalizeOptions options;
-  options.filter.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  options.filter.threads = seqloc::core::default_threads();
   if (device) {
     std::printf("1000 frames, 128x128x256 float16 volumes, 256x256x256 window, %d threads\n", options.filter.threads);
     std::printf("%s\n", device_run(route, cache, options, *device).c_str());

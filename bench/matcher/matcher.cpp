@@ -12,9 +12,11 @@
 
 #include <opencv2/core.hpp>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/matcher/matcher.hpp"
 #include "seqloc/sim/simulate.hpp"
 
+namespace core = seqloc::core;
 namespace io = seqloc::io;
 namespace matcher = seqloc::matcher;
 namespace sim = seqloc::sim;
@@ -39,7 +41,7 @@ int main(int argc, char** argv) {
     if (pts.size() < 2) continue;
     const auto& a = pts[0];
     const auto& b = pts[1];
-    const sim::GridPose pose{a.x_m, a.y_m, std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * 180 / M_PI};
+    const sim::GridPose pose{a.x_m, a.y_m, std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * core::kRadToDeg};
     observations.push_back(sim::render_observation(cache, pose, camera));
     // The matcher transforms one template for the visible disc and one per code beyond the first
     // of each channel (matcher.cpp), per heading in a quarter turn.

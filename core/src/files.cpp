@@ -22,9 +22,13 @@ void write_file(const std::filesystem::path& path, const std::string& bytes) {
     out.close();
     if (!out) throw IoError(path.string() + ": cannot write");
   }
+  commit_file(tmp, path);
+}
+
+void commit_file(const std::filesystem::path& partial, const std::filesystem::path& target) {
   std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throw IoError(path.string() + ": cannot write: " + ec.message());
+  std::filesystem::rename(partial, target, ec);
+  if (ec) throw IoError(target.string() + ": cannot move the finished file into place: " + ec.message());
 }
 
 void commit_directory(const std::filesystem::path& staged, const std::filesystem::path& target) {

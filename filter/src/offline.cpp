@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "internal.hpp"
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 
@@ -20,7 +21,7 @@ Odometry compose(const std::vector<Odometry>& increments) {
   // Pose in the start's body frame: x forward, y left, heading counter-clockwise.
   double x = 0, y = 0, yaw = 0;
   for (const auto& o : increments) {
-    const double c = std::cos(yaw * M_PI / 180.0), s = std::sin(yaw * M_PI / 180.0);
+    const double c = std::cos(yaw * core::kDegToRad), s = std::sin(yaw * core::kDegToRad);
     x += c * o.forward_m - s * o.left_m;
     y += s * o.forward_m + c * o.left_m;
     yaw += o.yaw_deg;
@@ -30,7 +31,7 @@ Odometry compose(const std::vector<Odometry>& increments) {
 
 Odometry invert(const Odometry& m) {
   // The start as seen from the end: minus the displacement, rotated into the end's frame.
-  const double c = std::cos(m.yaw_deg * M_PI / 180.0), s = std::sin(m.yaw_deg * M_PI / 180.0);
+  const double c = std::cos(m.yaw_deg * core::kDegToRad), s = std::sin(m.yaw_deg * core::kDegToRad);
   return {-(c * m.forward_m + s * m.left_m), -(-s * m.forward_m + c * m.left_m), -m.yaw_deg};
 }
 
@@ -87,7 +88,7 @@ OfflineAggregator& OfflineAggregator::operator=(OfflineAggregator&&) noexcept = 
 OfflineAggregator::Canvas OfflineAggregator::place(const OfflineFrame& f) {
   const PreparedFrame& p = *f.frame;
   // The footprint: the crop's rectangle (window cells) turned by its rotation.
-  const double scale = p.cell_m / kCellM, r = f.crop.rotation_deg * M_PI / 180.0;
+  const double scale = p.cell_m / kCellM, r = f.crop.rotation_deg * core::kDegToRad;
   const double half_w = p.width * scale / 2, half_h = p.height * scale / 2;
   const double c = std::abs(std::cos(r)), s = std::abs(std::sin(r));
   const double extent_u = half_w * c + half_h * s, extent_v = half_w * s + half_h * c;

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 
 #include "internal.hpp"
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/filter/offline.hpp"
 
@@ -132,12 +133,12 @@ void refine_on_gamma(FrameResult& result, const BeliefVolume& forward, const Bel
     double sx = 0, sy = 0;
     for (int i = -config.subbin_half_width; i <= config.subbin_half_width; ++i) {
       const int k = (k_star + i + R) % R;
-      const double h = forward.bin_heading_deg(k) * M_PI / 180.0;
+      const double h = forward.bin_heading_deg(k) * core::kDegToRad;
       sx += gamma(u_star, v_star, k) * std::sin(h);
       sy += gamma(u_star, v_star, k) * std::cos(h);
     }
-    const double deg = std::atan2(sx, sy) * 180.0 / M_PI;
-    result.pose.heading_deg = deg < 0 ? deg + 360.0 : deg;
+    const double deg = std::atan2(sx, sy) * core::kRadToDeg;
+    result.pose.heading_deg = core::wrap360(deg);
   }
 }
 

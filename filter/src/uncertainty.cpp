@@ -148,7 +148,7 @@ PoseUncertainty pose_uncertainty(const BeliefVolume& belief, const Pose& estimat
   }
   double heading_total = 0, heading_var = 0;
   for (int k = 0; k < belief.headings(); ++k) {
-    const double d = std::remainder(belief.bin_heading_deg(k) - estimate.heading_deg, 360.0);
+    const double d = core::wrap180(belief.bin_heading_deg(k) - estimate.heading_deg);
     heading_total += heading[static_cast<std::size_t>(k)];
     heading_var += heading[static_cast<std::size_t>(k)] * d * d;
   }

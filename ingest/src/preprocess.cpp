@@ -17,6 +17,7 @@
 #include "peak_memory.hpp"
 #include "region_tiles.hpp"
 #include "seqloc/core/stopwatch.hpp"
+#include "seqloc/core/thread_pool.hpp"
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/raster/cache.hpp"
 #include "seqloc/raster/tile_renderer.hpp"
@@ -222,8 +223,7 @@ struct BlockJob {
 // corridor from every road keep their road distance; their classes are neither drawn nor stored.
 void render_tiles(const BlockJob& job, raster::CacheWriter& writer, const PreprocessOptions& options,
                   const std::function<void(const PreprocessProgress&)>& on_progress, PreprocessReport& report) {
-  const int threads =
-      options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const int threads = options.threads > 0 ? options.threads : core::default_threads();
   const auto corridor_cm = static_cast<std::uint16_t>(std::lround(options.corridor_m * 100.0));
   TileQueue queue(static_cast<std::size_t>(threads) * 8);
   queue.set_producers(threads);

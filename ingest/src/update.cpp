@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include "region_tiles.hpp"
+#include "seqloc/core/files.hpp"
 #include "seqloc/core/stopwatch.hpp"
 #include "seqloc/osm/reader.hpp"
 #include "seqloc/raster/cache.hpp"
@@ -109,11 +110,7 @@ UpdateReport update_region(const UpdateOptions& options,
     throw;
   }
   report.render_seconds = seconds_since(t0);
-  if (!options.new_base.empty()) {
-    std::error_code ec;
-    std::filesystem::rename(new_data.path(), options.new_base, ec);
-    if (ec) throw IoError(options.new_base.string() + ": cannot keep the new base: " + ec.message());
-  }
+  if (!options.new_base.empty()) core::commit_file(new_data.path(), options.new_base);
   report.total_seconds = seconds_since(start);
   return report;
 }

@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/csv.hpp"
 #include "seqloc/core/error.hpp"
 #include "seqloc/core/files.hpp"
@@ -90,7 +91,7 @@ std::string poses_csv(const RouteResult& r) {
 std::pair<std::string, std::string> tum_trajectories(const RouteResult& r) {
   char line[256];
   const auto tum_line = [&line](double t, double x, double y, double grid_heading_deg) {
-    const double yaw = (90.0 - grid_heading_deg) * M_PI / 180.0;
+    const double yaw = (90.0 - grid_heading_deg) * core::kDegToRad;
     std::snprintf(line, sizeof line, "%.6f %.4f %.4f 0 0 0 %.9f %.9f\n", t, x, y, std::sin(yaw / 2), std::cos(yaw / 2));
     return std::string(line);
   };

@@ -8,6 +8,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/error.hpp"
 #include "seqloc/core/flat_index.hpp"
 #include "seqloc/core/thread_pool.hpp"
@@ -85,7 +86,7 @@ void rotate_bodies(const std::vector<std::vector<float>>& bodies, int t, double 
   const auto cells = static_cast<std::size_t>(t) * static_cast<std::size_t>(t);
   out.resize(bodies.size());
   for (auto& o : out) o.assign(cells, 0.0f);
-  const double th = heading_deg * M_PI / 180.0, s = std::sin(th), c = std::cos(th);
+  const double th = heading_deg * core::kDegToRad, s = std::sin(th), c = std::cos(th);
   for (int row = 0; row < t; ++row) {
     for (int col = 0; col < t; ++col) {
       // North-up cell (east e, north n from the camera) -> body (forward f, right r).

@@ -16,6 +16,8 @@
 #include <tuple>
 #include <utility>
 
+#include "seqloc/core/files.hpp"
+
 namespace seqloc::osm {
 namespace {
 
@@ -241,7 +243,7 @@ ChangeSummary apply_changes(const std::filesystem::path& base, const std::filesy
     merge(base, *list, m, reader);
     writer.close();
     reader.close();
-    std::filesystem::rename(partial, output);
+    core::commit_file(partial, output);
   } catch (const OsmError&) {
     std::error_code ignored;
     std::filesystem::remove(partial, ignored);

@@ -7,6 +7,7 @@
 #include <osmium/io/any_output.hpp>
 #include <osmium/memory/buffer.hpp>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/osm/errors.hpp"
 
 namespace seqloc::osm {
@@ -119,7 +120,7 @@ void SyntheticMap::write(const std::filesystem::path& path, double margin_m) con
   header.set("generator", "seqloc synthetic map");
   if (box.valid()) {
     const double dlat = margin_m / 111'000.0;
-    const double dlon = margin_m / (111'000.0 * std::cos(projection_.lat0_deg() * M_PI / 180.0));
+    const double dlon = margin_m / (111'000.0 * std::cos(projection_.lat0_deg() * core::kDegToRad));
     header.add_box(osmium::Box{box.bottom_left().lon() - dlon, box.bottom_left().lat() - dlat,
                                box.top_right().lon() + dlon, box.top_right().lat() + dlat});
   }

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include <nlohmann/json.hpp>
+#include "seqloc/core/angles.hpp"
 
 namespace seqloc::pipeline {
 
@@ -16,7 +17,7 @@ std::optional<std::array<int, 3>> true_volume_cell(const io::RouteFrame& frame, 
   const auto truth = projection.forward(frame.truth->where, gamma);
   // The offset in grid metres, turned into the crop's axes (the inverse of filter::volume_cell_pose).
   const double dx = truth.x_m - crop.x, dy = truth.y_m - crop.y;
-  const double a = crop.rotation_deg * M_PI / 180.0;
+  const double a = crop.rotation_deg * core::kDegToRad;
   const double east = dx * std::cos(a) - dy * std::sin(a);
   const double north = dx * std::sin(a) + dy * std::cos(a);
   const auto u = static_cast<int>(std::lround(east / cell_m + (width - 1) / 2.0));

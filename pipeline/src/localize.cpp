@@ -258,7 +258,7 @@ io::FramePose frame_pose(const io::RouteFrame& f, const FrameEstimate& e, const 
       pose.truth->grid_heading_deg = core::wrap360(*f.truth->heading_deg - gamma_true);
       pose.truth->compass_heading_deg = core::wrap360(*f.truth->heading_deg);
       pose.heading_error_deg = core::heading_difference_deg(pose.compass_heading_deg, *f.truth->heading_deg);
-      const double h = *pose.truth->grid_heading_deg * M_PI / 180.0;
+      const double h = *pose.truth->grid_heading_deg * core::kDegToRad;
       pose.longitudinal_error_m = ex * std::sin(h) + ey * std::cos(h);
       pose.lateral_error_m = -ex * std::cos(h) + ey * std::sin(h);
     }

@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "seqloc/core/angles.hpp"
+
 namespace seqloc::pipeline {
 
 RegionWindow::RegionWindow(raster::CacheReader& cache, int width, int height)
@@ -82,7 +84,7 @@ filter::Pose carry_pose(const filter::Pose& pose, const RegionWindow& from, cons
   const osm::GeoPoint p =
       from.cache().metadata().projection().reverse({from.x_of(pose.u), from.y_of(pose.v)}, gamma_from);
   const auto g = to.cache().metadata().projection().forward(p, gamma_to);
-  return {to.u_of(g.x_m), to.v_of(g.y_m), std::fmod(pose.heading_deg + gamma_from - gamma_to + 360.0, 360.0)};
+  return {to.u_of(g.x_m), to.v_of(g.y_m), core::wrap360(pose.heading_deg + gamma_from - gamma_to)};
 }
 
 GridCrop carry_crop(const GridCrop& crop, const osm::RegionProjection& from, const osm::RegionProjection& to) {

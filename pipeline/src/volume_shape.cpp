@@ -4,6 +4,7 @@
 #include <cmath>
 #include <vector>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/flat_index.hpp"
 
 namespace seqloc::pipeline {
@@ -51,7 +52,7 @@ VolumeShape volume_shape(const filter::PreparedFrame& frame, double heading_deg)
   shape.minor_sigma_m = std::sqrt(l2);
   shape.elongation = l2 > 0 ? std::sqrt(l1 / l2) : (l1 > 0 ? INFINITY : 1.0);
   // Major axis angle from the east axis, then as a heading (clockwise from north).
-  const double axis_from_east = 0.5 * std::atan2(2 * cen, cee - cnn) * 180.0 / M_PI;
+  const double axis_from_east = 0.5 * std::atan2(2 * cen, cee - cnn) * core::kRadToDeg;
   const double axis_heading = 90.0 - axis_from_east;
   double d = std::fmod(std::abs(axis_heading - heading_deg), 180.0);
   if (d > 90) d = 180 - d;

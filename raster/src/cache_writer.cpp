@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "cache_format.hpp"
+#include "seqloc/core/files.hpp"
 #include "seqloc/raster/png_codec.hpp"
 #include "sqlite.hpp"
 
@@ -409,9 +410,7 @@ void CacheWriter::finish() {
   db_->exec("COMMIT");
   db_->exec("PRAGMA journal_mode = DELETE");  // a finished cache is one self-contained file
   db_.reset();
-  std::error_code ec;
-  std::filesystem::rename(partial_, final_, ec);
-  if (ec) throw CacheIoError(final_.string() + ": cannot move the finished cache into place: " + ec.message());
+  core::commit_file(partial_, final_);
 }
 
 // ---------------------------------------------------------------------------------------------

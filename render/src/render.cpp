@@ -13,6 +13,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/files.hpp"
 #include "seqloc/core/flat_index.hpp"
 #include "seqloc/core/units.hpp"
@@ -66,7 +67,7 @@ cv::Scalar viridis(double t) {
 void star(cv::Mat& m, cv::Point2d c, double r) {
   std::vector<cv::Point> pts;
   for (int k = 0; k < 10; ++k) {
-    const double a = -M_PI / 2 + k * M_PI / 5, rr = k % 2 ? r * 0.45 : r;
+    const double a = -core::kPi / 2 + k * core::kPi / 5, rr = k % 2 ? r * 0.45 : r;
     pts.emplace_back(static_cast<int>(std::lround(c.x + rr * std::cos(a))),
                      static_cast<int>(std::lround(c.y + rr * std::sin(a))));
   }
@@ -213,7 +214,7 @@ void draw_scale_bar(cv::Mat& m, const cv::Rect& map, double metres_per_px) {
 // grid heading -gamma (the CRS's meridian convergence at the map's centre).
 void draw_north_arrow(cv::Mat& m, const cv::Rect& map, double gamma_deg) {
   const cv::Point2d c(map.x + map.width - 26, map.y + 34);
-  const double a = -gamma_deg * M_PI / 180.0;
+  const double a = -gamma_deg * core::kDegToRad;
   const cv::Point2d dir(std::sin(a), -std::cos(a)), side(std::cos(a), std::sin(a));
   cv::circle(m, c, 20, rgb(255, 255, 255), cv::FILLED, cv::LINE_AA);
   cv::circle(m, c, 20, rgb(120, 120, 120), 1, cv::LINE_AA);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/osm/synthetic.hpp"
 
 namespace {
@@ -36,7 +37,7 @@ class Random {
 };
 
 std::vector<LocalPoint> rectangle(double x, double y, double w, double h, double angle_deg) {
-  const double a = angle_deg * M_PI / 180.0, c = std::cos(a), s = std::sin(a);
+  const double a = angle_deg * seqloc::core::kDegToRad, c = std::cos(a), s = std::sin(a);
   std::vector<LocalPoint> ring;
   for (auto [dx, dy] : {std::pair{-w / 2, -h / 2}, {w / 2, -h / 2}, {w / 2, h / 2}, {-w / 2, h / 2}}) {
     ring.push_back({x + c * dx - s * dy, y + s * dx + c * dy});
@@ -70,15 +71,15 @@ void build(SyntheticMap& map) {
   // Hamlet: a residential loop and houses along it, a bus stop, a bench, lamps, a post box.
   std::vector<LocalPoint> loop;
   for (int k = 0; k <= 24; ++k) {
-    const double a = 2 * M_PI * k / 24;
+    const double a = 2 * seqloc::core::kPi * k / 24;
     loop.push_back({hamlet.x_m + 90 * std::cos(a), hamlet.y_m + 60 + 60 * std::sin(a)});
   }
   map.way(loop, {{"highway", "residential"}});
   for (int k = 0; k < 10; ++k) {
-    const double a = 2 * M_PI * (k + 0.5) / 10;
+    const double a = 2 * seqloc::core::kPi * (k + 0.5) / 10;
     const double r = 90 + 18;
     map.way(rectangle(hamlet.x_m + r * std::cos(a), hamlet.y_m + 60 + r * 0.7 * std::sin(a), rng.uniform(9, 14),
-                      rng.uniform(8, 12), a * 180 / M_PI),
+                      rng.uniform(8, 12), a * seqloc::core::kRadToDeg),
             {{"building", k % 4 == 0 ? "farm_auxiliary" : "house"}}, true);
   }
   map.node({hamlet.x_m + 6, hamlet.y_m - 8}, {{"highway", "bus_stop"}, {"name", "Talheim"}});

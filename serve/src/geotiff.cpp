@@ -13,6 +13,7 @@
 #include <gdal.h>
 
 #include "gdal_support.hpp"
+#include "seqloc/core/files.hpp"
 
 namespace seqloc::serve {
 namespace {
@@ -229,9 +230,7 @@ void export_cog(raster::CacheReader& cache, const ExportOptions& options, const 
     if (!dst) throw ExportError(out.string() + ": " + gdal_message());
     if (!dst.close()) throw ExportError(out.string() + ": " + gdal_message());
   }
-  std::error_code ec;
-  std::filesystem::rename(partial, out, ec);
-  if (ec) throw ExportError(out.string() + ": cannot rename the finished file into place: " + ec.message());
+  core::commit_file(partial, out);
 }
 
 void write_region_vrt(const raster::CacheReader& cache, const std::filesystem::path& out) {
@@ -271,9 +270,7 @@ void write_region_vrt(const raster::CacheReader& cache, const std::filesystem::p
     GDALSetDescription(band, "road_distance");
     if (!vrt.close()) throw ExportError(out.string() + ": " + gdal_message());
   }
-  std::error_code ec;
-  std::filesystem::rename(partial, out, ec);
-  if (ec) throw ExportError(out.string() + ": cannot rename the finished file into place: " + ec.message());
+  core::commit_file(partial, out);
 }
 
 }  // namespace seqloc::serve

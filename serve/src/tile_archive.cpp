@@ -495,7 +495,7 @@ ArchiveSummary export_tile_archive(raster::CacheReader& cache, const ArchiveOpti
         options.progress(static_cast<long long>(start + count), static_cast<long long>(keys.size()));
     }
     sink->finish(summary);
-    std::filesystem::rename(partial, path);
+    core::commit_file(partial, path);
   } catch (...) {
     std::error_code ignored;
     std::filesystem::remove(partial, ignored);

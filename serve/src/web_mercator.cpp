@@ -12,6 +12,7 @@
 
 #include "gdal_support.hpp"
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/error.hpp"
 
 namespace seqloc::serve {
@@ -55,8 +56,8 @@ const std::string& web_mercator_wkt() {
 // each time it is made.
 osm::GridPoint mercator_to_region(const osm::RegionProjection& projection, double x, double y) {
   constexpr double kEarthRadiusM = 6378137.0;
-  const double lon = x / kEarthRadiusM * 180.0 / M_PI;
-  const double lat = std::atan(std::sinh(y / kEarthRadiusM)) * 180.0 / M_PI;
+  const double lon = x / kEarthRadiusM * core::kRadToDeg;
+  const double lat = std::atan(std::sinh(y / kEarthRadiusM)) * core::kRadToDeg;
   return projection.forward(osm::GeoPoint{lat, lon});
 }
 
@@ -105,7 +106,7 @@ struct WarpOptions {
 
 WebZooms web_zooms(const raster::CacheMetadata& metadata) {
   // Ground size of a 256 px tile's pixel at zoom 0 and this latitude, metres.
-  const double zoom0_pixel_m = 2 * kHalfWorldM / 256.0 * std::cos(metadata.centre_lat * M_PI / 180.0);
+  const double zoom0_pixel_m = 2 * kHalfWorldM / 256.0 * std::cos(metadata.centre_lat * core::kDegToRad);
   WebZooms z;
   z.max_zoom = std::clamp(static_cast<int>(std::lround(std::log2(zoom0_pixel_m / raster::kCellM))), 3, 24);
   z.min_zoom = z.max_zoom - 3;

@@ -64,7 +64,7 @@ struct RoadGraph {
 };
 
 double grid_heading(const osm::GridPoint& a, const osm::GridPoint& b) {
-  return core::wrap360(std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * 180.0 / M_PI);
+  return core::wrap360(std::atan2(b.x_m - a.x_m, b.y_m - a.y_m) * core::kRadToDeg);
 }
 
 // A walk along the network, straight on at most junctions, turning sometimes; never a U-turn.
@@ -159,7 +159,7 @@ void corrupt(io::Observation& obs, const ObservationModel& m, std::mt19937_64& r
     // Areas are discs of 1-3 m, ways segments of 4-12 m, nodes single cells.
     const double radius = channel == 0 ? (1 + 2 * uniform(rng)) / kCellM : 0;
     const double length = channel == 1 ? (4 + 8 * uniform(rng)) / kCellM : 0;
-    const double dir = uniform(rng) * 2 * M_PI;
+    const double dir = uniform(rng) * 2 * core::kPi;
     auto paint = [&](int r, int c) {
       if (r < 0 || r >= t || c < 0 || c >= t) return;
       const std::size_t i = core::flat(r, c, t);
@@ -234,14 +234,14 @@ io::Observation render_observation(raster::CacheReader& cache, const GridPose& p
     if (c < 0 || c >= window || r < 0 || r >= window) return nullptr;
     return map.data() + static_cast<std::size_t>(r * window + c) * 3;
   };
-  const double th = pose.heading_deg * M_PI / 180.0, s = std::sin(th), co = std::cos(th);
+  const double th = pose.heading_deg * core::kDegToRad, s = std::sin(th), co = std::cos(th);
   const std::uint8_t building = osm::kBuildingArea.code();
   io::Observation obs(t);
   for (int r = 0; r < t; ++r) {
     for (int c = 0; c < t; ++c) {
       const double f = (centre - r) * kCellM, rt = (c - centre) * kCellM;  // forward, right (m)
       if (f * f + rt * rt > camera.range_m * camera.range_m) continue;
-      if (camera.fov_deg < 360 && std::abs(std::atan2(rt, f)) * 180.0 / M_PI > camera.fov_deg / 2) continue;
+      if (camera.fov_deg < 360 && std::abs(std::atan2(rt, f)) * core::kRadToDeg > camera.fov_deg / 2) continue;
       const double e = f * s + rt * co, n = f * co - rt * s;  // east, north (m)
       const double tu = pu + e / kCellM, tv = pv - n / kCellM;
       const std::uint8_t* target = cell(tu, tv);
@@ -346,7 +346,7 @@ io::RouteFrame record_frame(raster::CacheReader& cache, const osm::RegionProject
   double odo_f = 0, odo_l = 0, odo_yaw = 0;
   if (i > 0) {
     const GridPose& q = rec.poses[i - 1];
-    const double dx = p.x - q.x, dy = p.y - q.y, th = q.heading_deg * M_PI / 180.0;
+    const double dx = p.x - q.x, dy = p.y - q.y, th = q.heading_deg * core::kDegToRad;
     odo_f = dx * std::sin(th) + dy * std::cos(th);
     odo_l = -dx * std::cos(th) + dy * std::sin(th);
     odo_yaw = core::wrap180(q.heading_deg - p.heading_deg);
@@ -399,7 +399,7 @@ void simulate_routes(raster::CacheReader& cache, const SimulateOptions& options,
         {"gps_error_m",
          options.gps_error_m}}.dump();
     // The crop centre's error starts uniform in the disc.
-    const double a0 = uniform(rng) * 2 * M_PI, r0 = options.gps_error_m * std::sqrt(uniform(rng));
+    const double a0 = uniform(rng) * 2 * core::kPi, r0 = options.gps_error_m * std::sqrt(uniform(rng));
     rec.error_x = r0 * std::cos(a0);
     rec.error_y = r0 * std::sin(a0);
     for (std::size_t i = 0; i < rec.poses.size(); ++i) {

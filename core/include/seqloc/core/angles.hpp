@@ -9,6 +9,7 @@ namespace seqloc::core {
 
 inline constexpr double kPi = 3.14159265358979323846;
 inline constexpr double kDegToRad = kPi / 180.0;
+inline constexpr double kRadToDeg = 180.0 / kPi;
 
 /// `deg` wrapped to [0, 360).
 [[nodiscard]] inline double wrap360(double deg) {

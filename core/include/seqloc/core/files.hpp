@@ -12,6 +12,11 @@ namespace seqloc::core {
 /// Throws IoError naming the file.
 void write_file(const std::filesystem::path& path, const std::string& bytes);
 
+/// Moves the finished file `partial` onto `target` in one step (a rename within a file system), so
+/// that `target` is at every instant the previous file or the new one, never part of one. The one
+/// place a file is committed; write_file() commits through it. Throws IoError naming `target`.
+void commit_file(const std::filesystem::path& partial, const std::filesystem::path& target);
+
 /// Puts the complete folder `staged` in place of `target`. An existing target is exchanged with it
 /// in one atomic step (renameat2 RENAME_EXCHANGE), so that at every instant, even across a kill -9,
 /// `target` is either the previous complete folder or the new one; the previous one (now under

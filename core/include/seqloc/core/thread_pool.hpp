@@ -20,6 +20,12 @@
 
 namespace seqloc::core {
 
+/// Worker threads when the user names none: the machine's cores (1 when unknown, at most 64).
+[[nodiscard]] inline int default_threads() {
+  const unsigned n = std::thread::hardware_concurrency();
+  return n == 0 ? 1 : static_cast<int>(std::min(n, 64u));
+}
+
 class ThreadPool {
  public:
   /// The process's pool (created on first use, its threads joined at exit).

@@ -38,7 +38,7 @@ SEQLOC_HD inline float exp_or_zero(float x, float scale, float shift) {
 /// it translates without blurring.
 SEQLOC_HD inline void displacement_cells(double forward_m, double left_m, double heading_deg, double cell_m, double& du,
                                          double& dv) {
-  const double h = heading_deg * (3.14159265358979323846 / 180.0);
+  const double h = heading_deg * core::kDegToRad;
   const double east = forward_m * ::sin(h) - left_m * ::cos(h);
   const double north = forward_m * ::cos(h) + left_m * ::sin(h);
   du = east / cell_m;

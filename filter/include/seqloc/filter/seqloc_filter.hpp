@@ -40,7 +40,7 @@ inline constexpr float kLogZero = -1e30f;
 /// stored heading-major for sampling.
 struct PreparedFrame {
   int height = 0, width = 0, bins = 0;
-  double cell_m = 0.5;
+  double cell_m = core::kCellM;
   UninitializedAlignedVector<float> log_prob;  ///< [bin][v][u]; resize leaves new values unwritten
   double log_cells = 0;                        ///< log M
   double entropy = 0;                          ///< H_hat = -sum p log p / log M, in [0, 1]

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "seqloc/core/error.hpp"
+#include "seqloc/core/units.hpp"
 
 namespace seqloc::filter {
 
@@ -49,7 +50,7 @@ struct FrameVolume {
   int height = 0;
   int width = 0;
   int bins = 0;
-  double cell_m = 0.5;  ///< the volume's cell size
+  double cell_m = core::kCellM;  ///< the volume's cell size
 };
 
 /// Where a frame volume lies in the window: the window position (cells, may be fractional) of
