@@ -47,6 +47,21 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitUsage = 2;
 
+/// The exit code of an error's category: 2 for a usage error (an option, a value), 1 for the rest
+/// (what is not there, bad data, I/O, a bug of ours).
+[[nodiscard]] constexpr int exit_code(ErrorCategory category) {
+  switch (category) {
+    case ErrorCategory::usage:
+      return kExitUsage;
+    case ErrorCategory::not_found:
+    case ErrorCategory::data:
+    case ErrorCategory::io:
+    case ErrorCategory::internal:
+      break;
+  }
+  return kExitFailure;
+}
+
 /// Options every subcommand shares.
 struct GlobalOptions {
   bool verbose = false;

@@ -108,9 +108,8 @@ int main(int argc, char** argv) {
     }
     return app::kExitUsage;
   } catch (const std::exception& e) {
-    // One line naming what is wrong; the exit code from the error's category: 2 for a usage
-    // error, 1 for bad data, I/O and anything else.
+    // One line naming what is wrong; the exit code from the error's category alone.
     std::fprintf(stderr, "seqloc: error: %s\n", e.what());
-    return seqloc::category_of(e) == seqloc::ErrorCategory::usage ? app::kExitUsage : app::kExitFailure;
+    return app::exit_code(seqloc::category_of(e));
   }
 }

@@ -683,11 +683,12 @@ class PyLocalizer {
   std::vector<Pose> final_;            ///< poses final and not yet taken (lag > 0)
 };
 
-// seqloc's errors as Python exceptions, by category, in this one place: seqloc.Error is the base;
-// seqloc.UsageError and seqloc.DataError are ValueErrors, seqloc.IOError an OSError,
-// seqloc.InternalError a RuntimeError. The classes of the earlier module stay, under them:
-// seqloc.CacheError (an OSError), seqloc.FilterError (a DataError) and seqloc.RequestError (a
-// UsageError, for a crop that cannot be placed).
+// seqloc's errors as Python exceptions in this one place, by their category alone: seqloc.Error is
+// the base; seqloc.UsageError and seqloc.DataError are ValueErrors, seqloc.NotFoundError a
+// UsageError and a LookupError, seqloc.IOError an OSError, seqloc.InternalError a RuntimeError.
+// The names of the earlier module's classes stay, as the category classes they were raised for:
+// seqloc.CacheError is seqloc.IOError, seqloc.FilterError seqloc.DataError and seqloc.RequestError
+// seqloc.UsageError.
 void register_errors(py::module_& m) {
   // Each class lives as long as the module (released: never decremented after the interpreter ends).
   const auto make = [&m](const char* name, py::handle bases, const char* doc) {
@@ -701,6 +702,9 @@ void register_errors(py::module_& m) {
   static const py::handle usage = make("UsageError", py::make_tuple(error, py::handle(PyExc_ValueError)),
                                        "A request that cannot be carried out as given.")
                                       .release();
+  static const py::handle not_found = make("NotFoundError", py::make_tuple(usage, py::handle(PyExc_LookupError)),
+                                           "A request for what is not there: a point or tile outside the region.")
+                                          .release();
   static const py::handle data =
       make("DataError", py::make_tuple(error, py::handle(PyExc_ValueError)), "Input data that cannot be used.")
           .release();
@@ -710,11 +714,9 @@ void register_errors(py::module_& m) {
   static const py::handle internal = make("InternalError", py::make_tuple(error, py::handle(PyExc_RuntimeError)),
                                           "A broken invariant of seqloc itself.")
                                          .release();
-  static const py::handle cache =
-      make("CacheError", py::make_tuple(error, py::handle(PyExc_OSError)), "A region cache that cannot be read.")
-          .release();
-  static const py::handle filter_error = make("FilterError", data, "A frame volume the filter cannot use.").release();
-  static const py::handle request = make("RequestError", usage, "A crop that cannot be placed as asked.").release();
+  m.attr("CacheError") = io;
+  m.attr("FilterError") = data;
+  m.attr("RequestError") = usage;
   usage_type_error_class = make("UsageTypeError", py::make_tuple(usage, py::handle(PyExc_TypeError)),
                                 "An argument of a type seqloc cannot use.")
                                .release();
@@ -728,31 +730,25 @@ void register_errors(py::module_& m) {
     if (!p) return;
     try {
       std::rethrow_exception(p);
-    } catch (const raster::CacheError& e) {
-      PyErr_SetString(cache.ptr(), e.what());
-    } catch (const raster::CropError& e) {
-      PyErr_SetString(request.ptr(), e.what());
-    } catch (const filter::FilterError& e) {
-      // A device that cannot run (io) is no frame's fault.
-      PyErr_SetString(e.category() == seqloc::ErrorCategory::usage ? usage.ptr()
-                      : e.category() == seqloc::ErrorCategory::io  ? io.ptr()
-                                                                   : filter_error.ptr(),
-                      e.what());
     } catch (const seqloc::Error& e) {
+      py::handle type = internal;
       switch (e.category()) {
         case seqloc::ErrorCategory::usage:
-          PyErr_SetString(usage.ptr(), e.what());
+          type = usage;
+          break;
+        case seqloc::ErrorCategory::not_found:
+          type = not_found;
           break;
         case seqloc::ErrorCategory::data:
-          PyErr_SetString(data.ptr(), e.what());
+          type = data;
           break;
         case seqloc::ErrorCategory::io:
-          PyErr_SetString(io.ptr(), e.what());
+          type = io;
           break;
         case seqloc::ErrorCategory::internal:
-          PyErr_SetString(internal.ptr(), e.what());
           break;
       }
+      PyErr_SetString(type.ptr(), e.what());
     } catch (const py::error_already_set&) {
       throw;  // a Python exception already (ours, or Python's own)
     } catch (const py::builtin_exception&) {

@@ -80,13 +80,17 @@ Response error_response(int status, const std::string& message) {
 }
 
 int http_status(const std::exception& error) {
-  const auto* request = dynamic_cast<const RequestError*>(&error);
-  const auto* crop = dynamic_cast<const raster::CropError*>(&error);
-  if ((request && request->kind() == RequestError::Kind::not_found) ||
-      dynamic_cast<const raster::CacheRangeError*>(&error) || (crop && crop->kind() == raster::CropError::Kind::outside)) {
-    return 404;
+  switch (category_of(error)) {
+    case ErrorCategory::not_found:
+      return 404;
+    case ErrorCategory::usage:
+      return 400;
+    case ErrorCategory::data:
+    case ErrorCategory::io:
+    case ErrorCategory::internal:
+      break;
   }
-  return category_of(error) == ErrorCategory::usage ? 400 : 500;
+  return 500;  // the server's own data, files or code
 }
 
 Response Service::handle(const Request& request) {

@@ -90,14 +90,19 @@ class CacheCrop(unittest.TestCase):
             self.cache.crop(*self.centre, 64.0, layers=["roads"])
         with self.assertRaises(OSError):
             seqloc.Cache("/nonexistent.gpkg")
-        # One hierarchy (docs/python.md): each under seqloc.Error and the built-in it was before.
-        with self.assertRaises(seqloc.RequestError):  # a point outside the region
+        # One hierarchy (docs/python.md), by category: each under seqloc.Error and the built-in it was before.
+        with self.assertRaises(seqloc.NotFoundError):  # a point outside the region
             self.cache.crop(0.0, 0.0, 64.0)
-        with self.assertRaises(seqloc.CacheError):
+        with self.assertRaises(seqloc.RequestError):  # the earlier name, a usage error
+            self.cache.crop(0.0, 0.0, 64.0)
+        with self.assertRaises(seqloc.IOError):
+            seqloc.Cache("/nonexistent.gpkg")
+        with self.assertRaises(seqloc.CacheError):  # the earlier name, an I/O error
             seqloc.Cache("/nonexistent.gpkg")
 
     def test_errors_form_one_hierarchy(self):
         for cls, builtin in [(seqloc.UsageError, ValueError), (seqloc.DataError, ValueError),
+                             (seqloc.NotFoundError, seqloc.UsageError), (seqloc.NotFoundError, LookupError),
                              (seqloc.IOError, OSError), (seqloc.InternalError, RuntimeError),
                              (seqloc.CacheError, OSError), (seqloc.FilterError, seqloc.DataError),
                              (seqloc.RequestError, seqloc.UsageError), (seqloc.UsageTypeError, TypeError),
@@ -647,9 +652,14 @@ class TypingStub(unittest.TestCase):
         stub_path = os.path.join(os.path.dirname(seqloc.__file__), "_seqloc.pyi")
         tree = ast.parse(open(stub_path).read())
         stub_classes = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef) and not n.name.startswith("_")}
+        # Names of a class under another name (the earlier error names): NAME = CLASS.
+        stub_aliases = {n.targets[0].id: n.value.id for n in tree.body
+                        if isinstance(n, ast.Assign) and isinstance(n.value, ast.Name) and n.value.id in stub_classes}
         module = seqloc._seqloc
         runtime_classes = {name for name, v in vars(module).items() if inspect.isclass(v)}
-        self.assertEqual(set(stub_classes), runtime_classes)
+        self.assertEqual(set(stub_classes) | set(stub_aliases), runtime_classes)
+        for alias, name in stub_aliases.items():
+            self.assertIs(getattr(module, alias), getattr(module, name), alias)
         stub_functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
         runtime_functions = {name for name, v in vars(module).items()
                              if inspect.isbuiltin(v) and not name.startswith("_")}

@@ -308,6 +308,8 @@ TEST(HttpStatus, FromTheErrorOnce) {
   EXPECT_EQ(http_status(CropError(CropError::Kind::bad_argument, "x")), 400);
   EXPECT_EQ(http_status(raster::CacheRangeError("x")), 404);
   EXPECT_EQ(http_status(UsageError("x")), 400);
+  EXPECT_EQ(http_status(NotFoundError("x")), 404) << "by the category alone, whatever the class";
+  EXPECT_EQ(http_status(DataError("x")), 500);
   EXPECT_EQ(http_status(raster::CacheFormatError("x")), 500) << "a damaged cache is the server's fault";
   EXPECT_EQ(http_status(ExportError("x")), 500);
   EXPECT_EQ(http_status(std::runtime_error("x")), 500);

@@ -1,8 +1,8 @@
 #pragma once
 // The one base of every error seqloc raises for what it was given or what it met, with a category
 // that says whose fault it is. The command line maps the category to an exit code, the HTTP
-// service to a status and the Python module to an exception class, each once; every library
-// raises its own classes (CacheError, FilterError, ...) under this base.
+// service to a status and the Python module to an exception class, each once and by the category
+// alone; every library raises its own classes (CacheError, FilterError, ...) under this base.
 
 #include <stdexcept>
 #include <string>
@@ -10,17 +10,20 @@
 namespace seqloc {
 
 enum class ErrorCategory {
-  usage,     ///< a request that cannot be carried out as given: an option, a value, an output in the way
-  data,      ///< input that cannot be used: a malformed file, a bad row, a value out of range
-  io,        ///< a file or device that cannot be opened, read or written
-  internal,  ///< a broken invariant of seqloc itself
+  usage,      ///< a request that cannot be carried out as given: an option, a value, an output in the way
+  not_found,  ///< a request for what is not there: a tile or point outside the region, an unknown region
+  data,       ///< input that cannot be used: a malformed file, a bad row, a value out of range
+  io,         ///< a file or device that cannot be opened, read or written
+  internal,   ///< a broken invariant of seqloc itself
 };
 
-/// "usage", "data", "io" or "internal".
+/// "usage", "not_found", "data", "io" or "internal".
 [[nodiscard]] constexpr const char* category_name(ErrorCategory category) {
   switch (category) {
     case ErrorCategory::usage:
       return "usage";
+    case ErrorCategory::not_found:
+      return "not_found";
     case ErrorCategory::data:
       return "data";
     case ErrorCategory::io:
@@ -53,6 +56,13 @@ class DataError : public Error {
 class UsageError : public Error {
  public:
   explicit UsageError(const std::string& message) : Error(ErrorCategory::usage, message) {}
+};
+
+/// A request for what is not there (a tile outside the region, a region the server does not hold);
+/// the message names what was asked for and what there is.
+class NotFoundError : public Error {
+ public:
+  explicit NotFoundError(const std::string& message) : Error(ErrorCategory::not_found, message) {}
 };
 
 /// A file that cannot be opened, read or written; the message names it.

@@ -49,10 +49,10 @@ class CacheFormatError : public CacheError {
  public:
   explicit CacheFormatError(const std::string& message) : CacheError(message) {}
 };
-/// A tile or window outside the cached region, or a tile missing from a cache.
+/// A tile or window outside the cached region, or a tile missing from a cache (not_found).
 class CacheRangeError : public CacheError {
  public:
-  explicit CacheRangeError(const std::string& message) : CacheError(message) {}
+  explicit CacheRangeError(const std::string& message) : CacheError(message, ErrorCategory::not_found) {}
 };
 
 /// Version of the cache layout this build reads and writes.

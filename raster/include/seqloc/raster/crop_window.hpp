@@ -16,7 +16,7 @@ class CropError : public Error {
  public:
   enum class Kind { bad_argument, outside };
   CropError(Kind kind, const std::string& message)
-      : Error(kind == Kind::bad_argument ? ErrorCategory::usage : ErrorCategory::data, message), kind_(kind) {}
+      : Error(kind == Kind::bad_argument ? ErrorCategory::usage : ErrorCategory::not_found, message), kind_(kind) {}
   [[nodiscard]] Kind kind() const { return kind_; }
 
  private:

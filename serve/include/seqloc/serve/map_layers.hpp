@@ -23,13 +23,13 @@
 namespace seqloc::serve {
 
 /// A request that cannot be served as asked (a bad parameter, a point outside the region); the
-/// message says which parameter and why. A usage error, or a data error for what is not there;
+/// message says which parameter and why. A usage error, or a not_found one for what is not there;
 /// the HTTP layer answers 400 or 404 (http_status, service.hpp).
 class RequestError : public Error {
  public:
   enum class Kind { bad_request, not_found };
   RequestError(Kind kind, const std::string& message)
-      : Error(kind == Kind::bad_request ? ErrorCategory::usage : ErrorCategory::data, message), kind_(kind) {}
+      : Error(kind == Kind::bad_request ? ErrorCategory::usage : ErrorCategory::not_found, message), kind_(kind) {}
   [[nodiscard]] Kind kind() const { return kind_; }
 
  private:

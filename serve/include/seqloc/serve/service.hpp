@@ -132,10 +132,10 @@ class Service {
 /// A JSON error body {"error": {"status": S, "message": M}} with that status.
 [[nodiscard]] Response error_response(int status, const std::string& message);
 
-/// The HTTP status of an error, decided here once: 404 for what is not there (a request of kind
-/// not found, a tile or window outside the region, a crop around a point outside it), 400 for the
-/// other usage errors (the client's request), 500 for everything else (a damaged cache, a GDAL
-/// failure: the server's fault, not the client's).
+/// The HTTP status of an error, decided here once and by its category alone: 404 for not_found
+/// (an unknown region, a tile or window outside the region, a crop around a point outside it), 400
+/// for usage (the client's request), 500 for everything else (a damaged cache, a GDAL failure: the
+/// server's fault, not the client's).
 [[nodiscard]] int http_status(const std::exception& error);
 
 }  // namespace seqloc::serve
