@@ -60,7 +60,6 @@ struct SeqLocFilter::Impl {
   AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
   PowerEstimator estimator;
   std::optional<PowerBank> bank;  // self-calibration's judge when FilterConfig::self_calibration_bank
-  bool shape_pending = false;     // weigh() left the powered frame's peak and entropy to temper()
   bool was_held = true;           // the estimator's hold at the last frame
   double last_power = 1;          // and its power
   // Self-calibration's view of the predicted belief: each slice summed over 2 x 2 cells as the
@@ -300,7 +299,7 @@ void SeqLocFilter::predict(const Odometry& odometry) {
 }
 
 FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
-                               std::span<const float> road_distance_m, const GpsFix* gps) {
+                               std::span<const float> road_distance_m, const std::optional<GpsFix>& gps) {
   if (!first_) predict(odometry);
   FrameResult result = update(frame, crop, road_distance_m, gps);
   if (last_estimate_ && !first_) {
@@ -316,8 +315,8 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
 }
 
 FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop,
-                                 std::span<const float> road_distance_m, const GpsFix* gps,
-                                 const FrameWeighting* weighting) {
+                                 std::span<const float> road_distance_m, const std::optional<GpsFix>& gps,
+                                 const std::optional<FrameWeighting>& weighting) {
   // Checked before anything changes: a refused step leaves the belief as it was.
   if (config_.mgr && road_distance_m.empty())
     throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
@@ -327,13 +326,16 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
                       ErrorCategory::usage);
   }
   // Self-calibration estimates from this frame unless a weighting repeats an earlier pass.
-  const bool calibrating = config_.self_calibrate && weighting == nullptr;
+  const bool calibrating = config_.self_calibrate && !weighting;
   // The one-step criterion's evidence is collected while the frame is multiplied in; the bank
   // judges the frame on its own coarse windows after the step.
   const bool estimating = calibrating && !impl_->bank;
-  FrameResult result = weigh(given, weighting, calibrating);
+  // Where ETU's weight does not read the powered frame's entropy, the pass over the frame that
+  // finds it is left to temper(), which may hand it the powered frame it computes anyway.
+  const bool shape_in_temper = calibrating && (!config_.etu || config_.etu_route_reference);
+  FrameResult result = weigh(given, weighting, calibrating, shape_in_temper);
   if (calibrating) retemper();
-  const float outside = temper(given, result);
+  const float outside = temper(given, result, shape_in_temper);
   const double total = multiply_in(given, crop, outside, gps, estimating);
   const Peak peak = normalize(total, road_distance_m);
   if (calibrating && impl_->bank) impl_->bank->update(given, crop, result.etu_weight);
@@ -343,12 +345,13 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   return result;
 }
 
-FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating) {
+FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const std::optional<FrameWeighting>& weighting,
+                                bool calibrating, bool shape_in_temper) {
   // Self-calibration: the frame raised to the power kappa the frames before it favour,
   // q = p^kappa / Z(kappa). q is never written out: its peak and entropy come from one pass over
   // the given frame, which also bins the frame's cells by depth for the estimator.
   FrameResult result;
-  if (weighting != nullptr) {
+  if (weighting.has_value()) {
     result.volume_power = weighting->volume_power;
     result.etu_weight = weighting->etu_weight;
   } else {
@@ -357,15 +360,12 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting
   if (calibrating && !impl_->bank) {
     for (auto& worker : impl_->workers) worker.frame_cells.clear();
   }
-  // Where ETU's weight does not read the powered frame's entropy, the pass over the frame waits
-  // for temper(), which may hand it the powered frame it computes anyway.
-  impl_->shape_pending = calibrating && (!config_.etu || config_.etu_route_reference);
-  const FrameShape used = calibrating && !impl_->shape_pending
+  const FrameShape used = calibrating && !shape_in_temper
                               ? impl_->scan_frame(given, result.volume_power, config_.threads)
-                          : weighting != nullptr ? FrameShape{weighting->peak_log_prob, given.entropy}
-                                                 : FrameShape{given.max_log_prob, given.entropy};
+                          : weighting.has_value() ? FrameShape{weighting->peak_log_prob, given.entropy}
+                                                  : FrameShape{given.max_log_prob, given.entropy};
   result.frame_entropy = used.entropy;
-  if (weighting != nullptr) {
+  if (weighting.has_value()) {
     // As weighed before.
   } else if (config_.etu && config_.etu_route_reference) {
     entropies_.push_back(given.entropy);
@@ -379,7 +379,7 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const FrameWeighting
   return result;
 }
 
-float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result) {
+float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result, bool with_shape) {
   // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
   // normalization): exp(w kappa (log p - log p_max)); log(1/M) - outside_crop_nats outside the crop.
   const auto w = static_cast<float>(result.etu_weight);
@@ -393,14 +393,13 @@ float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result) {
                           impl_->tempered.data() + begin);
     }
   });
-  if (impl_->shape_pending) {
+  if (with_shape) {
     // Self-calibration's pass over the frame (weigh()): with w = 1 the tempered frame is q's
     // numerator e^{kappa r} itself.
     const FrameShape shape =
         impl_->scan_frame(frame, result.volume_power, config_.threads, w == 1.0f ? impl_->tempered.data() : nullptr);
     result.frame_entropy = shape.entropy;
     result.weighting.peak_log_prob = shape.max_log_prob;
-    impl_->shape_pending = false;
   }
   // The value of a window cell outside the crop.
   const float log_p_max = result.weighting.peak_log_prob;
@@ -456,9 +455,9 @@ void SeqLocFilter::retemper_by(float ratio) {
   cached_min_.reset();
 }
 
-std::vector<float> gps_prior_factor(const FilterConfig& config, const GpsFix* gps) {
+std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps) {
   std::vector<float> factor;
-  if (!config.gps_prior || gps == nullptr) return factor;
+  if (!config.gps_prior || !gps) return factor;
   const int W = config.width, H = config.height;
   factor.resize(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
   const double sigma_cells = gps->sigma_m / kCellM;
@@ -471,8 +470,8 @@ std::vector<float> gps_prior_factor(const FilterConfig& config, const GpsFix* gp
   return factor;
 }
 
-double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
-                                 bool calibrating) {
+double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside,
+                                 const std::optional<GpsFix>& gps, bool calibrating) {
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);

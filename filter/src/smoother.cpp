@@ -31,8 +31,8 @@ BackwardFilter::BackwardFilter(const FilterConfig& config) : filter_(backward_co
 void BackwardFilter::reset() { filter_.reset_uniform(); }
 
 void BackwardFilter::absorb(const PreparedFrame& frame, const CropPose& crop, const FrameWeighting& weighting,
-                            std::span<const float> road_distance_m, const GpsFix* gps) {
-  (void)filter_.update(frame, crop, road_distance_m, gps, &weighting);
+                            std::span<const float> road_distance_m, const std::optional<GpsFix>& gps) {
+  (void)filter_.update(frame, crop, road_distance_m, gps, weighting);
 }
 
 void BackwardFilter::step_back(const Odometry& odometry) { filter_.predict(invert(odometry)); }

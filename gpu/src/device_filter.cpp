@@ -159,7 +159,7 @@ void DeviceFilter::predict(const filter::Odometry& odometry) {
 
 FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                                const filter::Odometry& odometry, std::span<const float> road_distance_m,
-                               const filter::GpsFix* gps) {
+                               const std::optional<filter::GpsFix>& gps) {
   if (!first_) predict(odometry);
   FrameResult result = update(frame, crop, road_distance_m, gps);
   if (last_estimate_ && !first_) {
@@ -174,10 +174,10 @@ FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter:
   return result;
 }
 
-FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame, const filter::FrameWeighting* weighting,
-                                bool calibrating) {
+FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame,
+                                const std::optional<filter::FrameWeighting>& weighting, bool calibrating) {
   FrameResult result;
-  if (weighting != nullptr) {
+  if (weighting.has_value()) {
     result.volume_power = weighting->volume_power;
     result.etu_weight = weighting->etu_weight;
   } else {
@@ -185,7 +185,7 @@ FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame, const filter
   }
   // The powered frame's peak and entropy (SeqLocFilter's scan_frame): -log Z and
   // log Z - k sum(e^{k r} r) / Z.
-  float peak = weighting != nullptr ? weighting->peak_log_prob : frame.max_log_prob;
+  float peak = weighting.has_value() ? weighting->peak_log_prob : frame.max_log_prob;
   double entropy = frame.entropy;
   if (calibrating && result.volume_power != 1.0) {
     const FrameSums sums = engine_->frame_sums(static_cast<float>(result.volume_power), frame.max_log_prob);
@@ -194,7 +194,7 @@ FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame, const filter
     entropy = std::clamp((log_z - result.volume_power * sums.zr / sums.z) / frame.log_cells, 0.0, 1.0);
   }
   result.frame_entropy = entropy;
-  if (weighting != nullptr) {
+  if (weighting.has_value()) {
     // As weighed before.
   } else if (config_.etu && config_.etu_route_reference) {
     entropies_.push_back(frame.entropy);
@@ -225,8 +225,8 @@ void DeviceFilter::retemper(bool held) {
 }
 
 FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filter::CropPose& crop,
-                                 std::span<const float> road_distance_m, const filter::GpsFix* gps,
-                                 const filter::FrameWeighting* weighting) {
+                                 std::span<const float> road_distance_m, const std::optional<filter::GpsFix>& gps,
+                                 const std::optional<filter::FrameWeighting>& weighting) {
   const std::size_t slice = static_cast<std::size_t>(config_.width) * config_.height;
   if (config_.mgr && road_distance_m.empty())
     throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
@@ -235,7 +235,7 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
                           std::to_string(config_.width) + " x " + std::to_string(config_.height),
                       ErrorCategory::usage);
   }
-  const bool calibrating = config_.self_calibrate && weighting == nullptr;
+  const bool calibrating = config_.self_calibrate && !weighting;
   engine_->load_frame(frame);
   FrameResult result = weigh(frame, weighting, calibrating);
   if (calibrating) retemper(estimator_.held());

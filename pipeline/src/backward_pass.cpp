@@ -53,7 +53,7 @@ void BackwardPass::step_back(const StepRecord& record, const filter::PreparedFra
   // the window was before that step's re-centring.
   move_window(filter_, window_, record.origin);
   const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
-  filter_.absorb(frame, record.crop, record.weighting, road, record.fix ? &*record.fix : nullptr);
+  filter_.absorb(frame, record.crop, record.weighting, road, record.fix);
   filter_.step_back(record.odometry);
   if (&previous_region == &window_.cache()) {
     move_window(filter_, window_, previous.origin_after);
@@ -80,7 +80,7 @@ void ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& 
   move_window(filter_, window_, record.origin);
   filter_.predict(record.odometry);
   const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
-  (void)filter_.update(frame, record.crop, road, record.fix ? &*record.fix : nullptr, &record.weighting);
+  (void)filter_.update(frame, record.crop, road, record.fix, record.weighting);
   move_window(filter_, window_, record.origin_after);
 }
 

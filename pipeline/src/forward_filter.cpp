@@ -63,7 +63,7 @@ void ForwardFilter::reset_gaussian(double u, double v, double sigma_m) {
 
 filter::FrameResult ForwardFilter::step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                                         const filter::Odometry& odometry, std::span<const float> road_distance_m,
-                                        const filter::GpsFix* gps) {
+                                        const std::optional<filter::GpsFix>& gps) {
   return cpu_ ? cpu_->step(frame, crop, odometry, road_distance_m, gps)
               : gpu_->step(frame, crop, odometry, road_distance_m, gps);
 }

@@ -62,7 +62,7 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
   if (config_.gps_prior && gps) fix = filter::GpsFix{window_.u_of(gps->x_m), window_.v_of(gps->y_m), gps->sigma_m};
   const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
   const filter::CropPose crop_pose = window_.crop_pose(crop);
-  const filter::FrameResult r = filter_->step(*frame, crop_pose, odometry, road, fix ? &*fix : nullptr);
+  const filter::FrameResult r = filter_->step(*frame, crop_pose, odometry, road, fix);
   FrameEstimate e;
   e.x_m = window_.x_of(r.pose.u);
   e.y_m = window_.y_of(r.pose.v);

@@ -52,7 +52,8 @@ void ReferenceFilter::reset_gaussian(double u0, double v0, double sigma_m) {
 }
 
 FrameResult ReferenceFilter::step(const FrameVolume& volume, const CropPose& crop, const Odometry& odo,
-                                  std::span<const float> road_distance_m, const GpsFix* gps, double volume_power) {
+                                  std::span<const float> road_distance_m, const std::optional<GpsFix>& gps,
+                                  double volume_power) {
   // 1. Predict (not on the first frame after a reset).
   if (!first_) predict(odo);
   // 2. ETU: the frame's log-probabilities raised to the power and normalized, and its weight.
@@ -172,7 +173,7 @@ std::vector<double> ReferenceFilter::weigh(const FrameVolume& volume, FrameResul
 }
 
 void ReferenceFilter::update(const FrameVolume& volume, const std::vector<double>& logp, const CropPose& crop,
-                             const GpsFix* gps, double w) {
+                             const std::optional<GpsFix>& gps, double w) {
   const int W = c_.width, H = c_.height, R = c_.headings;
   const int vh = volume.height, vw = volume.width, vn = volume.bins;
   const double log_m = std::log(static_cast<double>(static_cast<std::size_t>(vh) * vw * vn));

@@ -4,6 +4,7 @@
 // seqloc_filter.hpp, sharing no code with the fast filter beyond the half-float conversion. The
 // tests run both on seeded random volumes and motions and compare them.
 
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -23,7 +24,8 @@ class ReferenceFilter {
   /// made here: the tests hand in the power the fast filter reports, and check the estimator
   /// against its own brute-force reference).
   FrameResult step(const FrameVolume& volume, const CropPose& crop, const Odometry& odometry,
-                   std::span<const float> road_distance_m, const GpsFix* gps = nullptr, double volume_power = 1.0);
+                   std::span<const float> road_distance_m, const std::optional<GpsFix>& gps = std::nullopt,
+                   double volume_power = 1.0);
 
   [[nodiscard]] double at(int u, int v, int k) const { return b_[index(u, v, k)]; }
 
@@ -33,8 +35,8 @@ class ReferenceFilter {
   /// The frame's log-probabilities ([bin][v][u]) raised to r.volume_power and normalized; sets
   /// r's frame entropy and ETU weight.
   std::vector<double> weigh(const FrameVolume& volume, FrameResult& r);
-  void update(const FrameVolume& volume, const std::vector<double>& logp, const CropPose& crop, const GpsFix* gps,
-              double etu_weight);
+  void update(const FrameVolume& volume, const std::vector<double>& logp, const CropPose& crop,
+              const std::optional<GpsFix>& gps, double etu_weight);
   void blend_road_prior(std::span<const float> road_distance_m);
   void estimate(FrameResult& r) const;
 

@@ -111,7 +111,7 @@ TEST_P(FastAgainstReference, AgreeOnSeededRandomSequences) {
     const CropPose crop{6 + 12 * unit(rng), 5 + 10 * unit(rng), p.rotation_deg == 0 ? 0.0 : p.rotation_deg + 10 * step};
     const Odometry odo{3 * unit(rng), unit(rng) - 0.5, 40 * unit(rng) - 20};
     const auto a = fast.step(prepare_frame(view, c.headings), crop, odo, road);
-    const auto b = ref.step(view, crop, odo, road, nullptr, a.volume_power);
+    const auto b = ref.step(view, crop, odo, road, std::nullopt, a.volume_power);
     expect_same_belief(fast.belief(), ref, std::string(p.name) + " step " + std::to_string(step));
     EXPECT_EQ(a.argmax.u, b.argmax.u);
     EXPECT_EQ(a.argmax.v, b.argmax.v);

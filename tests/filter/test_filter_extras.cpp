@@ -247,12 +247,12 @@ TEST(Beyond, GpsPriorPullsTowardsTheFix) {
   SeqLocFilter filter(c);
   std::vector<float> flat(9 * 9 * 8, 0.0f);
   const GpsFix fix{30, 10, 2.0};
-  const auto r = filter.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, {}, &fix);
+  const auto r = filter.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, {}, fix);
   EXPECT_EQ(r.argmax.u, 30);
   EXPECT_EQ(r.argmax.v, 10);
   c.gps_prior = false;
   SeqLocFilter without(c);
-  EXPECT_NE(without.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, {}, &fix).argmax.u, 30);
+  EXPECT_NE(without.step(prepare_frame(view(flat, 9, 9, 8), 8), {20, 20, 0}, {}, {}, fix).argmax.u, 30);
 }
 
 TEST(Beyond, RelocalizationIsFlaggedWhenTheArgmaxJumps) {

@@ -115,7 +115,7 @@ struct GpsFix {
 /// The GPS term over the window (W x H, row-major): exp(-d^2 / (2 sigma^2)) at each cell, d its
 /// distance from the fix; empty when the config has no GPS prior or there is no fix. What the
 /// update multiplies into every heading slice (the CPU filter's and the CUDA backend's).
-[[nodiscard]] std::vector<float> gps_prior_factor(const FilterConfig& config, const GpsFix* gps);
+[[nodiscard]] std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps);
 
 /// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
 /// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
@@ -163,7 +163,7 @@ class SeqLocFilter {
   /// empty when MGR is off; FilterError for another size), PAS. `gps` is used when the config
   /// enables the GPS term.
   FrameResult step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
-                   std::span<const float> road_distance_m, const GpsFix* gps = nullptr);
+                   std::span<const float> road_distance_m, const std::optional<GpsFix>& gps = std::nullopt);
 
   /// The stages, exposed for tests and for callers that move the window between frames.
   void predict(const Odometry& odometry);
@@ -179,7 +179,8 @@ class SeqLocFilter {
   /// an earlier one: nothing is estimated, self-calibration and ETU's route history are left as
   /// they are); without it, as the configuration says.
   FrameResult update(const PreparedFrame& given, const CropPose& crop, std::span<const float> road_distance_m,
-                     const GpsFix* gps = nullptr, const FrameWeighting* weighting = nullptr);
+                     const std::optional<GpsFix>& gps = std::nullopt,
+                     const std::optional<FrameWeighting>& weighting = std::nullopt);
 
   /// Self-calibration's one-step estimator (its power is what the next step uses when the bank is
   /// off; unused otherwise).
@@ -201,11 +202,12 @@ class SeqLocFilter {
   // self-calibration's evidence collected on the way (multiply_in, feed_estimator); the
   // normalization and MGR's blend with the road prior, and the largest cell (normalize); PAS and
   // the sub-bin heading around it (refine).
-  FrameResult weigh(const PreparedFrame& given, const FrameWeighting* weighting, bool calibrating);
+  FrameResult weigh(const PreparedFrame& given, const std::optional<FrameWeighting>& weighting, bool calibrating,
+                    bool shape_in_temper);
   void retemper();
   void retemper_by(float ratio);
-  float temper(const PreparedFrame& frame, FrameResult& result);
-  double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const GpsFix* gps,
+  float temper(const PreparedFrame& frame, FrameResult& result, bool with_shape);
+  double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const std::optional<GpsFix>& gps,
                      bool calibrating);
   void feed_estimator(const PreparedFrame& frame, const CropPose& crop);
   Peak normalize(double total, std::span<const float> road_distance_m);

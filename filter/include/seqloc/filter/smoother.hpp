@@ -35,7 +35,7 @@ class BackwardFilter {
   /// Frame t's likelihood multiplied in as the forward pass weighed it (with MGR as configured;
   /// `road_distance_m` as for SeqLocFilter::step, empty when MGR is off).
   void absorb(const PreparedFrame& frame, const CropPose& crop, const FrameWeighting& weighting,
-              std::span<const float> road_distance_m, const GpsFix* gps = nullptr);
+              std::span<const float> road_distance_m, const std::optional<GpsFix>& gps = std::nullopt);
   /// Back to frame t - 1 through `odometry`, the motion from t - 1 to t (frame t's), reversed.
   void step_back(const Odometry& odometry);
   /// The window moves by whole cells, as BeliefVolume::recentre.

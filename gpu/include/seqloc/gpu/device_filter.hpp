@@ -76,11 +76,12 @@ class DeviceFilter {
   void reset_gaussian(double u, double v, double sigma_m);
   filter::FrameResult step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                            const filter::Odometry& odometry, std::span<const float> road_distance_m,
-                           const filter::GpsFix* gps = nullptr);
+                           const std::optional<filter::GpsFix>& gps = std::nullopt);
   void predict(const filter::Odometry& odometry);
   filter::FrameResult update(const filter::PreparedFrame& frame, const filter::CropPose& crop,
-                             std::span<const float> road_distance_m, const filter::GpsFix* gps = nullptr,
-                             const filter::FrameWeighting* weighting = nullptr);
+                             std::span<const float> road_distance_m,
+                             const std::optional<filter::GpsFix>& gps = std::nullopt,
+                             const std::optional<filter::FrameWeighting>& weighting = std::nullopt);
   void recentre(int du, int dv);
   void rebase(const filter::BeliefVolume& belief, const std::optional<filter::Pose>& last_estimate);
   [[nodiscard]] const std::optional<filter::Pose>& last_estimate() const { return last_estimate_; }
@@ -98,7 +99,7 @@ class DeviceFilter {
   /// A new sequence over the belief just set: no prediction before the next step, and
   /// self-calibration and ETU's route history start again.
   void start_sequence();
-  filter::FrameResult weigh(const filter::PreparedFrame& frame, const filter::FrameWeighting* weighting,
+  filter::FrameResult weigh(const filter::PreparedFrame& frame, const std::optional<filter::FrameWeighting>& weighting,
                             bool calibrating);
   void retemper(bool held);
   /// Self-calibration's evidence of the loaded frame against the pooled predicted belief.

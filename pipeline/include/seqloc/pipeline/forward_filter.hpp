@@ -37,7 +37,7 @@ class ForwardFilter {
   void reset_gaussian(double u, double v, double sigma_m);
   filter::FrameResult step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                            const filter::Odometry& odometry, std::span<const float> road_distance_m,
-                           const filter::GpsFix* gps);
+                           const std::optional<filter::GpsFix>& gps);
   void recentre(int du, int dv);
   void rebase(filter::BeliefVolume belief, const std::optional<filter::Pose>& last_estimate);
   [[nodiscard]] const std::optional<filter::Pose>& last_estimate() const;
