@@ -498,13 +498,6 @@ PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
   return frame;
 }
 
-double route_reference_entropy(std::span<const double> entropies) {
-  const std::size_t n = std::min(entropies.size(), kEtuRouteFrames);
-  std::vector<double> last(entropies.end() - static_cast<std::ptrdiff_t>(n), entropies.end());
-  std::nth_element(last.begin(), last.begin() + static_cast<std::ptrdiff_t>(n / 2), last.end());
-  return last[n / 2];
-}
-
 Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {
   // Inverse of the sampling map in SeqLocFilter::Impl::sample_frame.
   const double east = (u - (frame.width - 1) / 2.0) * frame.cell_m;

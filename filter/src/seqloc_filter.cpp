@@ -27,19 +27,29 @@ using detail::ConstArrayMap;
 
 using detail::displacement_cells;
 
-Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, int radius) {
-  // x_hat = sum m(x) x / sum m(x) over the cells around x*, m(x) = sum_th exp(b(x, th)).
-  double sm = 0, su = 0, sv = 0;
-  for (int v = std::max(0, v_star - radius); v <= std::min(belief.height() - 1, v_star + radius); ++v) {
-    for (int u = std::max(0, u_star - radius); u <= std::min(belief.width() - 1, u_star + radius); ++u) {
-      const double m = belief.position_mass(u, v);
-      sm += m;
-      su += m * u;
-      sv += m * v;
+namespace {
+
+// The CPU belief's position masses for StepDecisions::refine.
+PositionMasses position_masses(const BeliefVolume& belief) {
+  return [&belief](int u0, int v0, int u1, int v1, std::span<double> out) {
+    std::size_t i = 0;
+    for (int v = v0; v <= v1; ++v) {
+      for (int u = u0; u <= u1; ++u) out[i++] = belief.position_mass(u, v);
     }
-  }
-  if (!(sm > 0)) return {static_cast<double>(u_star), static_cast<double>(v_star), 0};
-  return {su / sm, sv / sm, 0};
+  };
+}
+
+}  // namespace
+
+Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, int radius) {
+  FilterConfig pas_alone;
+  pas_alone.headings = belief.headings();
+  pas_alone.pas = true;
+  pas_alone.pas_radius = radius;
+  pas_alone.subbin_heading = false;
+  const Pose p = StepDecisions(pas_alone).refine(u_star, v_star, 0, belief.width(), belief.height(),
+                                                 position_masses(belief), nullptr);
+  return {p.u, p.v, 0};
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -60,8 +70,6 @@ struct SeqLocFilter::Impl {
   AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
   PowerEstimator estimator;
   std::optional<PowerBank> bank;  // self-calibration's judge when FilterConfig::self_calibration_bank
-  bool was_held = true;           // the estimator's hold at the last frame
-  double last_power = 1;          // and its power
   // Self-calibration's view of the predicted belief: each slice summed over 2 x 2 cells as the
   // update reads it, then `pooling` slices into one coarse bin (detail::pool_headings).
   std::optional<BeliefVolume> coarse;
@@ -173,7 +181,8 @@ void pool_slice(const float* slice, int width, int height, std::vector<float>& r
 SeqLocFilter::SeqLocFilter(const FilterConfig& config)
     : config_((config.validate(), config)),
       belief_(config.width, config.height, config.headings),
-      impl_(std::make_unique<Impl>(config)) {}
+      impl_(std::make_unique<Impl>(config)),
+      decisions_(config) {}
 
 SeqLocFilter::~SeqLocFilter() = default;
 
@@ -184,9 +193,7 @@ void SeqLocFilter::reset_uniform() {
   last_estimate_.reset();
   impl_->estimator.reset();
   if (impl_->bank) impl_->bank->reset();
-  impl_->was_held = true;
-  impl_->last_power = 1;
-  entropies_.clear();
+  decisions_.reset();
 }
 
 void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
@@ -196,9 +203,7 @@ void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
   last_estimate_.reset();
   impl_->estimator.reset();
   if (impl_->bank) impl_->bank->reset(belief_);
-  impl_->was_held = true;
-  impl_->last_power = 1;
-  entropies_.clear();
+  decisions_.reset();
 }
 
 const PowerEstimator& SeqLocFilter::calibration() const { return impl_->estimator; }
@@ -302,13 +307,7 @@ FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop,
                                std::span<const float> road_distance_m, const std::optional<GpsFix>& gps) {
   if (!first_) predict(odometry);
   FrameResult result = update(frame, crop, road_distance_m, gps);
-  if (last_estimate_ && !first_) {
-    double du = 0, dv = 0;
-    displacement_cells(odometry, last_estimate_->heading_deg, du, dv);
-    const double pu = last_estimate_->u + du, pv = last_estimate_->v + dv;
-    result.relocalized =
-        std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
-  }
+  if (last_estimate_ && !first_) result.relocalized = decisions_.relocalized(*last_estimate_, odometry, result.argmax);
   last_estimate_ = result.pose;
   first_ = false;
   return result;
@@ -332,7 +331,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   const bool estimating = calibrating && !impl_->bank;
   // Where ETU's weight does not read the powered frame's entropy, the pass over the frame that
   // finds it is left to temper(), which may hand it the powered frame it computes anyway.
-  const bool shape_in_temper = calibrating && (!config_.etu || config_.etu_route_reference);
+  const bool shape_in_temper = calibrating && !decisions_.etu_reads_powered_frame();
   FrameResult result = weigh(given, weighting, calibrating, shape_in_temper);
   if (calibrating) retemper();
   const float outside = temper(given, result, shape_in_temper);
@@ -351,12 +350,8 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const std::optional<
   // q = p^kappa / Z(kappa). q is never written out: its peak and entropy come from one pass over
   // the given frame, which also bins the frame's cells by depth for the estimator.
   FrameResult result;
-  if (weighting.has_value()) {
-    result.volume_power = weighting->volume_power;
-    result.etu_weight = weighting->etu_weight;
-  } else {
-    result.volume_power = !calibrating ? 1.0 : impl_->bank ? impl_->bank->power() : impl_->estimator.power();
-  }
+  result.volume_power =
+      StepDecisions::power(weighting, calibrating, impl_->bank ? impl_->bank->power() : impl_->estimator.power());
   if (calibrating && !impl_->bank) {
     for (auto& worker : impl_->workers) worker.frame_cells.clear();
   }
@@ -365,16 +360,7 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const std::optional<
                           : weighting.has_value() ? FrameShape{weighting->peak_log_prob, given.entropy}
                                                   : FrameShape{given.max_log_prob, given.entropy};
   result.frame_entropy = used.entropy;
-  if (weighting.has_value()) {
-    // As weighed before.
-  } else if (config_.etu && config_.etu_route_reference) {
-    entropies_.push_back(given.entropy);
-    if (entropies_.size() > 2 * kEtuRouteFrames)
-      entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
-    result.etu_weight = etu_weight(given.entropy, route_reference_entropy(entropies_));
-  } else {
-    result.etu_weight = config_.etu ? etu_weight(used.entropy, config_.etu_reference_entropy) : 1.0;
-  }
+  result.etu_weight = weighting ? weighting->etu_weight : decisions_.etu_weight_of(given.entropy, used.entropy);
   result.weighting = {result.volume_power, result.etu_weight, used.max_log_prob};
   return result;
 }
@@ -413,24 +399,9 @@ void SeqLocFilter::retemper() {
   // voted against is undone. The bank: whenever its power has moved half an octave or more from
   // the one the belief was last raised to (frames between go in at the power of their step). The
   // one-step criterion: once, when the hold is released (it is not taken again), from the power
-  // held until then (1, or an estimate followed far under 1).
-  double ratio = 1;
-  if (impl_->bank) {
-    const double now = impl_->bank->power();
-    if (std::abs(std::log2(now / impl_->last_power)) < 0.5) return;
-    ratio = now / impl_->last_power;
-    impl_->last_power = now;
-  } else {
-    const double now = impl_->estimator.power();
-    const bool held = impl_->estimator.held();
-    if (held || !impl_->was_held) {
-      impl_->last_power = now;
-      return;
-    }
-    ratio = now / impl_->last_power;
-    impl_->was_held = held;
-    impl_->last_power = now;
-  }
+  // held until then (1, or an estimate followed far under 1). StepDecisions decides when.
+  const double ratio = impl_->bank ? decisions_.bank_ratio(impl_->bank->power())
+                                   : decisions_.hold_ratio(impl_->estimator.power(), impl_->estimator.held());
   retemper_by(static_cast<float>(ratio));
 }
 
@@ -567,26 +538,8 @@ SeqLocFilter::Peak SeqLocFilter::normalize(double total, std::span<const float> 
 }
 
 Pose SeqLocFilter::refine(const Peak& peak) const {
-  const int R = config_.headings;
-  Pose pose{static_cast<double>(peak.u), static_cast<double>(peak.v), belief_.bin_heading_deg(peak.k)};
-  if (config_.pas) {
-    const Pose x_hat = peak_anchored_position(belief_, peak.u, peak.v, config_.pas_radius);
-    pose.u = x_hat.u;
-    pose.v = x_hat.v;
-  }
-  if (config_.subbin_heading) {
-    // Circular mean of the bin headings around th* at x*, weighted by the belief.
-    double sx = 0, sy = 0;
-    for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
-      const int k = (peak.k + i + R) % R;
-      const double weight = belief_.prob(peak.u, peak.v, k);
-      const double h = belief_.bin_heading_deg(k) * kDegToRad;
-      sx += weight * std::sin(h);
-      sy += weight * std::cos(h);
-    }
-    pose.heading_deg = core::wrap360(std::atan2(sx, sy) / kDegToRad);
-  }
-  return pose;
+  return decisions_.refine(peak.u, peak.v, peak.k, belief_.width(), belief_.height(), position_masses(belief_),
+                           [this](int u, int v, int k) { return static_cast<double>(belief_.prob(u, v, k)); });
 }
 
 }  // namespace seqloc::filter

@@ -103,43 +103,25 @@ SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& ba
   return p;
 }
 
-// PAS and the sub-bin heading on gamma around the argmax (u*, v*, k*) in `result.argmax`.
+// PAS and the sub-bin heading on gamma around the argmax (u*, v*, k*) in `result.argmax`, by the
+// forward filter's own rules (StepDecisions::refine).
 void refine_on_gamma(FrameResult& result, const BeliefVolume& forward, const BeliefVolume& backward, bool both,
                      int k_star, const FilterConfig& config) {
-  const int W = forward.width(), R = forward.headings();
-  const auto u_star = static_cast<int>(result.argmax.u), v_star = static_cast<int>(result.argmax.v);
   auto gamma = [&](int u, int v, int k) {
     return static_cast<double>(forward.prob(u, v, k)) * (both ? backward.prob(u, v, k) : 1.0f);
   };
-  if (config.pas) {
-    // PAS on gamma: the mass-weighted mean position over the cells around x* (peak_anchored_position).
-    double sm = 0, su = 0, sv = 0;
-    const int r = config.pas_radius;
-    for (int v = std::max(0, v_star - r); v <= std::min(forward.height() - 1, v_star + r); ++v) {
-      for (int u = std::max(0, u_star - r); u <= std::min(W - 1, u_star + r); ++u) {
+  const auto masses = [&](int u0, int v0, int u1, int v1, std::span<double> out) {
+    std::size_t i = 0;
+    for (int v = v0; v <= v1; ++v) {
+      for (int u = u0; u <= u1; ++u) {
         double m = 0;
-        for (int k = 0; k < R; ++k) m += gamma(u, v, k);
-        sm += m;
-        su += m * u;
-        sv += m * v;
+        for (int k = 0; k < forward.headings(); ++k) m += gamma(u, v, k);
+        out[i++] = m;
       }
     }
-    if (sm > 0) {
-      result.pose.u = su / sm;
-      result.pose.v = sv / sm;
-    }
-  }
-  if (config.subbin_heading) {
-    double sx = 0, sy = 0;
-    for (int i = -config.subbin_half_width; i <= config.subbin_half_width; ++i) {
-      const int k = (k_star + i + R) % R;
-      const double h = forward.bin_heading_deg(k) * core::kDegToRad;
-      sx += gamma(u_star, v_star, k) * std::sin(h);
-      sy += gamma(u_star, v_star, k) * std::cos(h);
-    }
-    const double deg = std::atan2(sx, sy) * core::kRadToDeg;
-    result.pose.heading_deg = core::wrap360(deg);
-  }
+  };
+  result.pose = StepDecisions(config).refine(static_cast<int>(result.argmax.u), static_cast<int>(result.argmax.v),
+                                             k_star, forward.width(), forward.height(), masses, gamma);
 }
 
 }  // namespace

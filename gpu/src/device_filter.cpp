@@ -77,7 +77,8 @@ DeviceFilter::DeviceFilter(const filter::FilterConfig& config, Backend backend)
       engine_(make_engine(config_, backend)),
       estimator_(config_.self_calibration_prior_octaves, config_.self_calibration_outlier_share,
                  {config_.self_calibration_hold_below_octaves, config_.self_calibration_hold_above_octaves,
-                  config_.self_calibration_hold_share, config_.self_calibration_hold_follow_octaves}) {
+                  config_.self_calibration_hold_share, config_.self_calibration_hold_follow_octaves}),
+      decisions_(config_) {
   reset_uniform();
 }
 
@@ -101,9 +102,7 @@ void DeviceFilter::start_sequence() {
   first_ = true;
   last_estimate_.reset();
   estimator_.reset();
-  was_held_ = true;
-  last_power_ = 1;
-  entropies_.clear();
+  decisions_.reset();
 }
 
 filter::BeliefVolume DeviceFilter::belief() const {
@@ -162,13 +161,7 @@ FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter:
                                const std::optional<filter::GpsFix>& gps) {
   if (!first_) predict(odometry);
   FrameResult result = update(frame, crop, road_distance_m, gps);
-  if (last_estimate_ && !first_) {
-    double du = 0, dv = 0;
-    filter::math::displacement_cells(odometry.forward_m, odometry.left_m, last_estimate_->heading_deg, kCellM, du, dv);
-    const double pu = last_estimate_->u + du, pv = last_estimate_->v + dv;
-    result.relocalized =
-        std::hypot(result.argmax.u - pu, result.argmax.v - pv) * kCellM > config_.relocalization_jump_m;
-  }
+  if (last_estimate_ && !first_) result.relocalized = decisions_.relocalized(*last_estimate_, odometry, result.argmax);
   last_estimate_ = result.pose;
   first_ = false;
   return result;
@@ -177,12 +170,7 @@ FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter:
 FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame,
                                 const std::optional<filter::FrameWeighting>& weighting, bool calibrating) {
   FrameResult result;
-  if (weighting.has_value()) {
-    result.volume_power = weighting->volume_power;
-    result.etu_weight = weighting->etu_weight;
-  } else {
-    result.volume_power = calibrating ? estimator_.power() : 1.0;
-  }
+  result.volume_power = filter::StepDecisions::power(weighting, calibrating, estimator_.power());
   // The powered frame's peak and entropy (SeqLocFilter's scan_frame): -log Z and
   // log Z - k sum(e^{k r} r) / Z.
   float peak = weighting.has_value() ? weighting->peak_log_prob : frame.max_log_prob;
@@ -194,32 +182,15 @@ FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame,
     entropy = std::clamp((log_z - result.volume_power * sums.zr / sums.z) / frame.log_cells, 0.0, 1.0);
   }
   result.frame_entropy = entropy;
-  if (weighting.has_value()) {
-    // As weighed before.
-  } else if (config_.etu && config_.etu_route_reference) {
-    entropies_.push_back(frame.entropy);
-    if (entropies_.size() > 2 * filter::kEtuRouteFrames) {
-      entropies_.erase(entropies_.begin(), entropies_.end() - filter::kEtuRouteFrames);
-    }
-    result.etu_weight = filter::etu_weight(frame.entropy, filter::route_reference_entropy(entropies_));
-  } else {
-    result.etu_weight = config_.etu ? filter::etu_weight(entropy, config_.etu_reference_entropy) : 1.0;
-  }
+  result.etu_weight = weighting ? weighting->etu_weight : decisions_.etu_weight_of(frame.entropy, entropy);
   result.weighting = {result.volume_power, result.etu_weight, peak};
   return result;
 }
 
-void DeviceFilter::retemper(bool held) {
+void DeviceFilter::retemper() {
   // SeqLocFilter::retemper: once the hold releases, the belief is raised to the ratio of the new
-  // power to the one its frames went in at.
-  const double now = estimator_.power();
-  if (held || !was_held_) {
-    last_power_ = now;
-    return;
-  }
-  const auto ratio = static_cast<float>(now / last_power_);
-  was_held_ = held;
-  last_power_ = now;
+  // power to the one its frames went in at (StepDecisions::hold_ratio).
+  const auto ratio = static_cast<float>(decisions_.hold_ratio(estimator_.power(), estimator_.held()));
   if (first_ || ratio == 1.0f) return;
   if (engine_->raise(ratio)) cached_min_.reset();
 }
@@ -238,7 +209,7 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   const bool calibrating = config_.self_calibrate && !weighting;
   engine_->load_frame(frame);
   FrameResult result = weigh(frame, weighting, calibrating);
-  if (calibrating) retemper(estimator_.held());
+  if (calibrating) retemper();
 
   // The tempered likelihood q^w, scaled by its peak, and the value of a cell outside the crop.
   const auto w = static_cast<float>(result.etu_weight);
@@ -270,7 +241,10 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   cached_min_ = peak.least;
   result.peak_log_belief = std::log(peak.value);
   result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), bin_heading_deg(peak.k, config_.headings)};
-  result.pose = refine(peak.u, peak.v, peak.k);
+  result.pose = decisions_.refine(
+      peak.u, peak.v, peak.k, config_.width, config_.height,
+      [this](int u0, int v0, int u1, int v1, std::span<double> out) { engine_->position_masses(u0, v0, u1, v1, out); },
+      [this](int u, int v, int k) { return static_cast<double>(engine_->value(u, v, k)); });
   return result;
 }
 
@@ -300,44 +274,6 @@ filter::CalibrationEvidence DeviceFilter::judge(const filter::PreparedFrame& fra
   evidence.window_cells = static_cast<double>(coarse_w) * coarse_h * coarse_r * cells_per_cell;
   evidence.outside_cells = static_cast<double>(sums.outside_cells) * cells_per_cell;
   return evidence;
-}
-
-Pose DeviceFilter::refine(int u_star, int v_star, int k_star) const {
-  const int R = config_.headings;
-  Pose pose{static_cast<double>(u_star), static_cast<double>(v_star), bin_heading_deg(k_star, R)};
-  if (config_.pas) {
-    // filter::peak_anchored_position over the cells around x* that lie in the window.
-    const int r = config_.pas_radius;
-    const int u0 = std::max(0, u_star - r), u1 = std::min(config_.width - 1, u_star + r);
-    const int v0 = std::max(0, v_star - r), v1 = std::min(config_.height - 1, v_star + r);
-    std::vector<double> mass(static_cast<std::size_t>(u1 - u0 + 1) * static_cast<std::size_t>(v1 - v0 + 1));
-    engine_->position_masses(u0, v0, u1, v1, mass);
-    double sm = 0, su = 0, sv = 0;
-    std::size_t i = 0;
-    for (int v = v0; v <= v1; ++v) {
-      for (int u = u0; u <= u1; ++u, ++i) {
-        sm += mass[i];
-        su += mass[i] * u;
-        sv += mass[i] * v;
-      }
-    }
-    if (sm > 0) {
-      pose.u = su / sm;
-      pose.v = sv / sm;
-    }
-  }
-  if (config_.subbin_heading) {
-    double sx = 0, sy = 0;
-    for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
-      const int k = (k_star + i + R) % R;
-      const double weight = engine_->value(u_star, v_star, k);
-      const double h = bin_heading_deg(k, R) * kDegToRad;
-      sx += weight * std::sin(h);
-      sy += weight * std::cos(h);
-    }
-    pose.heading_deg = core::wrap360(std::atan2(sx, sy) / kDegToRad);
-  }
-  return pose;
 }
 
 }  // namespace seqloc::gpu

@@ -26,6 +26,7 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/device_math.hpp"
 #include "seqloc/filter/self_calibration.hpp"
+#include "seqloc/filter/step_decisions.hpp"
 #include "seqloc/filter/types.hpp"
 
 namespace seqloc::filter {
@@ -74,22 +75,6 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
 /// and > 0.
 [[nodiscard]] PreparedFrame temper_frame(PreparedFrame frame, double power, int threads = 1);
 
-/// The median of the last `kEtuRouteFrames` entropies in `entropies` (which must not be empty):
-/// ETU's route reference (FilterConfig::etu_route_reference).
-inline constexpr std::size_t kEtuRouteFrames = 256;
-[[nodiscard]] double route_reference_entropy(std::span<const double> entropies);
-
-/// ETU weight of a frame (conventions.md section 6, step 2): w = max(1 - H, 1e-3). With a
-/// reference entropy H_ref > 0 (ours, FilterConfig::etu_reference_entropy) the weight is relative
-/// to a typical frame: w = clamp((1 - H) / (1 - H_ref), 1e-3, 1), so frames as sharp as H_ref or
-/// sharper count fully and only flatter ones are tempered.
-/// (A reference of 1, a route of uniform frames, is taken as 1 - 1e-9.)
-[[nodiscard]] inline double etu_weight(double normalized_entropy, double reference_entropy = 0.0) {
-  const double ref = std::min(reference_entropy, 1.0 - 1e-9);
-  const double w = ref > 0 ? (1.0 - normalized_entropy) / (1.0 - ref) : 1.0 - normalized_entropy;
-  return std::clamp(w, 1e-3, 1.0);
-}
-
 /// The road prior of MGR before normalization (conventions.md section 6, step 4):
 /// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road. The one definition the
 /// filter, the served road_prior layer and the Python module use.
@@ -116,16 +101,6 @@ struct GpsFix {
 /// distance from the fix; empty when the config has no GPS prior or there is no fix. What the
 /// update multiplies into every heading slice (the CPU filter's and the CUDA backend's).
 [[nodiscard]] std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps);
-
-/// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
-/// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
-/// the route (the smoother's, smoother.hpp) gives it to SeqLocFilter::update to multiply in the
-/// very likelihood the first pass did, without estimating anything again.
-struct FrameWeighting {
-  double volume_power = 1;
-  double etu_weight = 1;
-  float peak_log_prob = 0;
-};
 
 struct FrameResult {
   Pose pose;    ///< the estimate: PAS's x_hat with th* (or the argmax when PAS is off)
@@ -219,7 +194,7 @@ class SeqLocFilter {
   bool first_ = true;
   std::optional<Pose> last_estimate_;
   std::optional<float> cached_min_;  ///< the belief's minimum, known at the end of a step
-  std::vector<double> entropies_;    ///< the route's last frames' entropies, for ETU's route reference
+  StepDecisions decisions_;          ///< the step's decisions (step_decisions.hpp)
 };
 
 /// PAS (conventions.md section 6, step 5): the mass-weighted mean position over the

@@ -101,21 +101,18 @@ class DeviceFilter {
   void start_sequence();
   filter::FrameResult weigh(const filter::PreparedFrame& frame, const std::optional<filter::FrameWeighting>& weighting,
                             bool calibrating);
-  void retemper(bool held);
+  void retemper();
   /// Self-calibration's evidence of the loaded frame against the pooled predicted belief.
   [[nodiscard]] filter::CalibrationEvidence judge(const filter::PreparedFrame& frame, const filter::CropPose& crop);
-  [[nodiscard]] filter::Pose refine(int u, int v, int k) const;
 
   filter::FilterConfig config_;
   Backend backend_;
   std::unique_ptr<Engine> engine_;
   filter::PowerEstimator estimator_;
+  filter::StepDecisions decisions_;  ///< every decision of the step (filter/step_decisions.hpp)
   bool first_ = true;
-  bool was_held_ = true;
-  double last_power_ = 1;
   std::optional<filter::Pose> last_estimate_;
   std::optional<float> cached_min_;
-  std::vector<double> entropies_;
   std::vector<float> road_;  ///< the road distances whose prior the engine holds
 };
 

@@ -32,6 +32,9 @@ void check_device(Device device, const filter::FilterConfig& config);
 class ForwardFilter {
  public:
   ForwardFilter(const filter::FilterConfig& config, Device device);
+  ~ForwardFilter();
+  ForwardFilter(ForwardFilter&&) noexcept;
+  ForwardFilter& operator=(ForwardFilter&&) noexcept;
 
   void reset_uniform();
   void reset_gaussian(double u, double v, double sigma_m);
@@ -45,11 +48,12 @@ class ForwardFilter {
   [[nodiscard]] const filter::BeliefVolume& belief() const;
   [[nodiscard]] Device device() const { return device_; }
 
+  /// The calls above, which every backend answers (forward_filter.cpp adapts each filter to them).
+  class Backend;
+
  private:
   Device device_;
-  std::optional<filter::SeqLocFilter> cpu_;
-  std::unique_ptr<gpu::DeviceFilter> gpu_;
-  mutable std::optional<filter::BeliefVolume> copy_;  ///< the GPU's belief, as last copied
+  std::unique_ptr<Backend> backend_;  ///< the one filter of the run, on its device
 };
 
 }  // namespace seqloc::pipeline

@@ -1,0 +1,105 @@
+#pragma once
+// The decisions of a SeqLoc step (conventions.md section 6), made in this one place for every
+// backend: the power a frame goes in at, ETU's weight and the route's reference entropy, when the
+// one-step criterion's hold releases and the belief is raised again, PAS and the sub-bin heading
+// around the argmax, and the relocalization flag. The CPU filter (SeqLocFilter), the CUDA backend
+// (gpu::DeviceFilter) and the smoother call them; each provides only the cell work (a frame's
+// shape at a power, the belief's masses around a peak), so a change to one rule is made once and
+// a test of one backend's decisions is a test of all.
+
+#include <algorithm>
+#include <cstddef>
+#include <functional>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "seqloc/filter/config.hpp"
+#include "seqloc/filter/types.hpp"
+
+namespace seqloc::filter {
+
+/// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
+/// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
+/// the route (the smoother's, smoother.hpp) gives it to SeqLocFilter::update to multiply in the
+/// very likelihood the first pass did, without estimating anything again.
+struct FrameWeighting {
+  double volume_power = 1;
+  double etu_weight = 1;
+  float peak_log_prob = 0;
+};
+
+/// The median of the last `kEtuRouteFrames` entropies in `entropies` (which must not be empty):
+/// ETU's route reference (FilterConfig::etu_route_reference).
+inline constexpr std::size_t kEtuRouteFrames = 256;
+[[nodiscard]] double route_reference_entropy(std::span<const double> entropies);
+
+/// ETU weight of a frame (conventions.md section 6, step 2): w = max(1 - H, 1e-3). With a
+/// reference entropy H_ref > 0 (ours, FilterConfig::etu_reference_entropy) the weight is relative
+/// to a typical frame: w = clamp((1 - H) / (1 - H_ref), 1e-3, 1), so frames as sharp as H_ref or
+/// sharper count fully and only flatter ones are tempered.
+/// (A reference of 1, a route of uniform frames, is taken as 1 - 1e-9.)
+[[nodiscard]] inline double etu_weight(double normalized_entropy, double reference_entropy = 0.0) {
+  const double ref = std::min(reference_entropy, 1.0 - 1e-9);
+  const double w = ref > 0 ? (1.0 - normalized_entropy) / (1.0 - ref) : 1.0 - normalized_entropy;
+  return std::clamp(w, 1e-3, 1.0);
+}
+
+/// Fills `out` with the position masses m(x) = sum over th of the belief at x, for the cells
+/// u0..u1 x v0..v1 (inclusive, row by row): each backend reads them where its belief lives.
+using PositionMasses = std::function<void(int u0, int v0, int u1, int v1, std::span<double> out)>;
+/// One cell of the belief (or of the smoother's product of two).
+using CellValue = std::function<double(int u, int v, int k)>;
+
+class StepDecisions {
+ public:
+  explicit StepDecisions(const FilterConfig& config) : config_(config) {}
+
+  /// A new route: ETU's route reference and the hold's memory start again.
+  void reset();
+
+  /// The power a frame goes in at: a repeated pass's, self-calibration's `estimate` while it is
+  /// calibrating, else 1.
+  [[nodiscard]] static double power(const std::optional<FrameWeighting>& weighting, bool calibrating, double estimate);
+
+  /// Whether ETU's weight reads the frame raised to its power (the configured reference) rather
+  /// than the frame as given (the route's reference, or no ETU): a backend that finds the powered
+  /// frame's shape later in the step may then wait for it.
+  [[nodiscard]] bool etu_reads_powered_frame() const { return config_.etu && !config_.etu_route_reference; }
+
+  /// ETU's weight of a new frame (1 with ETU off): against the route's reference, which the frame's
+  /// `given_entropy` joins first, or the configured reference with the entropy of the frame raised
+  /// to its power (`powered_entropy`).
+  [[nodiscard]] double etu_weight_of(double given_entropy, double powered_entropy);
+
+  /// The one-step criterion's hold (FilterConfig::self_calibration_hold_share): the ratio the belief
+  /// is raised by at this step, from the estimator's power now and whether it is held. While held,
+  /// and after the release, 1 (the frames follow the estimate); at the release, the new power over
+  /// the one the belief's frames went in at, so that an early lock at a power the route has since
+  /// voted against is undone. The hold is not taken again.
+  [[nodiscard]] double hold_ratio(double power, bool held);
+  /// The bank's rule (FilterConfig::self_calibration_bank): the ratio whenever the bank's power has
+  /// moved half an octave or more from the one the belief was last raised to, else 1.
+  [[nodiscard]] double bank_ratio(double power);
+
+  /// The step's pose from the argmax (u*, v*, k*) of a width x height x headings belief: PAS's
+  /// mass-weighted mean position over the (2r + 1)^2 cells around x* that lie in the window, and the
+  /// sub-bin heading (the circular mean of the bin headings around th* at x*), as the config asks.
+  [[nodiscard]] Pose refine(int u_star, int v_star, int k_star, int width, int height, const PositionMasses& masses,
+                            const CellValue& value) const;
+
+  /// Whether the argmax jumped farther than FilterConfig::relocalization_jump_m from the previous
+  /// estimate moved by the odometry.
+  [[nodiscard]] bool relocalized(const Pose& previous, const Odometry& odometry, const Pose& argmax) const;
+
+  /// The route's given entropies that ETU's reference reads (the last 2 x kEtuRouteFrames at most).
+  [[nodiscard]] const std::vector<double>& route_entropies() const { return entropies_; }
+
+ private:
+  FilterConfig config_;
+  std::vector<double> entropies_;
+  bool was_held_ = true;   ///< the estimator's hold at the last frame
+  double last_power_ = 1;  ///< the power the belief's frames went in at
+};
+
+}  // namespace seqloc::filter

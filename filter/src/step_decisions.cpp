@@ -1,0 +1,102 @@
+#include "seqloc/filter/step_decisions.hpp"
+
+#include <cmath>
+
+#include "internal.hpp"
+#include "seqloc/core/angles.hpp"
+#include "seqloc/core/units.hpp"
+
+namespace seqloc::filter {
+
+double route_reference_entropy(std::span<const double> entropies) {
+  const std::size_t n = std::min(entropies.size(), kEtuRouteFrames);
+  std::vector<double> last(entropies.end() - static_cast<std::ptrdiff_t>(n), entropies.end());
+  std::nth_element(last.begin(), last.begin() + static_cast<std::ptrdiff_t>(n / 2), last.end());
+  return last[n / 2];
+}
+
+void StepDecisions::reset() {
+  entropies_.clear();
+  was_held_ = true;
+  last_power_ = 1;
+}
+
+double StepDecisions::power(const std::optional<FrameWeighting>& weighting, bool calibrating, double estimate) {
+  if (weighting) return weighting->volume_power;
+  return calibrating ? estimate : 1.0;
+}
+
+double StepDecisions::etu_weight_of(double given_entropy, double powered_entropy) {
+  if (!config_.etu) return 1.0;
+  if (!config_.etu_route_reference) return etu_weight(powered_entropy, config_.etu_reference_entropy);
+  entropies_.push_back(given_entropy);
+  if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
+  return etu_weight(given_entropy, route_reference_entropy(entropies_));
+}
+
+double StepDecisions::hold_ratio(double power, bool held) {
+  if (held || !was_held_) {
+    last_power_ = power;
+    return 1.0;
+  }
+  const double ratio = power / last_power_;
+  was_held_ = held;
+  last_power_ = power;
+  return ratio;
+}
+
+double StepDecisions::bank_ratio(double power) {
+  if (std::abs(std::log2(power / last_power_)) < 0.5) return 1.0;
+  const double ratio = power / last_power_;
+  last_power_ = power;
+  return ratio;
+}
+
+Pose StepDecisions::refine(int u_star, int v_star, int k_star, int width, int height, const PositionMasses& masses,
+                           const CellValue& value) const {
+  const int R = config_.headings;
+  Pose pose{static_cast<double>(u_star), static_cast<double>(v_star), k_star * 360.0 / R};
+  if (config_.pas) {
+    // x_hat = sum m(x) x / sum m(x) over the cells around x* that lie in the window.
+    const int r = config_.pas_radius;
+    const int u0 = std::max(0, u_star - r), u1 = std::min(width - 1, u_star + r);
+    const int v0 = std::max(0, v_star - r), v1 = std::min(height - 1, v_star + r);
+    std::vector<double> mass(static_cast<std::size_t>(u1 - u0 + 1) * static_cast<std::size_t>(v1 - v0 + 1));
+    masses(u0, v0, u1, v1, mass);
+    double sm = 0, su = 0, sv = 0;
+    std::size_t i = 0;
+    for (int v = v0; v <= v1; ++v) {
+      for (int u = u0; u <= u1; ++u, ++i) {
+        sm += mass[i];
+        su += mass[i] * u;
+        sv += mass[i] * v;
+      }
+    }
+    if (sm > 0) {
+      pose.u = su / sm;
+      pose.v = sv / sm;
+    }
+  }
+  if (config_.subbin_heading) {
+    // Circular mean of the bin headings around th* at x*, weighted by the belief.
+    double sx = 0, sy = 0;
+    for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
+      const int k = (k_star + i + R) % R;
+      const double weight = value(u_star, v_star, k);
+      const double h = k * 360.0 / R * core::kDegToRad;
+      sx += weight * std::sin(h);
+      sy += weight * std::cos(h);
+    }
+    pose.heading_deg = core::wrap360(std::atan2(sx, sy) / core::kDegToRad);
+  }
+  return pose;
+}
+
+bool StepDecisions::relocalized(const Pose& previous, const Odometry& odometry, const Pose& argmax) const {
+  double du = 0, dv = 0;
+  detail::displacement_cells(odometry, previous.heading_deg, du, dv);
+  const double pu = previous.u + du, pv = previous.v + dv;
+  return std::hypot(argmax.u - pu, argmax.v - pv) * core::kCellM > config_.relocalization_jump_m;
+}
+
+}  // namespace seqloc::filter

@@ -1,0 +1,109 @@
+// The step's decisions (StepDecisions), which every backend calls: each rule on a case whose
+// answer is worked out by hand.
+
+#include <cmath>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "seqloc/filter/step_decisions.hpp"
+
+namespace seqloc::filter {
+namespace {
+
+FilterConfig small(int headings = 8) {
+  FilterConfig c;
+  c.width = c.height = 20;
+  c.headings = headings;
+  return c;
+}
+
+TEST(StepDecisions, ThePowerIsTheRepeatedPassesThenTheEstimateWhileCalibratingElseOne) {
+  EXPECT_EQ(StepDecisions::power(FrameWeighting{0.25, 0.5, -1}, true, 2.0), 0.25);
+  EXPECT_EQ(StepDecisions::power(std::nullopt, true, 2.0), 2.0);
+  EXPECT_EQ(StepDecisions::power(std::nullopt, false, 2.0), 1.0);
+}
+
+TEST(StepDecisions, TheHoldRaisesTheBeliefOnceWhenItReleases) {
+  StepDecisions d(small());
+  EXPECT_EQ(d.hold_ratio(1.0, true), 1.0);
+  EXPECT_EQ(d.hold_ratio(0.9, true), 1.0) << "held: the frames went in at the held power";
+  EXPECT_DOUBLE_EQ(d.hold_ratio(0.25, false), 0.25 / 0.9) << "released: from the power held until then";
+  EXPECT_EQ(d.hold_ratio(0.5, false), 1.0) << "after the release the frames follow the estimate";
+  EXPECT_EQ(d.hold_ratio(0.5, true), 1.0) << "the hold is not taken again";
+  EXPECT_EQ(d.hold_ratio(2.0, false), 1.0);
+  d.reset();
+  EXPECT_EQ(d.hold_ratio(1.0, true), 1.0);
+  EXPECT_DOUBLE_EQ(d.hold_ratio(4.0, false), 4.0) << "a new route holds again";
+}
+
+TEST(StepDecisions, TheBankRaisesTheBeliefWhenItsPowerMovesHalfAnOctave) {
+  StepDecisions d(small());
+  EXPECT_EQ(d.bank_ratio(1.3), 1.0) << "0.38 octaves";
+  EXPECT_DOUBLE_EQ(d.bank_ratio(2.0), 2.0);
+  EXPECT_EQ(d.bank_ratio(1.5), 1.0) << "0.42 octaves from the power last applied, 2";
+  EXPECT_DOUBLE_EQ(d.bank_ratio(1.0), 0.5);
+}
+
+TEST(StepDecisions, EtuWeighsAgainstTheMedianOfTheRoutesLastFrames) {
+  FilterConfig c = small();
+  StepDecisions d(c);
+  // Entropies 0.5, 0.6, 0.7: the third frame's reference is their median 0.6.
+  EXPECT_EQ(d.etu_weight_of(0.5, 0.9), 1.0) << "the only frame is its own reference";
+  EXPECT_EQ(d.etu_weight_of(0.6, 0.9), 1.0);
+  EXPECT_NEAR(d.etu_weight_of(0.7, 0.1), (1 - 0.7) / (1 - 0.6), 1e-12) << "the given entropy, not the powered one";
+  for (int i = 0; i < 1000; ++i) (void)d.etu_weight_of(0.2, 0.2);
+  EXPECT_LE(d.route_entropies().size(), 2 * kEtuRouteFrames);
+  EXPECT_EQ(d.etu_weight_of(0.7, 0.7), (1 - 0.7) / (1 - 0.2)) << "the old frames are forgotten";
+
+  c.etu_route_reference = false;
+  StepDecisions configured(c);
+  EXPECT_NEAR(configured.etu_weight_of(0.1, 0.95), (1 - 0.95) / (1 - c.etu_reference_entropy), 1e-12)
+      << "the configured reference reads the powered frame";
+  EXPECT_TRUE(configured.etu_reads_powered_frame());
+  c.etu = false;
+  EXPECT_EQ(StepDecisions(c).etu_weight_of(0.99, 0.99), 1.0);
+}
+
+TEST(StepDecisions, PasIsTheMassWeightedMeanAroundThePeakWithinTheWindow) {
+  FilterConfig c = small();
+  c.pas_radius = 1;
+  // Masses m(u, v) = u + 1 on the cells around (0, 5): the window clips the column u = -1, so the
+  // mean is over u = 0, 1 with masses 1 and 2 in each of three rows: u = 2/3, v = 5.
+  const PositionMasses masses = [](int u0, int v0, int u1, int v1, std::span<double> out) {
+    std::size_t i = 0;
+    for (int v = v0; v <= v1; ++v)
+      for (int u = u0; u <= u1; ++u) out[i++] = u + 1.0;
+  };
+  const Pose p = StepDecisions(c).refine(0, 5, 2, c.width, c.height, masses, nullptr);
+  EXPECT_NEAR(p.u, 2.0 / 3.0, 1e-12);
+  EXPECT_NEAR(p.v, 5.0, 1e-12);
+  EXPECT_EQ(p.heading_deg, 2 * 45.0) << "th* without the sub-bin heading";
+}
+
+TEST(StepDecisions, TheSubBinHeadingIsTheCircularMeanAroundThePeak) {
+  FilterConfig c = small(8);
+  c.pas = false;
+  c.subbin_heading = true;
+  c.subbin_half_width = 1;
+  // Bins 7 (315 deg) and 0 (0 deg) equal, bin 1 empty: the mean is 337.5 deg, across north.
+  const CellValue value = [](int, int, int k) { return k == 7 || k == 0 ? 1.0 : 0.0; };
+  const Pose p = StepDecisions(c).refine(3, 4, 0, c.width, c.height, nullptr, value);
+  EXPECT_EQ(p.u, 3);
+  EXPECT_EQ(p.v, 4);
+  EXPECT_NEAR(p.heading_deg, 337.5, 1e-9);
+}
+
+TEST(StepDecisions, RelocalizedWhenTheArgmaxLandsFarFromThePreviousEstimateMoved) {
+  FilterConfig c = small();
+  c.relocalization_jump_m = 10;
+  const StepDecisions d(c);
+  const Pose previous{10, 40, 0};      // heading north
+  const Odometry five_north{5, 0, 0};  // 10 cells up: expected at (10, 30)
+  EXPECT_FALSE(d.relocalized(previous, five_north, {10, 12, 0})) << "9 m from (10, 30)";
+  EXPECT_TRUE(d.relocalized(previous, five_north, {10, 8, 0})) << "11 m";
+  EXPECT_TRUE(d.relocalized(previous, {}, {10, 18, 0})) << "11 m when it did not move";
+}
+
+}  // namespace
+}  // namespace seqloc::filter
