@@ -1,11 +1,13 @@
 cmake_minimum_required(VERSION 3.20)
 # cmake -DROOT=<tree> -P cmake/CheckLayers.cmake
 # Fails when a module's sources or headers include a header of a module it may not depend on
-# (one above it, or beside it): the layering of docs/development.md's layout table, kept by a test.
-#   core (the base: errors, angles, the cell size, CSV, atomic files, the thread pool) under all;
+# (one above it, or beside it), or when its CMakeLists.txt links one: the layering of
+# docs/development.md's layout table, kept by a test.
+#   core (the base: errors, angles, the cell size, CSV, atomic files, the thread pool, a frame's
+#   volume and odometry, the road prior) under all;
 #   osm <- raster <- ingest; filter (Eigen and core only) <- gpu (its CUDA backend);
-#   osm + raster + filter <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + gpu + ros <- pipeline
-#   (the driver) <- render; raster + filter <- serve; pipeline <- python; everything <- apps.
+#   osm + raster <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + filter + gpu + ros <- pipeline
+#   (the driver) <- render; raster <- serve; pipeline <- python; everything <- apps.
 if(NOT ROOT)
   message(FATAL_ERROR "CheckLayers: set -DROOT=<source tree>")
 endif()
@@ -15,16 +17,17 @@ set(allowed_raster core osm raster)
 set(allowed_filter core filter)
 set(allowed_gpu core filter gpu)
 set(allowed_ingest core osm raster ingest)
-set(allowed_io core osm raster filter io)
-set(allowed_matcher core osm filter io matcher)
-set(allowed_sim core osm raster filter io sim)
-set(allowed_ros core osm raster filter io ros)
+set(allowed_io core osm raster io)
+set(allowed_matcher core osm raster io matcher)
+set(allowed_sim core osm raster io sim)
+set(allowed_ros core osm raster io ros)
 set(allowed_pipeline core osm raster filter gpu io matcher ros pipeline)
 set(allowed_render core osm raster filter gpu io matcher ros pipeline render)
-set(allowed_serve core osm raster filter serve)
+set(allowed_serve core osm raster serve)
 set(allowed_python core osm raster filter gpu io matcher ros pipeline)
 set(violations 0)
-foreach(module core osm raster filter gpu ingest io matcher sim ros pipeline render serve python)
+set(modules core osm raster filter gpu ingest io matcher sim ros pipeline render serve python)
+foreach(module IN LISTS modules)
   file(GLOB_RECURSE files "${ROOT}/${module}/*.cpp" "${ROOT}/${module}/*.hpp" "${ROOT}/${module}/*.cu")
   foreach(file IN LISTS files)
     file(STRINGS "${file}" includes REGEX "^[ \t]*#[ \t]*include[ \t]*[<\"]seqloc/[a-z_]+/")
@@ -37,8 +40,23 @@ foreach(module core osm raster filter gpu ingest io matcher sim ros pipeline ren
       endif()
     endforeach()
   endforeach()
+  # Its link lines: every seqloc::NAME its CMakeLists.txt names (seqloc_module's PUBLIC and
+  # PRIVATE, target_link_libraries) must be a module it may use, or a dependency's wrapper
+  # (seqloc::libosmium, seqloc::opencv, ...: not a module of the tree).
+  if(EXISTS "${ROOT}/${module}/CMakeLists.txt")
+    file(READ "${ROOT}/${module}/CMakeLists.txt" lists)
+    string(REGEX REPLACE "#[^\n]*" "" lists "${lists}")
+    string(REGEX MATCHALL "seqloc::[a-z_]+" linked "${lists}")
+    foreach(entry IN LISTS linked)
+      string(REPLACE "seqloc::" "" target "${entry}")
+      if(target IN_LIST modules AND NOT target IN_LIST allowed_${module})
+        message(SEND_ERROR "${module}/CMakeLists.txt: ${module} links ${target} (${module} may use: ${allowed_${module}})")
+        math(EXPR violations "${violations} + 1")
+      endif()
+    endforeach()
+  endif()
 endforeach()
 if(violations GREATER 0)
-  message(FATAL_ERROR "${violations} include(s) across the module layering")
+  message(FATAL_ERROR "${violations} include(s) or link(s) across the module layering")
 endif()
-message(STATUS "module layering: no include crosses it")
+message(STATUS "module layering: no include or link crosses it")

@@ -1,4 +1,4 @@
-// The road prior of MGR (conventions.md section 6): g over the road distance, and q over a window.
+// The road prior of MGR (conventions.md section 6) over a window: q from g (core/road_prior.hpp).
 
 #include "seqloc/filter/seqloc_filter.hpp"
 
@@ -6,19 +6,6 @@
 #include <string>
 
 namespace seqloc::filter {
-
-std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_m) {
-  std::vector<float> g(distance_m.size());
-  float last = 0, value = 1.0f;
-  for (std::size_t i = 0; i < distance_m.size(); ++i) {
-    if (i == 0 || distance_m[i] != last) {
-      last = distance_m[i];
-      value = static_cast<float>(road_prior_g(static_cast<double>(last), sigma_m));
-    }
-    g[i] = value;
-  }
-  return g;
-}
 
 std::vector<float> road_prior_log_q(std::span<const float> road_distance_m, int width, int height, int headings, double sigma_m) {
   const std::size_t n = static_cast<std::size_t>(width) * height;

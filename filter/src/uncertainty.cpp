@@ -63,8 +63,6 @@ double mass_within(const std::vector<double>& position, int width, int height, d
   return sum;
 }
 
-double chi2_2(double p) { return -2 * std::log1p(-p); }
-
 // Whether the marginal falls below half of the lower end's value somewhere on the segment between
 // cells a and b (a valley: two places, not one ridge along a road).
 bool valley_between(const std::vector<double>& position, int width, int ua, int va, int ub, int vb) {
@@ -161,7 +159,7 @@ PoseUncertainty pose_uncertainty(const BeliefVolume& belief, const Pose& estimat
 Ellipse covariance_ellipse(double cov_ee, double cov_en, double cov_nn, double p) {
   const double mean = (cov_ee + cov_nn) / 2, half = std::hypot((cov_ee - cov_nn) / 2, cov_en);
   const double major = std::max(mean + half, 0.0), minor = std::max(mean - half, 0.0);
-  const double scale = chi2_2(p);
+  const double scale = core::chi2_2(p);
   // The major axis' direction (east, north): an eigenvector of [[ee, en], [en, nn]] for `major`.
   double e = cov_en, n = major - cov_ee;
   if (std::abs(e) < 1e-300 && std::abs(n) < 1e-300) {
@@ -171,13 +169,6 @@ Ellipse covariance_ellipse(double cov_ee, double cov_en, double cov_nn, double p
   double bearing = std::atan2(e, n) / core::kDegToRad;
   bearing = std::fmod(bearing + 360.0, 180.0);
   return {std::sqrt(scale * major), std::sqrt(scale * minor), bearing};
-}
-
-bool inside_ellipse(double cov_ee, double cov_en, double cov_nn, double d_east, double d_north, double p) {
-  const double det = cov_ee * cov_nn - cov_en * cov_en;
-  if (!(det > 0)) return d_east == 0 && d_north == 0;
-  const double q = (cov_nn * d_east * d_east - 2 * cov_en * d_east * d_north + cov_ee * d_north * d_north) / det;
-  return q <= chi2_2(p);
 }
 
 }  // namespace seqloc::filter

@@ -161,11 +161,11 @@ HeaderSpan read_preamble(int fd, std::uint64_t file_bytes, const std::string& na
 
 // The header's dtype as a volume type and its item size; its shape checked as (H, W, N) within
 // kMaxVolumeCells.
-std::pair<filter::VolumeType, std::size_t> check_header(const Header& h, const std::string& name) {
+std::pair<core::VolumeType, std::size_t> check_header(const Header& h, const std::string& name) {
   auto fail = [&](const std::string& what) { throw DataError(name + ": " + what); };
-  std::pair<filter::VolumeType, std::size_t> type{filter::VolumeType::float32, 4};
+  std::pair<core::VolumeType, std::size_t> type{core::VolumeType::float32, 4};
   if (h.descr == "<f2") {
-    type = {filter::VolumeType::float16, 2};
+    type = {core::VolumeType::float16, 2};
   } else if (h.descr != "<f4") {
     fail("dtype '" + h.descr + "' is not supported; volumes are little-endian float32 ('<f4') or float16 ('<f2')");
   }

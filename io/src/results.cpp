@@ -4,7 +4,7 @@
 #include <cmath>
 #include <optional>
 
-#include "seqloc/filter/uncertainty.hpp"
+#include "seqloc/core/ellipse.hpp"
 
 namespace seqloc::io {
 
@@ -80,7 +80,7 @@ std::optional<UncertaintyCalibration> uncertainty_calibration(std::span<const Fr
     if (!p.truth || !p.uncertainty) continue;
     const auto& u = *p.uncertainty;
     const double de = p.truth->x_m - p.x_m, dn = p.truth->y_m - p.y_m;
-    inside += filter::inside_ellipse(u.cov_xx_m2, u.cov_xy_m2, u.cov_yy_m2, de, dn, 0.95) ? 1 : 0;
+    inside += core::inside_ellipse(u.cov_xx_m2, u.cov_xy_m2, u.cov_yy_m2, de, dn, 0.95) ? 1 : 0;
     const auto bin = static_cast<std::size_t>(std::clamp(u.mass_within_5m * 10, 0.0, 9.0));
     ++c.reliability[bin].frames;
     reported[bin] += u.mass_within_5m;

@@ -85,9 +85,9 @@ void read_route_json(const std::filesystem::path& dir, Route& route) {
   route.name = string_member("name", dir.filename().string().c_str());
   const std::string kind = string_member("volume_kind", "log_prob");
   if (kind == "log_prob") {
-    route.volume_kind = filter::VolumeValues::log_prob;
+    route.volume_kind = core::VolumeValues::log_prob;
   } else if (kind == "prob") {
-    route.volume_kind = filter::VolumeValues::prob;
+    route.volume_kind = core::VolumeValues::prob;
   } else {
     meta_fail(R"("volume_kind" must be "log_prob" or "prob", not ")" + kind + "\"");
   }
@@ -227,12 +227,12 @@ void check_volume_layout(const Route& route, const RouteFrame& f, const NpyVolum
                   R"("layout": "HWN" if )" + shape + " is H, W, N)");
 }
 
-filter::FrameVolume frame_volume(const Route& route, const RouteFrame& f, const NpyVolume& npy,
-                                 std::vector<unsigned char>& buffer) {
+core::FrameVolume frame_volume(const Route& route, const RouteFrame& f, const NpyVolume& npy,
+                               std::vector<unsigned char>& buffer) {
   check_volume_layout(route, f, npy);
   if (route.layout == VolumeLayout::hwn) return npy.view(route.volume_kind, route.cell_m);
   const int n = npy.height(), h = npy.width(), w = npy.bins();
-  const std::size_t element = npy.type() == filter::VolumeType::float16 ? 2 : 4;
+  const std::size_t element = npy.type() == core::VolumeType::float16 ? 2 : 4;
   const auto cells = static_cast<std::size_t>(n) * static_cast<std::size_t>(h) * static_cast<std::size_t>(w);
   buffer.resize(cells * element);
   const auto* source = static_cast<const unsigned char*>(npy.data());
@@ -339,7 +339,7 @@ void write_route(const Route& route, const std::filesystem::path& dir) {
   nlohmann::ordered_json meta = {{"format", "seqloc-route"},
                                  {"version", 1},
                                  {"name", route.name},
-                                 {"volume_kind", route.volume_kind == filter::VolumeValues::prob ? "prob" : "log_prob"},
+                                 {"volume_kind", route.volume_kind == core::VolumeValues::prob ? "prob" : "log_prob"},
                                  {"cell_m", route.cell_m}};
   if (route.layout_declared) meta["layout"] = route.layout == VolumeLayout::nhw ? "NHW" : "HWN";
   if (!route.simulated_json.empty()) meta["simulated"] = nlohmann::ordered_json::parse(route.simulated_json);

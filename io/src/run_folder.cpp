@@ -373,7 +373,7 @@ MetricsByMode evaluate_poses_files(const std::vector<PosesFile>& files) {
 }
 
 KeptBeliefs::KeptBeliefs(const std::filesystem::path& dir, std::size_t frames) : npy_(dir / "beliefs.npy") {
-  if (npy_.type() != filter::VolumeType::float32 || static_cast<std::size_t>(npy_.height()) != frames) {
+  if (npy_.type() != core::VolumeType::float32 || static_cast<std::size_t>(npy_.height()) != frames) {
     throw DataError((dir / "beliefs.npy").string() + ": expected float32 beliefs of " + std::to_string(frames) +
                     " frames (the route's), found " + std::to_string(npy_.height()));
   }

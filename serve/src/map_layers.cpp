@@ -6,7 +6,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/core/road_prior.hpp"
 #include "seqloc/raster/palette.hpp"
 #include "seqloc/raster/png_codec.hpp"
 
@@ -118,7 +118,7 @@ MapBlock read_block(raster::CacheReader& cache, std::int64_t u0, std::int64_t v0
         (band++)->f32 = metres;
         break;
       case MapLayer::road_prior:
-        (band++)->f32 = filter::road_prior_g(metres, options.prior_sigma_m);
+        (band++)->f32 = core::road_prior_g(metres, options.prior_sigma_m);
         break;
     }
   }

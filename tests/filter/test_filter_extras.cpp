@@ -335,5 +335,14 @@ TEST(RoadPrior, TheBlockFormIsTheScalarGOfEachDistance) {
   EXPECT_TRUE(road_prior_g(std::vector<float>{}, 3.0).empty());
 }
 
+// The CUDA kernels' copy of g (device_math.hpp) is the base layer's, bit for bit.
+TEST(RoadPrior, TheDeviceCopyIsTheBaseLayersG) {
+  for (const double d : {0.0, 0.5, 1.25, 3.0, 7.5, 40.0, 100.0}) {
+    for (const double sigma : {1.0, core::kRoadPriorSigmaM, 8.0}) {
+      EXPECT_EQ(math::road_prior_g(d, sigma), core::road_prior_g(d, sigma)) << d << " m, sigma " << sigma;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace seqloc::filter

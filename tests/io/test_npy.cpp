@@ -55,18 +55,18 @@ TEST(Npy, ReadsWhatNumPyWrites) {
     EXPECT_EQ(v.bins(), 4);
     for (int i = 0; i < 24; ++i) {
       const float expected = static_cast<float>(i - 7) / 4;  // exact in float16 too
-      const float got = v.type() == filter::VolumeType::float32
+      const float got = v.type() == core::VolumeType::float32
                             ? static_cast<const float*>(v.data())[i]
-                            : filter::half_to_float(static_cast<const std::uint16_t*>(v.data())[i]);
+                            : core::half_to_float(static_cast<const std::uint16_t*>(v.data())[i]);
       EXPECT_EQ(got, expected) << name << " cell " << i;
     }
   }
   const io::NpyVolume big(dir / "big.npy");
   EXPECT_EQ(big.bins(), 256);
-  EXPECT_EQ(big.type(), filter::VolumeType::float16);
-  const auto view = big.view(filter::VolumeValues::prob, 0.5);
+  EXPECT_EQ(big.type(), core::VolumeType::float16);
+  const auto view = big.view(core::VolumeValues::prob, 0.5);
   EXPECT_EQ(view.height, 64);
-  EXPECT_EQ(view.values, filter::VolumeValues::prob);
+  EXPECT_EQ(view.values, core::VolumeValues::prob);
   io::NpyVolume moved = io::NpyVolume(dir / "f32.npy");
   EXPECT_EQ(moved.width(), 3);
 }

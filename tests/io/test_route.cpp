@@ -38,7 +38,7 @@ TEST(Route, ReadsAValidRoute) {
                                            "2,11.0,\"a,b.npy\",47.9502,11.25,5.0,0.0,0.0,,,,47.9502,11.25,"}));
   const io::Route route = io::read_route(r.dir.path());
   EXPECT_EQ(route.name, "valley");
-  EXPECT_EQ(route.volume_kind, filter::VolumeValues::log_prob);
+  EXPECT_EQ(route.volume_kind, core::VolumeValues::log_prob);
   ASSERT_EQ(route.frames.size(), 3u);
   const auto& f0 = route.frames[0];
   EXPECT_EQ(f0.line, 2);
@@ -76,7 +76,7 @@ TEST(Route, GridCropsAndProbVolumes) {
              "frame,timestamp,volume,crop_x,crop_y,odo_forward_m,odo_left_m,odo_yaw_deg\n"
              "a,0,v0.npy,-120.5,33.25,0,0,0\nb,1,v1.npy,-115.5,33.25,5,0,0\n");
   const io::Route route = io::read_route(r.dir.path());
-  EXPECT_EQ(route.volume_kind, filter::VolumeValues::prob);
+  EXPECT_EQ(route.volume_kind, core::VolumeValues::prob);
   EXPECT_EQ(route.name, r.dir.path().filename().string());
   ASSERT_TRUE(route.frames[1].crop_grid.has_value());
   EXPECT_DOUBLE_EQ(route.frames[1].crop_grid->x_m, -115.5);
@@ -161,7 +161,7 @@ TEST(Route, WriteRouteReadsBackExactly) {
   std::ofstream(dir / "out/b c.npy") << "x";
   io::Route route;
   route.name = "round, trip";
-  route.volume_kind = filter::VolumeValues::prob;
+  route.volume_kind = core::VolumeValues::prob;
   route.cell_m = 0.25;
   route.layout = io::VolumeLayout::nhw;
   route.layout_declared = true;
@@ -172,7 +172,7 @@ TEST(Route, WriteRouteReadsBackExactly) {
     f.timestamp_s = t / 3.0;
     f.volume = t == 2 ? dir / "out/b c.npy" : dir / "a.npy";
     f.crop_geo = osm::GeoPoint{47.1 + t * 1e-7 / 3, -10.5 - t / 7.0};
-    f.odometry = t == 0 ? filter::Odometry{} : filter::Odometry{5.0 / 3, -1e-9, 0.1 + 0.2};
+    f.odometry = t == 0 ? core::Odometry{} : core::Odometry{5.0 / 3, -1e-9, 0.1 + 0.2};
     if (t == 0) f.gps = io::GpsPrior{{47.1, -10.5}, 32.5};
     if (t != 1)
       f.truth =

@@ -5,6 +5,8 @@
 #include <string>
 #include <variant>
 
+#include "seqloc/core/road_prior.hpp"
+
 namespace seqloc::filter {
 
 // Fields grouped by the component they set (window, ETU, MGR, ...), not packed: one config per filter.
@@ -33,7 +35,7 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// sigma of the road prior g(x) = exp(-d^2 / (2 sigma^2)). 3 m: a vehicle's centre lies within
   /// a lane or two of the mapped centerline, and the OSM centerline itself is off by a few metres
   /// on rural roads; the benchmark's sigma sweep refines this per region.
-  double mgr_sigma_m = 3.0;
+  double mgr_sigma_m = core::kRoadPriorSigmaM;
   int pas_radius = 3;  ///< r of PAS, cells
 
   /// Window cells outside a frame's crop get the density log(1/M) - outside_crop_nats (conventions.md

@@ -48,7 +48,8 @@ SEQLOC_HD inline void displacement_cells(double forward_m, double left_m, double
 }
 
 /// The road prior of MGR before normalization (conventions.md section 6, step 4):
-/// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road.
+/// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road: the device's copy of
+/// core::road_prior_g (which host code calls), tested equal to it.
 SEQLOC_HD inline double road_prior_g(double distance_m, double sigma_m) {
   return ::exp(-distance_m * distance_m / (2 * sigma_m * sigma_m));
 }

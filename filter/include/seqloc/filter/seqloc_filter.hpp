@@ -22,6 +22,7 @@
 #include <span>
 #include <vector>
 
+#include "seqloc/core/road_prior.hpp"
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/device_math.hpp"
@@ -75,16 +76,9 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
 /// and > 0.
 [[nodiscard]] PreparedFrame temper_frame(PreparedFrame frame, double power, int threads = 1);
 
-/// The road prior of MGR before normalization (conventions.md section 6, step 4):
-/// g(x) = exp(-d(x)^2 / (2 sigma^2)), d the distance to the nearest road. The one definition the
-/// filter, the served road_prior layer and the Python module use.
-[[nodiscard]] inline double road_prior_g(double distance_m, double sigma_m) {
-  return math::road_prior_g(distance_m, sigma_m);
-}
-
-/// g of each distance, as float: the road_prior layer of a block of road distances (runs of equal
-/// distances, as far from roads, reuse one exp).
-[[nodiscard]] std::vector<float> road_prior_g(std::span<const float> distance_m, double sigma_m);
+/// The road prior of MGR before normalization (conventions.md section 6, step 4): g at a distance
+/// or over a block of them, the base layer's one definition (core/road_prior.hpp).
+using core::road_prior_g;
 
 /// The road prior of MGR over the window: log q(x) for every cell (one heading's share).
 /// `road_distance_m` is W x H, row-major (v, u) (FilterError when it holds another number of values).

@@ -16,6 +16,7 @@
 //   kSecondModeShare (multimodal: the covariance then spans both places, and a fusion stack
 //   should not take the pose as one Gaussian).
 
+#include "seqloc/core/ellipse.hpp"
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/types.hpp"
 
@@ -45,8 +46,7 @@ struct Ellipse {
 };
 [[nodiscard]] Ellipse covariance_ellipse(double cov_ee, double cov_en, double cov_nn, double p);
 
-/// Whether offset (d_east, d_north) lies inside the covariance's ellipse of probability `p`
-/// (its squared Mahalanobis distance at most chi2_2(p) = -2 ln(1 - p)).
-[[nodiscard]] bool inside_ellipse(double cov_ee, double cov_en, double cov_nn, double d_east, double d_north, double p);
+/// Whether an offset lies inside the covariance's ellipse of probability `p` (core/ellipse.hpp).
+using core::inside_ellipse;
 
 }  // namespace seqloc::filter

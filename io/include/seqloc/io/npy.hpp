@@ -9,7 +9,7 @@
 #include <string>
 
 #include "seqloc/core/error.hpp"
-#include "seqloc/filter/types.hpp"
+#include "seqloc/core/volume.hpp"
 
 namespace seqloc::io {
 
@@ -29,12 +29,12 @@ class NpyVolume {
   [[nodiscard]] int height() const { return height_; }
   [[nodiscard]] int width() const { return width_; }
   [[nodiscard]] int bins() const { return bins_; }
-  [[nodiscard]] filter::VolumeType type() const { return type_; }
+  [[nodiscard]] core::VolumeType type() const { return type_; }
   [[nodiscard]] const void* data() const { return data_; }
   [[nodiscard]] const std::filesystem::path& path() const { return path_; }
 
   /// The volume as the filter takes it.
-  [[nodiscard]] filter::FrameVolume view(filter::VolumeValues values, double cell_m) const {
+  [[nodiscard]] core::FrameVolume view(core::VolumeValues values, double cell_m) const {
     return {data_, type_, values, height_, width_, bins_, cell_m};
   }
 
@@ -46,13 +46,13 @@ class NpyVolume {
   std::size_t mapping_bytes_ = 0;
   const void* data_ = nullptr;
   int height_ = 0, width_ = 0, bins_ = 0;
-  filter::VolumeType type_ = filter::VolumeType::float32;
+  core::VolumeType type_ = core::VolumeType::float32;
 };
 
 /// A C-order float32 array of shape (d0, d1, d2) as the bytes of a .npy file (format 1.0), which
 /// NpyVolume reads back.
 [[nodiscard]] std::string encode_npy_float32(int d0, int d1, int d2, const float* data);
-/// The same for float16 values given as their IEEE half bits (filter::float_to_half).
+/// The same for float16 values given as their IEEE half bits (core::float_to_half).
 [[nodiscard]] std::string encode_npy_float16(int d0, int d1, int d2, const std::uint16_t* halves);
 
 /// Largest volume accepted: 2^31 cells (8 GB of float32), far beyond any backbone's output.

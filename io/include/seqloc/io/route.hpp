@@ -11,7 +11,7 @@
 
 #include "seqloc/core/error.hpp"
 #include "seqloc/core/units.hpp"
-#include "seqloc/filter/types.hpp"
+#include "seqloc/core/volume.hpp"
 #include "seqloc/osm/projection.hpp"
 
 namespace seqloc::io {
@@ -34,7 +34,7 @@ struct RouteFrame {
   std::filesystem::path observation;
   std::optional<osm::GeoPoint> crop_geo;    ///< crop centre as lat/lon (tangent-plane, true north)
   std::optional<osm::GridPoint> crop_grid;  ///< or in region-grid coordinates (grid north)
-  filter::Odometry odometry;                ///< from the previous frame (0 on the first)
+  core::Odometry odometry;                  ///< from the previous frame (0 on the first)
   std::optional<GpsPrior> gps;
   std::optional<GroundTruth> truth;
 };
@@ -46,7 +46,7 @@ enum class VolumeLayout { hwn, nhw };
 struct Route {
   std::filesystem::path dir;
   std::string name;
-  filter::VolumeValues volume_kind = filter::VolumeValues::log_prob;
+  core::VolumeValues volume_kind = core::VolumeValues::log_prob;
   double cell_m = core::kCellM;
   VolumeLayout layout = VolumeLayout::hwn;
   bool layout_declared = false;  ///< route.json names the layout (else HWN, with a check of each shape)
@@ -65,8 +65,8 @@ void check_volume_layout(const Route& route, const RouteFrame& f, const NpyVolum
 
 /// Frame `f`'s volume `npy` as the filter takes it, (H, W, N): the mapped file itself, or for an
 /// NHW route its values transposed into `buffer`. Checks the layout (check_volume_layout).
-[[nodiscard]] filter::FrameVolume frame_volume(const Route& route, const RouteFrame& f, const NpyVolume& npy,
-                                               std::vector<unsigned char>& buffer);
+[[nodiscard]] core::FrameVolume frame_volume(const Route& route, const RouteFrame& f, const NpyVolume& npy,
+                                             std::vector<unsigned char>& buffer);
 
 /// Plausibility limits of the odometry between consecutive frames.
 struct RouteLimits {

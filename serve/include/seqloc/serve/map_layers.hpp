@@ -15,9 +15,9 @@
 #include <string_view>
 #include <vector>
 
-#include "seqloc/filter/config.hpp"
-#include "seqloc/raster/cache.hpp"
 #include "seqloc/core/error.hpp"
+#include "seqloc/core/road_prior.hpp"
+#include "seqloc/raster/cache.hpp"
 #include "seqloc/raster/crop_window.hpp"
 
 namespace seqloc::serve {
@@ -68,7 +68,7 @@ struct MapBlock {
 };
 
 struct LayerOptions {
-  double prior_sigma_m = filter::FilterConfig{}.mgr_sigma_m;  ///< sigma of road_prior (the filter's MGR default)
+  double prior_sigma_m = core::kRoadPriorSigmaM;  ///< sigma of road_prior (the filter's MGR default)
 
   /// Throws RequestError naming the field, its value and the constraint it breaks.
   void validate() const;
