@@ -1,11 +1,9 @@
 #include "seqloc/pipeline/backbone_calibration.hpp"
 
 #include <cmath>
-#include <fstream>
-#include <sstream>
 
-#include <nlohmann/json.hpp>
 #include "seqloc/core/angles.hpp"
+#include "seqloc/io/calibration_file.hpp"
 
 namespace seqloc::pipeline {
 
@@ -68,43 +66,15 @@ BackboneFit fit_backbone_calibration(const std::vector<io::Route>& routes, raste
 
 std::string calibration_json(const BackboneFit& fit) {
   const auto& b = fit.best;
-  const nlohmann::ordered_json j = {{"format", "seqloc-calibration"},
-                                    {"version", 1},
-                                    {"temperature", b.temperature},
-                                    {"blur_cells", b.calibration.blur_cells},
-                                    {"blur_bins", b.calibration.blur_bins},
-                                    {"floor", b.calibration.floor},
-                                    {"nll", b.nll},
-                                    {"uniform_nll", b.uniform_nll},
-                                    {"as_given_nll", fit.as_given_nll},
-                                    {"frames", b.frames},
-                                    {"skipped", b.skipped}};
-  return j.dump(2) + "\n";
+  return io::calibration_file_json({b.temperature, b.calibration.blur_cells, b.calibration.blur_bins,
+                                    b.calibration.floor, b.nll, b.uniform_nll, fit.as_given_nll, b.frames, b.skipped});
 }
 
 void apply_calibration_file(const std::filesystem::path& path, LocalizeOptions& options) {
-  std::ifstream in(path);
-  if (!in) throw DataError(path.string() + ": cannot read");
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(in);
-  } catch (const nlohmann::json::exception& e) {
-    throw DataError(path.string() + ": not JSON: " + e.what());
-  }
-  if (!j.is_object() || j.value("format", "") != "seqloc-calibration") {
-    throw DataError(path.string() + ": not a calibration file (\"format\": \"seqloc-calibration\" expected)");
-  }
-  if (j.value("version", 0) != 1) {
-    throw DataError(path.string() + ": calibration version " + j.value("version", nlohmann::json()).dump() +
-                    ", this seqloc reads version 1");
-  }
-  auto number = [&](const char* key) {
-    if (!j.contains(key) || !j[key].is_number()) throw DataError(path.string() + ": '" + key + "' must be a number");
-    return j[key].get<double>();
-  };
+  const io::CalibrationFile file = io::read_calibration_file(path);
   LocalizeOptions applied = options;
-  applied.volume_temperature = number("temperature");
-  applied.volume_calibration = {number("blur_cells"), number("blur_bins"), number("floor")};
+  applied.volume_temperature = file.temperature;
+  applied.volume_calibration = {file.blur_cells, file.blur_bins, file.floor};
   try {
     applied.validate();
   } catch (const std::exception& e) {

@@ -42,12 +42,12 @@ struct BackboneFit {
                                                    const LocalizeOptions& options,
                                                    const std::function<void()>& on_frame = {});
 
-/// calibration.json: {"format": "seqloc-calibration", "version": 1, "temperature", "blur_cells",
-/// "blur_bins", "floor", "nll", "uniform_nll", "as_given_nll", "frames", "skipped"}.
+/// The fit as calibration.json (io::calibration_file_json, the file's one writer).
 [[nodiscard]] std::string calibration_json(const BackboneFit& fit);
 
-/// Reads calibration.json into the options localize applies (volume_temperature and
-/// volume_calibration). Throws DataError naming the file and what is wrong.
+/// Reads calibration.json (io::read_calibration_file, its one reader) into the options localize
+/// applies (volume_temperature and volume_calibration), checked as localize checks them. Throws
+/// DataError naming the file and what is wrong.
 void apply_calibration_file(const std::filesystem::path& path, LocalizeOptions& options);
 
 }  // namespace seqloc::pipeline
