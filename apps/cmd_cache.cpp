@@ -1,6 +1,5 @@
 #include <cstdio>
 #include <filesystem>
-#include <set>
 #include <string>
 #include <vector>
 
@@ -13,14 +12,6 @@ namespace seqloc::app {
 namespace {
 
 class CacheInfoCommand : public Command {
-  static bool is_number_row(const std::string& key) {
-    static const std::set<std::string> kNumbers = {
-        "format_version", "centre_lat", "centre_lon", "bbox_min_lon", "bbox_min_lat", "bbox_max_lon", "bbox_max_lat",
-        "max_distance_m", "cell_m", "tile_px", "tile_x0", "tile_y0", "tile_x1", "tile_y1", "shard_index",
-        "shard_count"};
-    return kNumbers.count(key) > 0;
-  }
-
  public:
   void setup(CLI::App& app) override {
     app.add_option("cache", path_, "Region cache (GeoPackage)")->required();
@@ -33,13 +24,13 @@ class CacheInfoCommand : public Command {
     if (json_) {
       nlohmann::ordered_json out;
       out["path"] = path_.string();
-      for (const auto& [key, value] : rows) {
+      for (const auto& row : rows) {
         // The class table is JSON already, and numbers are JSON numbers (the rows hold each one
         // as a decimal that reads back to the same double, %.17g).
-        if (key == "classes" || (is_number_row(key) && !value.empty())) {
-          out[key] = nlohmann::json::parse(value);
+        if (row.kind != raster::MetadataRow::Kind::text && !row.value.empty()) {
+          out[row.key] = nlohmann::json::parse(row.value);
         } else {
-          out[key] = value;
+          out[row.key] = row.value;
         }
       }
       out["tiles_wide"] = metadata.grid.tiles_wide();
@@ -48,7 +39,7 @@ class CacheInfoCommand : public Command {
       return kExitOk;
     }
     std::printf("%-26s %s\n", "path", path_.c_str());
-    for (const auto& [key, value] : rows) std::printf("%-26s %s\n", key.c_str(), value.c_str());
+    for (const auto& row : rows) std::printf("%-26s %s\n", row.key.c_str(), row.value.c_str());
     std::printf("%-26s %lld x %lld tiles of 512 x 512 px (%.1f x %.1f km)\n", "extent",
                 static_cast<long long>(metadata.grid.tiles_wide()), static_cast<long long>(metadata.grid.tiles_high()),
                 (metadata.grid.max_x() - metadata.grid.min_x()) / 1000.0,

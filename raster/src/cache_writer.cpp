@@ -308,8 +308,8 @@ void CacheWriter::create_schema(const osm::RegionProjection& projection) {
 
 void CacheWriter::write_metadata() {
   detail::Statement s(*db_, "INSERT OR REPLACE INTO seqloc_metadata (key, value) VALUES (?, ?)");
-  for (const auto& [key, value] : metadata_rows(metadata_)) {
-    s.bind(1, key).bind(2, value);
+  for (const MetadataRow& row : metadata_rows(metadata_)) {
+    s.bind(1, row.key).bind(2, row.value);
     s.run();
   }
 }

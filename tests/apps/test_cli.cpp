@@ -197,6 +197,7 @@ TEST(Cli, PreprocessWritesACacheAndInfoDescribesIt) {
   EXPECT_EQ(json["tile_px"], 512);
   EXPECT_EQ(json["tile_x0"], metadata.grid.tx0);
   EXPECT_TRUE(json["shard_count"].is_number_integer());
+  EXPECT_EQ(json["corridor_m"].get<double>(), metadata.corridor_m) << "every number row, typed where it is written";
   EXPECT_EQ(json["source_sha256"], osm::file_sha256(map));
   EXPECT_EQ(json["source_file"], "map.osm.pbf");
   EXPECT_EQ(json["state"], "complete");

@@ -263,8 +263,17 @@ class CacheReader {
 /// the format; for `seqloc cache info`.
 [[nodiscard]] CacheMetadata read_cache_metadata(const std::filesystem::path& path);
 
-/// The metadata as key/value pairs, as stored in `seqloc_metadata`.
-[[nodiscard]] std::vector<std::pair<std::string, std::string>> metadata_rows(const CacheMetadata& metadata);
+/// One row of `seqloc_metadata`: its key, its text as stored, and what the text holds (a number
+/// is written as a decimal that reads back to the same double; the class table is JSON).
+struct MetadataRow {
+  enum class Kind { text, number, json };
+  std::string key, value;
+  Kind kind = Kind::text;
+};
+
+/// The metadata as the rows stored in `seqloc_metadata`, with the kind of each (the one list of
+/// them: the writer stores them, `seqloc cache info --json` types its values by them).
+[[nodiscard]] std::vector<MetadataRow> metadata_rows(const CacheMetadata& metadata);
 
 /// Merges shards of one build into a complete cache at `out` (atomically). Throws CacheError when
 /// the shards belong to different builds, overlap, or do not cover the region.
