@@ -190,7 +190,7 @@ std::pair<core::VolumeType, std::size_t> check_header(const Header& h, const std
 
 }  // namespace
 
-NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
+NpyArray::NpyArray(const std::filesystem::path& path) : path_(path) {
   const std::string name = path.string();
   const FileDescriptor file(::open(name.c_str(), O_RDONLY | O_CLOEXEC));
   if (file.fd < 0) throw DataError(name + ": cannot open (" + std::strerror(errno) + ")");
@@ -214,9 +214,7 @@ NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
                     " bytes of data but the file holds " + std::to_string(file_bytes - data_start) +
                     (file_bytes - data_start < expected ? " (truncated)" : ""));
   }
-  height_ = static_cast<int>(shape[0]);
-  width_ = static_cast<int>(shape[1]);
-  bins_ = static_cast<int>(shape[2]);
+  for (std::size_t i = 0; i < 3; ++i) shape_[i] = static_cast<int>(shape[i]);
   mapping_bytes_ = static_cast<std::size_t>(file_bytes);
   mapping_ = ::mmap(nullptr, mapping_bytes_, PROT_READ, MAP_PRIVATE, file.fd, 0);
   if (mapping_ == MAP_FAILED) {
@@ -230,37 +228,33 @@ NpyVolume::NpyVolume(const std::filesystem::path& path) : path_(path) {
   }
 }
 
-void NpyVolume::release() {
+void NpyArray::release() {
   if (mapping_) ::munmap(mapping_, mapping_bytes_);
   mapping_ = nullptr;
   data_ = nullptr;
 }
 
-NpyVolume::~NpyVolume() { release(); }
+NpyArray::~NpyArray() { release(); }
 
-NpyVolume::NpyVolume(NpyVolume&& o) noexcept
+NpyArray::NpyArray(NpyArray&& o) noexcept
     : path_(std::move(o.path_)),
       mapping_(o.mapping_),
       mapping_bytes_(o.mapping_bytes_),
       data_(o.data_),
-      height_(o.height_),
-      width_(o.width_),
-      bins_(o.bins_),
+      shape_(o.shape_),
       type_(o.type_) {
   o.mapping_ = nullptr;
   o.data_ = nullptr;
 }
 
-NpyVolume& NpyVolume::operator=(NpyVolume&& o) noexcept {
+NpyArray& NpyArray::operator=(NpyArray&& o) noexcept {
   if (this != &o) {
     release();
     path_ = std::move(o.path_);
     mapping_ = o.mapping_;
     mapping_bytes_ = o.mapping_bytes_;
     data_ = o.data_;
-    height_ = o.height_;
-    width_ = o.width_;
-    bins_ = o.bins_;
+    shape_ = o.shape_;
     type_ = o.type_;
     o.mapping_ = nullptr;
     o.data_ = nullptr;

@@ -373,9 +373,9 @@ MetricsByMode evaluate_poses_files(const std::vector<PosesFile>& files) {
 }
 
 KeptBeliefs::KeptBeliefs(const std::filesystem::path& dir, std::size_t frames) : npy_(dir / "beliefs.npy") {
-  if (npy_.type() != core::VolumeType::float32 || static_cast<std::size_t>(npy_.height()) != frames) {
+  if (npy_.type() != core::VolumeType::float32 || static_cast<std::size_t>(npy_.extent(0)) != frames) {
     throw DataError((dir / "beliefs.npy").string() + ": expected float32 beliefs of " + std::to_string(frames) +
-                    " frames (the route's), found " + std::to_string(npy_.height()));
+                    " frames (the route's), found " + std::to_string(npy_.extent(0)));
   }
   const auto path = dir / "beliefs.csv";
   std::ifstream in(path);

@@ -86,15 +86,15 @@ class KeptBeliefs {
   /// Reads `dir` (OUT/<route>/<mode>). Throws DataError naming the file when they are missing or
   /// do not match a route of `frames` frames.
   KeptBeliefs(const std::filesystem::path& dir, std::size_t frames);
-  [[nodiscard]] int width() const { return npy_.bins(); }
-  [[nodiscard]] int height() const { return npy_.width(); }
+  [[nodiscard]] int width() const { return npy_.extent(2); }
+  [[nodiscard]] int height() const { return npy_.extent(1); }
   /// Frame `frame`'s belief over position, height x width, row-major.
   [[nodiscard]] std::vector<double> marginal(std::size_t frame) const;
   /// The region pixel of frame `frame`'s window cell (0, 0).
   [[nodiscard]] const std::array<std::int64_t, 2>& origin(std::size_t frame) const { return origins_.at(frame); }
 
  private:
-  NpyVolume npy_;
+  NpyArray npy_;  ///< (frames, height, width)
   std::vector<std::array<std::int64_t, 2>> origins_;
 };
 
