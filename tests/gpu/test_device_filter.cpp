@@ -5,10 +5,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <random>
 #include <string>
 #include <vector>
 
+#include <gtest/gtest-spi.h>
 #include <gtest/gtest.h>
 
 #include "seqloc/filter/seqloc_filter.hpp"
@@ -115,8 +117,13 @@ struct Exercised {
   bool released = false;  ///< the hold released (the belief was raised once)
 };
 
-Exercised compare_route(const Variant& p, Backend backend, int steps) {
+/// The CPU filter and the backend side by side over a seeded route; `plant` (when given) changes
+/// the backend's configuration alone, to show that the comparisons catch a decision made otherwise.
+Exercised compare_route(const Variant& p, Backend backend, int steps,
+                        const std::function<void(FilterConfig&)>& plant = {}) {
   const FilterConfig c = config_of(p);
+  FilterConfig planted = c;
+  if (plant) plant(planted);
   std::mt19937 rng(4242);
   std::uniform_real_distribution<double> unit(0, 1);
   std::vector<float> road(static_cast<std::size_t>(c.width) * c.height);
@@ -124,7 +131,7 @@ Exercised compare_route(const Variant& p, Backend backend, int steps) {
     for (int u = 0; u < c.width; ++u)
       road[static_cast<std::size_t>(v) * c.width + u] = static_cast<float>(std::abs(0.6 * u - 0.8 * v + 4) * 0.5);
   SeqLocFilter cpu(c);
-  DeviceFilter device(c, backend);
+  DeviceFilter device(planted, backend);
   Exercised seen;
   for (int step = 0; step < steps; ++step) {
     const int h = 15 + step % 3, w = 17 - step % 2;
@@ -161,6 +168,28 @@ TEST_P(DeviceAgainstCpu, HostBackendAgreesOnSeededRoutes) {
       EXPECT_TRUE(seen.released) << "and release the hold (the belief raised once)";
     }
   }
+}
+
+// The comparisons have teeth: a backend whose ETU decides otherwise (here the backend weighs each
+// frame against the configured reference entropy while the CPU weighs against the route's) fails
+// them on ETU's weight, and on the beliefs that follow.
+TEST(DeviceAgainstCpuCheck, APlantedDifferenceInOneBackendsEtuIsCaught) {
+  if (!built_with_cuda()) GTEST_SKIP() << cuda_status().reason;
+  ::testing::TestPartResultArray failures;
+  {
+    const ::testing::ScopedFakeTestPartResultReporter intercept(
+        ::testing::ScopedFakeTestPartResultReporter::INTERCEPT_ONLY_CURRENT_THREAD, &failures);
+    (void)compare_route(Variant{"planted_etu"}, Backend::host, 6,
+                        [](FilterConfig& c) { c.etu_route_reference = false; });
+  }
+  int on_etu = 0;
+  for (int i = 0; i < failures.size(); ++i) {
+    on_etu += std::string(failures.GetTestPartResult(i).message()).find("etu_weight") != std::string::npos;
+  }
+  EXPECT_GT(on_etu, 0) << failures.size() << " failures, none on ETU's weight";
+  // And the same route without the plant passes: the failures are the plant's.
+  const Exercised clean = compare_route(Variant{"unplanted"}, Backend::host, 6);
+  (void)clean;
 }
 
 TEST_P(DeviceAgainstCpu, CudaBackendAgreesOnSeededRoutes) {
