@@ -234,7 +234,7 @@ Pose sum_argmax(const SumBox& box, int R) {
   const auto rest = static_cast<std::size_t>(best) % box.cells;
   const auto u = box.u0 + static_cast<int>(rest % static_cast<std::size_t>(box.width));
   const auto v = box.v0 + static_cast<int>(rest / static_cast<std::size_t>(box.width));
-  return {static_cast<double>(u), static_cast<double>(v), k * 360.0 / R};
+  return {static_cast<double>(u), static_cast<double>(v), bin_heading_deg(k, R)};
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/units.hpp"
+#include "seqloc/filter/belief.hpp"
 
 namespace seqloc::filter {
 
@@ -55,7 +56,7 @@ double StepDecisions::bank_ratio(double power) {
 Pose StepDecisions::refine(int u_star, int v_star, int k_star, int width, int height, const PositionMasses& masses,
                            const CellValue& value) const {
   const int R = config_.headings;
-  Pose pose{static_cast<double>(u_star), static_cast<double>(v_star), k_star * 360.0 / R};
+  Pose pose{static_cast<double>(u_star), static_cast<double>(v_star), bin_heading_deg(k_star, R)};
   if (config_.pas) {
     // x_hat = sum m(x) x / sum m(x) over the cells around x* that lie in the window.
     const int r = config_.pas_radius;
@@ -83,7 +84,7 @@ Pose StepDecisions::refine(int u_star, int v_star, int k_star, int width, int he
     for (int i = -config_.subbin_half_width; i <= config_.subbin_half_width; ++i) {
       const int k = (k_star + i + R) % R;
       const double weight = value(u_star, v_star, k);
-      const double h = k * 360.0 / R * core::kDegToRad;
+      const double h = bin_heading_deg(k, R) * core::kDegToRad;
       sx += weight * std::sin(h);
       sy += weight * std::cos(h);
     }

@@ -1,5 +1,3 @@
-#include <cmath>
-#include <cstring>
 #include <sstream>
 
 #include "seqloc/filter/config.hpp"

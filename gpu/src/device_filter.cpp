@@ -19,11 +19,10 @@ namespace {
 
 using core::kCellM;
 using core::kDegToRad;
+using filter::bin_heading_deg;
 using filter::FilterError;
 using filter::FrameResult;
 using filter::Pose;
-
-double bin_heading_deg(int k, int headings) { return k * 360.0 / headings; }
 
 /// The window bins' reading of a frame's bins (filter/resample.cpp's sample_slice).
 std::vector<HeadingBlend> heading_blends(int headings, int frame_bins, double rotation_deg) {

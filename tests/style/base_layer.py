@@ -9,8 +9,11 @@ reports each line that writes one of them by hand; comments and string literals 
 
 import pathlib
 import re
-import subprocess
 import sys
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from function_length import blank  # noqa: E402  comments and literals blanked, raw strings too
+from outside_paths import files  # noqa: E402  the files git tracks (or every file)
 
 CHECKS = [
     (re.compile(r"\bM_PI\w*\b"), "pi: core::kPi, core::kDegToRad, core::kRadToDeg (core/angles.hpp)"),
@@ -22,42 +25,8 @@ SUFFIXES = {".cpp", ".hpp", ".h", ".cc", ".cu", ".cuh"}
 SKIP = {"core", "tests"}
 
 
-def code_only(text):
-    """The text with comments and string or character literals replaced by spaces (newlines kept)."""
-    out, i, n = [], 0, len(text)
-    while i < n:
-        if text.startswith("//", i):
-            j = text.find("\n", i)
-            j = n if j < 0 else j
-            out.append(" " * (j - i))
-            i = j
-        elif text.startswith("/*", i):
-            j = text.find("*/", i + 2)
-            j = n if j < 0 else j + 2
-            out.append(re.sub(r"[^\n]", " ", text[i:j]))
-            i = j
-        elif text[i] in "\"'":
-            quote, j = text[i], i + 1
-            while j < n and text[j] != quote and text[j] != "\n":
-                j += 2 if text[j] == "\\" else 1
-            j = min(j + 1, n)
-            out.append(" " * (j - i))
-            i = j
-        else:
-            out.append(text[i])
-            i += 1
-    return "".join(out)
-
-
 def sources(root, all_files):
-    try:
-        if all_files:
-            raise FileNotFoundError
-        out = subprocess.run(["git", "-C", str(root), "ls-files", "-z"], check=True, capture_output=True).stdout
-        paths = [root / f for f in out.decode().split("\0") if f]
-    except (subprocess.CalledProcessError, FileNotFoundError):
-        paths = [p for p in root.rglob("*") if p.is_file()]
-    for path in sorted(paths):
+    for path in sorted(files(root, all_files)):
         relative = path.relative_to(root)
         if path.suffix in SUFFIXES and path.is_file() and len(relative.parts) > 1 and relative.parts[0] not in SKIP:
             yield path, relative.as_posix()
@@ -68,7 +37,7 @@ def main():
     root = pathlib.Path([a for a in args if a != "--all-files"][0]).resolve()
     found = 0
     for path, relative in sources(root, "--all-files" in args):
-        for number, line in enumerate(code_only(path.read_text(encoding="utf-8")).splitlines(), 1):
+        for number, line in enumerate(blank(path.read_text(encoding="utf-8")).splitlines(), 1):
             for pattern, instead in CHECKS:
                 if pattern.search(line):
                     print(f"{relative}:{number}: {instead}")

@@ -4,10 +4,9 @@
 // layer and the Python module's crops use (the CUDA kernels carry a device copy of the formula,
 // filter/device_math.hpp, tested equal).
 
+#include <cmath>
 #include <span>
 #include <vector>
-
-#include <cmath>
 
 namespace seqloc::core {
 

@@ -15,6 +15,9 @@
 
 namespace seqloc::filter {
 
+/// Grid heading (degrees, clockwise) of bin k of `headings`: k * 360 / headings.
+[[nodiscard]] inline double bin_heading_deg(int k, int headings) { return k * 360.0 / headings; }
+
 class BeliefVolume {
  public:
   BeliefVolume(int width, int height, int headings);
@@ -25,7 +28,7 @@ class BeliefVolume {
   [[nodiscard]] std::size_t slice_cells() const { return static_cast<std::size_t>(width_) * height_; }
   [[nodiscard]] std::size_t size() const { return data_.size(); }
   /// Grid heading (degrees, clockwise) of bin k.
-  [[nodiscard]] double bin_heading_deg(int k) const { return k * 360.0 / headings_; }
+  [[nodiscard]] double bin_heading_deg(int k) const { return filter::bin_heading_deg(k, headings_); }
 
   /// Probabilities of heading bin k, W x H row-major.
   [[nodiscard]] float* slice(int k) { return data_.data() + static_cast<std::size_t>(k) * slice_cells(); }
