@@ -8,11 +8,10 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include <nlohmann/json.hpp>
-
 #include "command.hpp"
 #include "seqloc/core/files.hpp"
 #include "seqloc/ingest/preprocess.hpp"
+#include "seqloc/io/preprocess_report.hpp"
 
 namespace seqloc::app {
 
@@ -100,39 +99,8 @@ class PreprocessCommand : public Command, public WithProgress {
           << "missing from the input); their relations are drawn from the rings that close\n";
     }
     std::fputs(out.str().c_str(), stdout);
-    if (!report_path_.empty()) write_report(report);
+    if (!report_path_.empty()) core::write_file(report_path_, io::preprocess_report_json(report));
     return kExitOk;
-  }
-
-  void write_report(const ingest::PreprocessReport& r) const {
-    nlohmann::ordered_json j;
-    j["output"] = options_.output.string();
-    j["tiles_wide"] = r.tiles_wide;
-    j["tiles_high"] = r.tiles_high;
-    j["tiles_total"] = r.tiles_total;
-    j["tiles_written"] = r.tiles_written;
-    j["tiles_resumed"] = r.tiles_resumed;
-    j["tiles_skipped"] = r.tiles_skipped;
-    j["corridor_m"] = options_.corridor_m;
-    j["megapixels_per_layer"] = static_cast<double>(r.tiles_total) * 512.0 * 512.0 / 1e6;
-    j["threads"] = r.threads;
-    j["read_seconds"] = r.read_seconds;
-    j["render_seconds"] = r.render_seconds;
-    j["total_seconds"] = r.total_seconds;
-    j["classes_cpu_seconds"] = r.classes_cpu_seconds;
-    j["distance_cpu_seconds"] = r.distance_cpu_seconds;
-    j["encode_cpu_seconds"] = r.encode_cpu_seconds;
-    j["write_seconds"] = r.write_seconds;
-    j["start_mb"] = r.start_mb;
-    j["read_peak_mb"] = r.read_peak_mb;
-    j["render_start_mb"] = r.render_start_mb;
-    j["render_peak_mb"] = r.render_peak_mb;
-    j["spilled_bytes"] = r.spilled_bytes;
-    j["scale_error"] = r.scale_error;
-    j["features"] = {{"nodes", r.nodes}, {"lines", r.lines}, {"areas", r.areas}, {"roads", r.roads}};
-    j["ways_missing_nodes"] = r.ways_missing_nodes;
-    j["multipolygon_open_chains"] = r.multipolygon_open_chains;
-    core::write_file(report_path_, j.dump(2) + "\n");
   }
 
  private:

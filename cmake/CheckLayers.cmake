@@ -5,7 +5,7 @@ cmake_minimum_required(VERSION 3.20)
 # docs/development.md's layout table, kept by a test.
 #   core (the base: errors, angles, the cell size, CSV, atomic files, the thread pool, a frame's
 #   volume and odometry, the road prior) under all;
-#   osm <- raster <- ingest; filter (Eigen and core only) <- gpu (its CUDA backend);
+#   osm <- raster <- io <- ingest (the preprocess report); filter (Eigen and core only) <- gpu (its CUDA backend);
 #   osm + raster <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + filter + gpu + ros <- pipeline
 #   (the driver) <- render; raster <- serve; pipeline <- python; everything <- apps.
 if(NOT ROOT)
@@ -16,7 +16,7 @@ set(allowed_osm core osm)
 set(allowed_raster core osm raster)
 set(allowed_filter core filter)
 set(allowed_gpu core filter gpu)
-set(allowed_ingest core osm raster ingest)
+set(allowed_ingest core osm raster io ingest)
 set(allowed_io core osm raster io)
 set(allowed_matcher core osm raster io matcher)
 set(allowed_sim core osm raster io sim)

@@ -443,6 +443,8 @@ PreprocessReport preprocess_region(const PreprocessOptions& options,
   const raster::RegionGrid grid = grid_for(bbox, projection);
 
   PreprocessReport report = region_report(bbox, grid, features);
+  report.output = options.output.string();
+  report.corridor_m = options.corridor_m;
   if (!writer) {
     writer.emplace(options.output, declared_metadata ? *declared_metadata : metadata_for(options, bbox, header));
   }

@@ -1,9 +1,8 @@
 #include "seqloc/io/calibration_file.hpp"
 
-#include <fstream>
-
 #include <nlohmann/json.hpp>
 
+#include "json_file.hpp"
 #include "seqloc/core/error.hpp"
 
 namespace seqloc::io {
@@ -24,21 +23,7 @@ std::string calibration_file_json(const CalibrationFile& c) {
 }
 
 CalibrationFile read_calibration_file(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) throw DataError(path.string() + ": cannot read");
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(in);
-  } catch (const nlohmann::json::exception& e) {
-    throw DataError(path.string() + ": not JSON: " + e.what());
-  }
-  if (!j.is_object() || j.value("format", "") != "seqloc-calibration") {
-    throw DataError(path.string() + ": not a calibration file (\"format\": \"seqloc-calibration\" expected)");
-  }
-  if (j.value("version", 0) != 1) {
-    throw DataError(path.string() + ": calibration version " + j.value("version", nlohmann::json()).dump() +
-                    ", this seqloc reads version 1");
-  }
+  const nlohmann::json j = detail::read_json_file(path, "seqloc-calibration", 1, "calibration file");
   auto number = [&](const char* key) {
     if (!j.contains(key) || !j[key].is_number()) throw DataError(path.string() + ": '" + key + "' must be a number");
     return j[key].get<double>();

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "seqloc/core/error.hpp"
+#include "seqloc/io/preprocess_report.hpp"
 #include "seqloc/osm/features.hpp"
 
 namespace seqloc::ingest {
@@ -43,35 +44,8 @@ struct PreprocessProgress {
   std::int64_t tiles_total = 0;
 };
 
-struct PreprocessReport {
-  std::int64_t tiles_total = 0;    ///< tiles of this shard
-  std::int64_t tiles_written = 0;  ///< rendered by this run
-  std::int64_t tiles_resumed = 0;  ///< already in an interrupted build's partial file
-  std::int64_t tiles_skipped = 0;  ///< of those written, farther than the corridor from every road: no classes
-  std::int64_t tiles_wide = 0, tiles_high = 0;
-  std::size_t nodes = 0, lines = 0, areas = 0, roads = 0;
-  std::uint64_t ways_missing_nodes = 0;
-  std::size_t multipolygon_open_chains = 0;  ///< relation member chains left open (members cut)
-  double read_seconds = 0;                   ///< reading and classifying the OSM input (wall)
-  double render_seconds = 0;                 ///< rendering, encoding and writing the tiles (wall)
-  double total_seconds = 0;
-  /// CPU time per stage, summed over the worker threads (the writer is the calling thread).
-  double classes_cpu_seconds = 0;
-  double distance_cpu_seconds = 0;
-  double encode_cpu_seconds = 0;
-  double write_seconds = 0;
-  int threads = 0;
-  /// Peak resident memory (MB) while reading, classifying, projecting and cutting the features
-  /// into blocks (holds the OSM node index), and while rendering and writing (one block at a time).
-  double start_mb = 0;  ///< resident memory when the call began (the program and its libraries)
-  double read_peak_mb = 0;
-  double render_peak_mb = 0;
-  double render_start_mb = 0;       ///< resident when rendering began (what reading left allocated)
-  std::uint64_t spilled_bytes = 0;  ///< the features' temporary file (one copy per block they meet)
-  double scale_error = 0;           ///< the region CRS's largest |k - 1| on the grid's edge
-  osm::GeoBox bbox;
-  double centre_lat = 0, centre_lon = 0;
-};
+/// The run's figures (seqloc/io/preprocess_report.hpp: its fields and its file).
+using PreprocessReport = io::PreprocessReport;
 
 /// Builds the cache. `on_progress` (optional) is called from the calling thread after each tile.
 /// Throws UsageError, osm::OsmError or raster::CacheError with a message naming what is wrong.
