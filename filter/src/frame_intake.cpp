@@ -493,6 +493,26 @@ void summarize_frame(PreparedFrame& frame, int threads) {
   normalize(frame, x.maxCoeff(), std::max(1, std::min(threads, frame.bins)), /*shift=*/false);
 }
 
+float powered_peak_log_prob(const PreparedFrame& frame, double power, int threads) {
+  // -log sum exp(k (x - x_max)): the peak of p^k / sum p^k. Sums per bin, added in bin order (the
+  // same for any number of threads).
+  const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
+  std::vector<double> sums(static_cast<std::size_t>(frame.bins));
+  core::parallel_chunks(frame.bins, std::max(1, std::min(threads, frame.bins)), [&](int j0, int j1, int) {
+    std::vector<float> e(slice);
+    for (int j = j0; j < j1; ++j) {
+      detail::exp_or_zero(frame.log_prob.data() + static_cast<std::size_t>(j) * slice, slice, static_cast<float>(power),
+                          frame.max_log_prob, e.data());
+      double sum = 0;
+      for (const float x : e) sum += x;
+      sums[static_cast<std::size_t>(j)] = sum;
+    }
+  });
+  double total = 0;
+  for (const double x : sums) total += x;
+  return static_cast<float>(-std::log(total));
+}
+
 PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
   temper_frame_in_place(frame, power, threads);
   return frame;

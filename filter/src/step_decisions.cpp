@@ -46,6 +46,12 @@ double StepDecisions::hold_ratio(double power, bool held) {
   return ratio;
 }
 
+bool StepDecisions::replay_due(double power, std::span<const double> kept_powers, int replays) {
+  if (replays >= kMaxReplays) return false;
+  return std::any_of(kept_powers.begin(), kept_powers.end(),
+                     [power](double kept) { return std::abs(std::log2(kept / power)) >= 0.5; });
+}
+
 double StepDecisions::bank_ratio(double power) {
   if (std::abs(std::log2(power / last_power_)) < 0.5) return 1.0;
   const double ratio = power / last_power_;

@@ -40,6 +40,9 @@ std::span<const FilterConfigField> filter_config_fields() {
        "Self-calibration: held, an estimate this many octaves under 1 is followed all the same"},
       {"self_calibration_hold_share", &C::self_calibration_hold_share,
        "Self-calibration: the power stays 1 while the posterior keeps this share on calibrated powers"},
+      {"self_calibration_replay_frames", &C::self_calibration_replay_frames,
+       "Self-calibration: the route's first this many frames are filtered again at the power it settles on (0: "
+       "never)"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},
@@ -102,6 +105,9 @@ void FilterConfig::validate() const {
   }
   if (!(self_calibration_hold_share >= 0 && self_calibration_hold_share <= 1)) {
     fail("self_calibration_hold_share", self_calibration_hold_share, "must be in [0, 1]");
+  }
+  if (self_calibration_replay_frames < 0 || self_calibration_replay_frames > 64) {
+    fail("self_calibration_replay_frames", self_calibration_replay_frames, "must be in [0, 64] frames");
   }
   if (threads < 1 || threads > 256) fail("threads", threads, "must be in [1, 256]");
 }

@@ -73,15 +73,16 @@ void ForwardReplay::resume(const filter::BeliefVolume& alpha, const StepRecord& 
   filter_.belief() = alpha;
 }
 
-void ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& frame) {
+filter::FrameResult ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& frame, bool predict) {
   // The window moves as it moved the first time: before the step (onto the frame's crop), then
   // after it (onto the estimate), each a move of its own (a move drops the mass that leaves the
   // window and fills what enters).
   move_window(filter_, window_, record.origin);
-  filter_.predict(record.odometry);
+  if (predict) filter_.predict(record.odometry);
   const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
-  (void)filter_.update(frame, record.crop, road, record.fix, record.weighting);
+  filter::FrameResult result = filter_.update(frame, record.crop, road, record.fix, record.weighting);
   move_window(filter_, window_, record.origin_after);
+  return result;
 }
 
 }  // namespace seqloc::pipeline

@@ -34,7 +34,10 @@ SequentialLocalizer::SequentialLocalizer(raster::CacheReader& cache, const filte
 
 FrameEstimate SequentialLocalizer::step(const filter::PreparedFrame& frame, const GridCrop& crop,
                                         const filter::Odometry& odometry, const std::optional<GridFix>& gps) {
-  if (lag_ == 0) {
+  // The early replay keeps the route's first frames (FilterConfig::self_calibration_replay_frames).
+  const bool replay_may_keep =
+      config_.self_calibrate && stepped_ < static_cast<std::size_t>(config_.self_calibration_replay_frames);
+  if (lag_ == 0 && !replay_may_keep) {
     // Nothing keeps the frame: no copy.
     return step(std::shared_ptr<const filter::PreparedFrame>(&frame, [](const filter::PreparedFrame*) {}), crop,
                 odometry, gps);
@@ -54,6 +57,9 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
     } else {
       filter_->reset_uniform();
     }
+    if (config_.self_calibrate && config_.self_calibration_replay_frames > 0) {
+      early_.emplace(Early{filter_->belief(), {window_.origin_u(), window_.origin_v()}, {}, {}, 0});
+    }
   }
   // A crop far from the window (the estimate wandered off while the frames' evidence stayed
   // around the GPS-like crops) brings the window to it: evidence outside the window is lost.
@@ -62,7 +68,9 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
   if (config_.gps_prior && gps) fix = filter::GpsFix{window_.u_of(gps->x_m), window_.v_of(gps->y_m), gps->sigma_m};
   const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
   const filter::CropPose crop_pose = window_.crop_pose(crop);
-  const filter::FrameResult r = filter_->step(*frame, crop_pose, odometry, road, fix);
+  const std::array<std::int64_t, 2> origin{window_.origin_u(), window_.origin_v()};
+  filter::FrameResult r = filter_->step(*frame, crop_pose, odometry, road, fix);
+  if (early_) r = replay_early(frame, StepRecord{origin, origin, crop_pose, odometry, fix, r.weighting, {}}, r);
   FrameEstimate e;
   e.x_m = window_.x_of(r.pose.u);
   e.y_m = window_.y_of(r.pose.v);
@@ -74,10 +82,15 @@ FrameEstimate SequentialLocalizer::step(std::shared_ptr<const filter::PreparedFr
   // With a lag, the estimates handed out are the backward pass's, with the smoothed posterior's
   // uncertainty.
   if (uncertainty_ && lag_ == 0) e.uncertainty = uncertainty_of(filter_->belief(), r.pose, config_.threads);
-  last_ = StepRecord{{window_.origin_u(), window_.origin_v()}, {}, crop_pose, odometry, fix, r.weighting, e};
+  last_ = StepRecord{origin, {}, crop_pose, odometry, fix, r.weighting, e};
   // Keep the window on the vehicle.
   keep_in_window(r.pose.u, r.pose.v);
   last_.origin_after = {window_.origin_u(), window_.origin_v()};
+  if (early_) {
+    early_->records.back().origin_after = last_.origin_after;
+    early_->records.back().filtered = e;
+    if (early_->records.size() >= static_cast<std::size_t>(config_.self_calibration_replay_frames)) early_.reset();
+  }
 
   const std::size_t index = stepped_++;
   if (lag_ == 0) {
@@ -120,7 +133,56 @@ void SequentialLocalizer::finish() {
   waiting_.clear();
 }
 
+filter::FrameResult SequentialLocalizer::replay_early(std::shared_ptr<const filter::PreparedFrame> frame,
+                                                      const StepRecord& record, const filter::FrameResult& r) {
+  Early& early = *early_;
+  early.records.push_back(record);
+  early.frames.push_back(std::move(frame));
+  std::vector<double> powers;
+  for (const StepRecord& kept : early.records) powers.push_back(kept.weighting.volume_power);
+  if (!filter::StepDecisions::replay_due(r.volume_power, powers, early.replays)) return r;
+  ++early.replays;
+  // The route again from its prior, each kept frame at the newest frame's power (its ETU weight
+  // as it was: ETU's route reference reads the frames as given), the window moving as it moved.
+  ForwardReplay replay(window_.cache(), config_);
+  StepRecord start;
+  start.origin_after = early.origin;
+  replay.resume(early.prior, start);
+  filter::FrameResult last = r;
+  const std::size_t first_index = stepped_ + 1 - early.records.size();
+  for (std::size_t i = 0; i < early.records.size(); ++i) {
+    StepRecord& kept = early.records[i];
+    const filter::PreparedFrame& f = *early.frames[i];
+    kept.weighting.volume_power = r.volume_power;
+    kept.weighting.peak_log_prob = filter::powered_peak_log_prob(f, r.volume_power, config_.threads);
+    last = replay.step(kept, f, /*predict=*/i > 0);
+    const std::size_t index = first_index + i;
+    Rewrite rewrite{index, kept, std::nullopt};
+    if (alphas_wanted_ && alphas_wanted_(index)) rewrite.alpha = replay.belief();
+    for (Waiting& w : waiting_) {  // a lag's frames keep their forward belief and weighting
+      if (w.index != index) continue;
+      w.record.weighting = kept.weighting;
+      w.alpha = replay.belief();
+    }
+    if (i + 1 < early.records.size()) rewritten_.push_back(std::move(rewrite));
+  }
+  filter_->rebase(replay.belief(), last.pose);
+  last.relocalized = r.relocalized;  // against the estimate handed out before, as the step judged it
+  last.volume_power = r.volume_power;
+  last.etu_weight = r.etu_weight;
+  last.frame_entropy = r.frame_entropy;
+  last.weighting = early.records.back().weighting;
+  return last;
+}
+
+std::vector<SequentialLocalizer::Rewrite> SequentialLocalizer::take_rewritten() {
+  std::vector<Rewrite> out;
+  out.swap(rewritten_);
+  return out;
+}
+
 void SequentialLocalizer::hand_over(raster::CacheReader& next) {
+  early_.reset();  // the kept frames were taken in the region the route leaves
   RegionWindow moved(next, config_.width, config_.height);
   if (!filter_) {  // nothing stepped yet: the first step places the window
     window_ = moved;

@@ -2,10 +2,12 @@
 // answer is worked out by hand.
 
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/filter/step_decisions.hpp"
 
 namespace seqloc::filter {
@@ -103,6 +105,31 @@ TEST(StepDecisions, RelocalizedWhenTheArgmaxLandsFarFromThePreviousEstimateMoved
   EXPECT_FALSE(d.relocalized(previous, five_north, {10, 12, 0})) << "9 m from (10, 30)";
   EXPECT_TRUE(d.relocalized(previous, five_north, {10, 8, 0})) << "11 m";
   EXPECT_TRUE(d.relocalized(previous, {}, {10, 18, 0})) << "11 m when it did not move";
+}
+
+TEST(StepDecisions, TheEarlyReplayIsDueWhenAKeptFrameWentInHalfAnOctaveAway) {
+  const std::vector<double> kept{1.0, 1.0, 0.8};
+  EXPECT_FALSE(StepDecisions::replay_due(0.75, kept, 0)) << "0.42 octaves from 1";
+  EXPECT_TRUE(StepDecisions::replay_due(0.7, kept, 0)) << "0.51 octaves from 1";
+  EXPECT_TRUE(StepDecisions::replay_due(1.45, kept, 0)) << "above as below: 0.54 octaves from 1";
+  EXPECT_FALSE(StepDecisions::replay_due(0.7, std::vector<double>{0.7, 0.6}, 0)) << "all within half an octave";
+  EXPECT_TRUE(StepDecisions::replay_due(0.25, kept, StepDecisions::kMaxReplays - 1));
+  EXPECT_FALSE(StepDecisions::replay_due(0.25, kept, StepDecisions::kMaxReplays)) << "a route's replays are bounded";
+}
+
+TEST(StepDecisions, ThePoweredPeakIsTheTemperedFramesPeak) {
+  // A frame raised to k and renormalized (temper_frame, which writes it) has the peak
+  // powered_peak_log_prob computes without writing it.
+  std::vector<float> values(6 * 5 * 8);
+  for (std::size_t i = 0; i < values.size(); ++i)
+    values[i] = static_cast<float>(std::sin(0.7 * static_cast<double>(i)) * 3.0);
+  values[17] = -std::numeric_limits<float>::infinity();  // a zero
+  const PreparedFrame frame =
+      prepare_frame({values.data(), VolumeType::float32, VolumeValues::log_prob, 6, 5, 8, 0.5}, 8);
+  for (const double k : {0.25, 1.0, 3.0}) {
+    EXPECT_NEAR(powered_peak_log_prob(frame, k), temper_frame(frame, k).max_log_prob, 1e-5) << "k = " << k;
+    EXPECT_EQ(powered_peak_log_prob(frame, k, 3), powered_peak_log_prob(frame, k, 1)) << "any number of threads";
+  }
 }
 
 }  // namespace

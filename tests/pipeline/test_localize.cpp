@@ -376,11 +376,16 @@ TEST(Smooth, PlacesTheFramesBeforeTheDistinctiveOneAndLagsCarryItBackLFrames) {
 // (its backward pass over beliefs kept in memory; smooth's over beliefs recomputed from
 // checkpoints, three stretches here), a lag of L at frame t is smooth over frames 0 .. t + L, and a
 // lag of 0 is the filter itself.
-TEST(Smooth, FixedLagAgreesWithSmoothAndLagZeroWithTheFilter) {
+// As given, and with every frame four times too sharp (volume temperature 1/4), where the early
+// replay refilters the route's first frames: smooth and the lags take its weightings and beliefs.
+class FixedLag : public ::testing::TestWithParam<double> {};
+
+TEST_P(FixedLag, AgreesWithSmoothAndLagZeroWithTheFilter) {
   RidgeCase ridge;
   const io::Route& route = ridge.route;
   raster::CacheReader& cache = ridge.cache;
   LocalizeOptions options = ridge_options();
+  options.volume_temperature = GetParam();
   auto expect_same = [](const io::FramePose& a, const io::FramePose& b, const std::string& what) {
     EXPECT_EQ(a.x_m, b.x_m) << what << " frame " << a.frame;
     EXPECT_EQ(a.y_m, b.y_m) << what << " frame " << a.frame;
@@ -388,6 +393,13 @@ TEST(Smooth, FixedLagAgreesWithSmoothAndLagZeroWithTheFilter) {
   };
   const io::RouteResult smooth = localize_route(route, cache, options, io::Mode::smooth);
   const io::RouteResult seqloc = localize_route(route, cache, options, io::Mode::seqloc);
+  if (GetParam() != 1.0) {
+    bool replayed = false;  // a kept frame went in at 1, half an octave or more from a later one's power
+    for (std::size_t t = 1; t < 16 && t < seqloc.poses.size(); ++t) {
+      replayed = replayed || std::abs(std::log2(seqloc.poses[t].volume_power)) >= 0.5;
+    }
+    ASSERT_TRUE(replayed) << "the sharpened route replays its first frames";
+  }
   options.lag = kRidgeFrames;
   const io::RouteResult whole = localize_route(route, cache, options, io::Mode::seqloc);
   ASSERT_EQ(whole.poses.size(), smooth.poses.size());
@@ -412,6 +424,9 @@ TEST(Smooth, FixedLagAgreesWithSmoothAndLagZeroWithTheFilter) {
   options.lag = -1;
   EXPECT_THROW(options.validate(), filter::FilterError);
 }
+
+INSTANTIATE_TEST_SUITE_P(Smooth, FixedLag, ::testing::Values(1.0, 0.25),
+                         [](const auto& p) { return p.param == 1.0 ? std::string("AsGiven") : std::string("Sharp"); });
 
 }  // namespace
 }  // namespace seqloc::pipeline::localize_tests

@@ -18,6 +18,7 @@
 #include <sys/types.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <filesystem>
 #include <memory>
@@ -98,6 +99,10 @@ class SmoothMode final : public LocalizationMode {
  private:
   [[nodiscard]] std::vector<std::size_t> stretch_starts() const;
   void run(FramePrefetcher& frames);
+  /// The forward pass, as the seqloc mode runs (the belief handed over where the route enters a
+  /// region): each frame's record, and the forward belief at each stretch's start.
+  void forward(FramePrefetcher& frames, const std::vector<std::size_t>& starts, std::vector<StepRecord>& records,
+               CheckpointFile& checkpoints);
 
   std::vector<FrameEstimate> estimates_;
   int recentres_ = 0;
@@ -113,6 +118,39 @@ std::vector<std::size_t> SmoothMode::stretch_starts() const {
   return starts;
 }
 
+void SmoothMode::forward(FramePrefetcher& frames, const std::vector<std::size_t>& starts,
+                         std::vector<StepRecord>& records, CheckpointFile& checkpoints) {
+  const io::Route& route = context_.route;
+  const std::size_t n = route.frames.size();
+  const LocalizeOptions& options = context_.options;
+  SequentialLocalizer localizer(cache_of(0), options.filter, /*online=*/false, options.recentre_margin, /*lag=*/0,
+                                options.device);
+  localizer.without_uncertainty();  // each frame's comes from its smoothed posterior
+  // The early replay (FilterConfig::self_calibration_replay_frames) rewrites the route's first
+  // records, and the checkpoints of stretches that start among them.
+  auto stretch_of = [&starts](std::size_t t) { return std::find(starts.begin(), starts.end(), t) - starts.begin(); };
+  localizer.want_replayed_alphas(
+      [&](std::size_t t) { return stretch_of(t) < static_cast<std::ptrdiff_t>(starts.size()); });
+  std::size_t stretch = 0;
+  for (std::size_t t = 0; t < n; ++t) {
+    const io::RouteFrame& f = route.frames[t];
+    if (t > 0 && region_of(t) != region_of(t - 1)) localizer.hand_over(cache_of(t));
+    const std::optional<GridFix> gps = frame_gps_fix(f, projection_of(t));
+    const auto frame = frames.get_shared(t);  // kept, not copied, while the early replay keeps it
+    const auto t0 = Clock::now();
+    (void)localizer.step(frame, crop_in_region_of(t, t), f.odometry, gps);
+    records[t] = localizer.last_step();
+    for (auto& rewrite : localizer.take_rewritten()) {
+      records[rewrite.index] = rewrite.record;
+      if (rewrite.alpha) checkpoints.write(static_cast<std::size_t>(stretch_of(rewrite.index)), *rewrite.alpha);
+    }
+    if (stretch < starts.size() && starts[stretch] == t) checkpoints.write(stretch++, localizer.filter()->belief());
+    filter_seconds_ += seconds_since(t0);
+    frames.release(t);
+  }
+  recentres_ = localizer.recentres();
+}
+
 void SmoothMode::run(FramePrefetcher& frames) {
   const io::Route& route = context_.route;
   const std::size_t n = route.frames.size();
@@ -123,26 +161,7 @@ void SmoothMode::run(FramePrefetcher& frames) {
                                                     static_cast<std::size_t>(options.filter.height) *
                                                     static_cast<std::size_t>(options.filter.headings));
 
-  // Forward, as the seqloc mode runs (the belief handed over where the route enters a region).
-  {
-    SequentialLocalizer forward(cache_of(0), options.filter, /*online=*/false, options.recentre_margin, /*lag=*/0,
-                                options.device);
-    forward.without_uncertainty();  // each frame's comes from its smoothed posterior
-    std::size_t stretch = 0;
-    for (std::size_t t = 0; t < n; ++t) {
-      const io::RouteFrame& f = route.frames[t];
-      if (t > 0 && region_of(t) != region_of(t - 1)) forward.hand_over(cache_of(t));
-      const std::optional<GridFix> gps = frame_gps_fix(f, projection_of(t));
-      const auto& frame = frames.get(t);
-      const auto t0 = Clock::now();
-      (void)forward.step(frame, crop_in_region_of(t, t), f.odometry, gps);
-      records[t] = forward.last_step();
-      if (stretch < starts.size() && starts[stretch] == t) checkpoints.write(stretch++, forward.filter()->belief());
-      filter_seconds_ += seconds_since(t0);
-      frames.release(t);
-    }
-    recentres_ = forward.recentres();
-  }
+  forward(frames, starts, records, checkpoints);
 
   // Backward, a stretch at a time from the route's end; each stretch's frames read again in order,
   // the next one prepared meanwhile. A stretch is replayed in its region; beta is carried into

@@ -76,6 +76,14 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// While held, an estimate more than this many octaves under 1 is followed all the same: frames
   /// that much too sharp lock the belief onto a wrong place before the evidence is decisive.
   double self_calibration_hold_follow_octaves = 1.0;
+  /// The route's first frames are filtered again at the power self-calibration settles on
+  /// (pipeline::SequentialLocalizer): while the route has taken no more than this many frames,
+  /// whenever a kept frame went in half an octave or more away from the power of the newest
+  /// (StepDecisions::replay_due), the belief is rebuilt from the route's prior through every
+  /// kept frame at that power, so that a lock made before the estimate was in is undone (at most
+  /// StepDecisions::kMaxReplays times a route). 0: never. Chosen on development routes
+  /// (docs/filter.md, "Self-calibration").
+  int self_calibration_replay_frames = 24;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the
   /// odometry is flagged "relocalized".

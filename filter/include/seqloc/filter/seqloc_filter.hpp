@@ -76,6 +76,10 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
 /// and > 0.
 [[nodiscard]] PreparedFrame temper_frame(PreparedFrame frame, double power, int threads = 1);
 
+/// The largest log-probability of the frame raised to `power` and renormalized (temper_frame's
+/// max_log_prob, without writing the frame): a FrameWeighting's peak_log_prob at that power.
+[[nodiscard]] float powered_peak_log_prob(const PreparedFrame& frame, double power, int threads = 1);
+
 /// The road prior of MGR before normalization (conventions.md section 6, step 4): g at a distance
 /// or over a block of them, the base layer's one definition (core/road_prior.hpp).
 using core::road_prior_g;

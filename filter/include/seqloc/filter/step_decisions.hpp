@@ -82,6 +82,13 @@ class StepDecisions {
   /// moved half an octave or more from the one the belief was last raised to, else 1.
   [[nodiscard]] double bank_ratio(double power);
 
+  /// The early replay's rule (FilterConfig::self_calibration_replay_frames): the kept frames are
+  /// filtered again when any of them went in (`kept_powers`) half an octave or more away from
+  /// `power`, the power of the newest frame, and the route has been replayed fewer than
+  /// kMaxReplays times (`replays`).
+  static constexpr int kMaxReplays = 4;
+  [[nodiscard]] static bool replay_due(double power, std::span<const double> kept_powers, int replays);
+
   /// The step's pose from the argmax (u*, v*, k*) of a width x height x headings belief: PAS's
   /// mass-weighted mean position over the (2r + 1)^2 cells around x* that lie in the window, and the
   /// sub-bin heading (the circular mean of the bin headings around th* at x*), as the config asks.

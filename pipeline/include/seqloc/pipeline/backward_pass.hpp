@@ -65,8 +65,10 @@ class ForwardReplay {
 
   /// Resumes after frame t with `alpha`, the forward filter's belief then (`record`: frame t's).
   void resume(const filter::BeliefVolume& alpha, const StepRecord& record);
-  /// The next frame, `record` and `frame`; belief() is then its alpha.
-  void step(const StepRecord& record, const filter::PreparedFrame& frame);
+  /// The next frame, `record` and `frame`; belief() is then its alpha. Returns the update's result
+  /// (its pose from the replayed belief). `predict` false: the route's first frame, taken in
+  /// without a prediction as the filter takes it.
+  filter::FrameResult step(const StepRecord& record, const filter::PreparedFrame& frame, bool predict = true);
   [[nodiscard]] const filter::BeliefVolume& belief() const { return filter_.belief(); }
 
  private:

@@ -5,8 +5,11 @@
 // for a loop that brings its own volumes. With a lag L it also smooths: frame t - L's pose given
 // the frames up to t (fixed-lag smoothing, docs/localize.md).
 
+#include <array>
 #include <cstddef>
+#include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -66,6 +69,20 @@ class SequentialLocalizer {
   /// backward filter carries its belief back across the seam into their region.
   void hand_over(raster::CacheReader& next);
 
+  /// A frame the early replay filtered again (FilterConfig::self_calibration_replay_frames): its
+  /// index, its record with the weighting it went in at the second time, and, where
+  /// want_replayed_alphas asked for it, the forward belief after it.
+  struct Rewrite {
+    std::size_t index;
+    StepRecord record;
+    std::optional<filter::BeliefVolume> alpha;
+  };
+  /// The frames replayed since the last call, oldest first (a caller keeping records of its own,
+  /// as smooth does, takes them after each step). Their poses, handed out before, are not changed.
+  [[nodiscard]] std::vector<Rewrite> take_rewritten();
+  /// Which replayed frames' forward beliefs take_rewritten hands out (none unless asked).
+  void want_replayed_alphas(std::function<bool(std::size_t)> wanted) { alphas_wanted_ = std::move(wanted); }
+
   /// Estimates without their uncertainty (for a caller that makes its own, as smooth does from
   /// the smoothed posterior): saves a pass over the belief per frame.
   void without_uncertainty() { uncertainty_ = false; }
@@ -88,7 +105,20 @@ class SequentialLocalizer {
     std::shared_ptr<const filter::PreparedFrame> frame;
     filter::BeliefVolume alpha;
   };
+  /// The route's first frames, kept for the early replay: the belief and window origin the route
+  /// started from, and each frame's record and volume.
+  struct Early {
+    filter::BeliefVolume prior;
+    std::array<std::int64_t, 2> origin{};
+    std::vector<StepRecord> records;
+    std::vector<std::shared_ptr<const filter::PreparedFrame>> frames;
+    int replays = 0;
+  };
   void keep_in_window(double u, double v);
+  /// Keeps the step just taken (`record`, `frame`, its result `r`) and, when StepDecisions says
+  /// so, filters every kept frame again at r's power: returns the newest frame's result then.
+  filter::FrameResult replay_early(std::shared_ptr<const filter::PreparedFrame> frame, const StepRecord& record,
+                                   const filter::FrameResult& r);
   /// Frames [from, waiting_.size()) of waiting_ smoothed by one backward pass from the last.
   void smooth_waiting(std::size_t from, std::size_t to_emit);
 
@@ -105,6 +135,9 @@ class SequentialLocalizer {
   std::deque<Waiting> waiting_;
   std::optional<BackwardPass> backward_;
   std::vector<std::pair<std::size_t, FrameEstimate>> final_;
+  std::optional<Early> early_;
+  std::vector<Rewrite> rewritten_;
+  std::function<bool(std::size_t)> alphas_wanted_;
 };
 
 }  // namespace seqloc::pipeline
