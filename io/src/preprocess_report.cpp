@@ -1,12 +1,16 @@
 #include "seqloc/io/preprocess_report.hpp"
 
+#include <algorithm>
 #include <array>
+#include <type_traits>
 #include <variant>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "json_file.hpp"
 #include "seqloc/core/error.hpp"
+#include "seqloc/raster/grid.hpp"
 
 namespace seqloc::io {
 namespace {
@@ -85,7 +89,7 @@ void read_fields(const nlohmann::json& j, const std::array<Field, N>& fields, Re
 std::string preprocess_report_json(const PreprocessReport& r) {
   nlohmann::ordered_json j = {{"format", "seqloc-preprocess-report"}, {"version", 1}, {"output", r.output}};
   write_fields(j, kHead, r);
-  j["megapixels_per_layer"] = static_cast<double>(r.tiles_total) * 512.0 * 512.0 / 1e6;
+  j["megapixels_per_layer"] = static_cast<double>(r.tiles_total) * raster::kTilePx * raster::kTilePx / 1e6;
   write_fields(j, kBody, r);
   nlohmann::ordered_json features = nlohmann::ordered_json::object();
   write_fields(features, kFeatures, r);

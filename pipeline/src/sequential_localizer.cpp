@@ -34,9 +34,10 @@ SequentialLocalizer::SequentialLocalizer(raster::CacheReader& cache, const filte
 
 FrameEstimate SequentialLocalizer::step(const filter::PreparedFrame& frame, const GridCrop& crop,
                                         const filter::Odometry& odometry, const std::optional<GridFix>& gps) {
-  // The early replay keeps the route's first frames (FilterConfig::self_calibration_replay_frames).
+  // The early replay keeps the route's first frames (FilterConfig::self_calibration_replay_frames):
+  // from the first step, which starts it, while it keeps them.
   const bool replay_may_keep =
-      config_.self_calibrate && stepped_ < static_cast<std::size_t>(config_.self_calibration_replay_frames);
+      config_.self_calibrate && config_.self_calibration_replay_frames > 0 && (!filter_ || early_);
   if (lag_ == 0 && !replay_may_keep) {
     // Nothing keeps the frame: no copy.
     return step(std::shared_ptr<const filter::PreparedFrame>(&frame, [](const filter::PreparedFrame*) {}), crop,

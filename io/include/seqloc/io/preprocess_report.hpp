@@ -3,7 +3,6 @@
 // writes about a run (the tiles, the features, the time and memory per stage). Its one writer and
 // its one reader.
 
-#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <string>
