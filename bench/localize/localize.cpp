@@ -20,6 +20,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <optional>
 #include <random>
@@ -158,9 +159,12 @@ const BenchCalibration kCalibration{1.5, {1.5, 1.0, 0.05}};
 // five rounds each, ms a frame): the floor maps the .npy file and converts its float16 values to
 // float32 in one plain pass into a buffer allocated as a frame is (no transposition, no
 // log-softmax); the intake maps it and prepares it as localize does (read, convert, transpose,
-// check, normalize), and once more tempered by a volume temperature of 2.
+// check, normalize), once more tempered by a volume temperature of 2, with a backbone calibration,
+// and with its vectors limited to 8 lanes (AVX2, where the CPU has AVX-512).
 struct Intake {
   double floor_ms = 0, intake_ms = 0, tempered_ms = 0, calibrated_ms = 0;
+  double eight_lanes_ms = 0;  ///< the intake with its vectors limited to 8 lanes (AVX2)
+  int lanes = 1;              ///< the intake's vector width here
 };
 
 Intake time_intake(const fs::path& dir, int distinct) {
@@ -171,41 +175,48 @@ Intake time_intake(const fs::path& dir, int distinct) {
   auto calibrated = one;
   calibrated.volume_temperature = kCalibration.temperature;
   calibrated.volume_calibration = kCalibration.volume;
-  // Rounds over all the files in turn, so that a file is not still in the processor's caches
-  // from its last round (16 volumes of 8 MB, each made into 16 MB): each file's best round.
-  auto best_ms = [&](auto&& work) {
-    std::vector<double> best(static_cast<std::size_t>(distinct), 1e300);
-    for (int round = 0; round < 5; ++round) {
-      for (int k = 0; k < distinct; ++k) {
-        const auto t0 = Clock::now();
-        const seqloc::io::NpyVolume npy(dir / ("v" + std::to_string(k) + ".npy"));
-        work(npy);
-        auto& b = best[static_cast<std::size_t>(k)];
-        b = std::min(b, std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-      }
-    }
-    double sum = 0;
-    for (const double b : best) sum += b;
-    return sum / distinct;
-  };
-  Intake r;
-  r.floor_ms = best_ms([&](const seqloc::io::NpyVolume& npy) {
+  using Work = std::function<void(const seqloc::io::NpyVolume&)>;
+  const Work floor = [](const seqloc::io::NpyVolume& npy) {
     const std::size_t n = static_cast<std::size_t>(npy.height()) * npy.width() * npy.bins();
     seqloc::filter::UninitializedAlignedVector<float> floats(n);  // allocated as a prepared frame is
     seqloc::filter::halves_to_floats({static_cast<const std::uint16_t*>(npy.data()), n}, floats);
     if (!(floats[n / 2] > -1e30f)) std::abort();
-  });
-  auto prepared = [&](const seqloc::pipeline::LocalizeOptions& options) {
-    return [&options](const seqloc::io::NpyVolume& npy) {
+  };
+  auto prepared = [](const seqloc::pipeline::LocalizeOptions& options) -> Work {
+    return [options](const seqloc::io::NpyVolume& npy) {
       const auto frame = seqloc::pipeline::prepare_volume(
           npy.view(seqloc::filter::VolumeValues::log_prob, seqloc::core::kCellM), options);
       if (!(frame.entropy >= 0)) std::abort();
     };
   };
-  r.intake_ms = best_ms(prepared(one));
-  r.tempered_ms = best_ms(prepared(tempered));
-  r.calibrated_ms = best_ms(prepared(calibrated));
-  return r;
+  const Work eight_lanes = [plain = prepared(one)](const seqloc::io::NpyVolume& npy) {
+    const int before = seqloc::filter::limit_intake_vector_lanes(8);
+    plain(npy);
+    (void)seqloc::filter::limit_intake_vector_lanes(before);
+  };
+  const std::vector<Work> works{floor, prepared(one), prepared(tempered), prepared(calibrated), eight_lanes};
+  // Rounds over every kind of work, each over all the files in turn, so that a file is not still
+  // in the processor's caches from its last round (16 volumes of 8 MB, each made into 16 MB) and
+  // every kind sees the machine as the others do (the first round after the volumes were written
+  // runs slower): each file's best round.
+  std::vector<std::vector<double>> best(works.size(), std::vector<double>(static_cast<std::size_t>(distinct), 1e300));
+  for (int round = 0; round < 5; ++round) {
+    for (std::size_t w = 0; w < works.size(); ++w) {
+      for (int k = 0; k < distinct; ++k) {
+        const auto t0 = Clock::now();
+        const seqloc::io::NpyVolume npy(dir / ("v" + std::to_string(k) + ".npy"));
+        works[w](npy);
+        auto& b = best[w][static_cast<std::size_t>(k)];
+        b = std::min(b, std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+      }
+    }
+  }
+  auto mean = [&](std::size_t w) {
+    double sum = 0;
+    for (const double b : best[w]) sum += b;
+    return sum / distinct;
+  };
+  return {mean(0), mean(1), mean(2), mean(3), mean(4), seqloc::filter::intake_vector_lanes()};
 }
 
 }  // namespace
@@ -320,16 +331,18 @@ int main(int argc, char** argv) {
   }
   const Intake intake = time_intake(work / "route", distinct);
   std::printf(
-      "intake of one frame, 1 thread: %.1f ms (tempered: %.1f ms; calibrated: %.1f ms) against a floor of "
-      "%.1f ms (map the file, float16 to float32): %.2fx (target <= 3)\n",
-      intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms, intake.intake_ms / intake.floor_ms);
+      "intake of one frame, 1 thread, %d-lane vectors: %.2f ms (tempered: %.2f ms; calibrated: %.1f ms; 8 lanes: "
+      "%.2f ms) against a floor of %.2f ms (map the file, float16 to float32): %.2fx (target <= 3)\n",
+      intake.lanes, intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.eight_lanes_ms, intake.floor_ms,
+      intake.intake_ms / intake.floor_ms);
   if (intake_only) {
     std::printf(
         "{\"benchmark\": \"localize_intake\", \"intake_ms_per_frame\": %.2f, "
         "\"intake_tempered_ms_per_frame\": %.2f, \"intake_calibrated_ms_per_frame\": %.2f, "
-        "\"intake_floor_ms\": %.2f, \"intake_over_floor\": %.2f}\n",
-        intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms,
-        intake.intake_ms / intake.floor_ms);
+        "\"intake_floor_ms\": %.2f, \"intake_over_floor\": %.2f, \"intake_lanes\": %d, "
+        "\"intake_8_lanes_ms_per_frame\": %.2f}\n",
+        intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms, intake.intake_ms / intake.floor_ms,
+        intake.lanes, intake.eight_lanes_ms);
     fs::remove_all(work);
     return 0;
   }
@@ -397,11 +410,13 @@ int main(int argc, char** argv) {
       "\"smooth_peak_mb\": %.0f, "
       "\"hand_over_ms\": %.1f, \"intake_ms_per_frame\": %.2f, \"intake_tempered_ms_per_frame\": %.2f, "
       "\"intake_calibrated_ms_per_frame\": %.2f, \"intake_floor_ms\": %.2f, \"intake_over_floor\": %.2f, "
+      "\"intake_lanes\": %d, \"intake_8_lanes_ms_per_frame\": %.2f, "
       "\"calibrated_frames_per_s\": %.2f, \"calibrated_wait_s\": %.2f%s}\n",
       frames, frames / total, total, result.prepare_seconds, result.filter_seconds, result.wait_seconds, write_s,
       peak_mb, frames / plain_s, without.filter_seconds, without.wait_seconds, frames / smooth_s, smooth_s / run_s,
       smooth_peak_mb, hand_over, intake.intake_ms, intake.tempered_ms, intake.calibrated_ms, intake.floor_ms,
-      intake.intake_ms / intake.floor_ms, frames / calibrated_s, with_calibration.wait_seconds, observations.c_str());
+      intake.intake_ms / intake.floor_ms, intake.lanes, intake.eight_lanes_ms, frames / calibrated_s,
+      with_calibration.wait_seconds, observations.c_str());
   fs::remove_all(work);
   return 0;
 }

@@ -14,10 +14,7 @@
 
 #include <Eigen/Core>
 
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
-
+#include "frame_intake_simd.hpp"
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
@@ -240,8 +237,7 @@ Softmax combine(const std::vector<std::optional<BinSums>>& chunks, double log_ce
 
 /// Writes cells u0 .. u1 of bins j0 + b0 .. j0 + b1 of row v (`row`, [u][b], nb bins a cell) into
 /// heading-major `log_prob` as x - lse (values at or below kLogZero, -inf among them, as kLogZero):
-/// the portable version, in tiles that keep both sides in the first-level cache, and the AVX
-/// version's edges.
+/// the portable version, in tiles that keep both sides in the first-level cache.
 void write_cells(const float* row, int nb, int v, int j0, int b0, int b1, int u0, int u1, int height, int width,
                  float lse, float* log_prob) {
   constexpr int kTileBins = 8, kTileCells = 32;
@@ -262,77 +258,18 @@ void write_cells(const float* row, int nb, int v, int j0, int b0, int b1, int u0
   }
 }
 
-#if defined(__x86_64__)
-/// Cells u .. u + 7 of bins b .. b + 7 of a row ([u][b], nb bins a cell) as x - lse (cells at or
-/// below kLogZero, -inf among them, as kLogZero) and transposed in registers: out[i] holds bin
-/// b + i of the eight cells.
-__attribute__((target("avx"))) inline void transpose_block(const float* row, int nb, int u, int b, __m256 shift,
-                                                           __m256* out) {
-  const __m256 zero = _mm256_set1_ps(kLogZero);
-  __m256 r[8];
-  for (int i = 0; i < 8; ++i) {
-    const __m256 x = _mm256_loadu_ps(row + static_cast<std::size_t>(u + i) * nb + b);
-    r[i] = _mm256_blendv_ps(zero, _mm256_sub_ps(x, shift), _mm256_cmp_ps(x, zero, _CMP_GT_OQ));
-  }
-  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
-  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
-  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
-  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
-  const __m256 s0 = _mm256_shuffle_ps(t0, t2, 0x44), s1 = _mm256_shuffle_ps(t0, t2, 0xEE);
-  const __m256 s2 = _mm256_shuffle_ps(t1, t3, 0x44), s3 = _mm256_shuffle_ps(t1, t3, 0xEE);
-  const __m256 s4 = _mm256_shuffle_ps(t4, t6, 0x44), s5 = _mm256_shuffle_ps(t4, t6, 0xEE);
-  const __m256 s6 = _mm256_shuffle_ps(t5, t7, 0x44), s7 = _mm256_shuffle_ps(t5, t7, 0xEE);
-  out[0] = _mm256_permute2f128_ps(s0, s4, 0x20);
-  out[1] = _mm256_permute2f128_ps(s1, s5, 0x20);
-  out[2] = _mm256_permute2f128_ps(s2, s6, 0x20);
-  out[3] = _mm256_permute2f128_ps(s3, s7, 0x20);
-  out[4] = _mm256_permute2f128_ps(s0, s4, 0x31);
-  out[5] = _mm256_permute2f128_ps(s1, s5, 0x31);
-  out[6] = _mm256_permute2f128_ps(s2, s6, 0x31);
-  out[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
-}
-
-/// write_row with AVX: 8 x 8 blocks transposed in registers, two side by side so that each bin's
-/// row gets whole 64-byte lines (the cells and bins beyond whole blocks by write_cells).
-__attribute__((target("avx"))) void write_row_avx(const float* row, int v, int j0, int j1, int height, int width,
-                                                  float lse, float* log_prob) {
-  const std::size_t slice = static_cast<std::size_t>(height) * width;
-  const int nb = j1 - j0, whole_u = width / 16 * 16, whole_b = nb / 8 * 8;
-  const __m256 shift = _mm256_set1_ps(lse);
-  // Where every line's destination is 64-byte aligned, the stores bypass the cache: the frame
-  // (16 MB at 128 x 128 x 256) does not stay there anyway, and its lines need not be read first.
-  const bool stream = width % 16 == 0 && reinterpret_cast<std::uintptr_t>(log_prob) % 64 == 0;
-  for (int b = 0; b < whole_b; b += 8) {
-    for (int u = 0; u < whole_u; u += 16) {
-      __m256 left[8], right[8];
-      transpose_block(row, nb, u, b, shift, left);
-      transpose_block(row, nb, u + 8, b, shift, right);
-      for (int i = 0; i < 8; ++i) {
-        float* dst = log_prob + static_cast<std::size_t>(j0 + b + i) * slice + static_cast<std::size_t>(v) * width + u;
-        if (stream) {
-          _mm256_stream_ps(dst, left[i]);
-          _mm256_stream_ps(dst + 8, right[i]);
-        } else {
-          _mm256_storeu_ps(dst, left[i]);
-          _mm256_storeu_ps(dst + 8, right[i]);
-        }
-      }
-    }
-  }
-  write_cells(row, nb, v, j0, whole_b, nb, 0, width, height, width, lse, log_prob);
-  write_cells(row, nb, v, j0, 0, whole_b, whole_u, width, height, width, lse, log_prob);
-  if (stream) _mm_sfence();  // the streamed stores visible before the worker reports its part done
-}
-#endif
-
-/// Writes row v of bins j0 .. j1 (`row`, [u][j - j0]) into heading-major `log_prob` as x - lse
-/// (values at or below kLogZero as kLogZero): with AVX where the CPU has it (asked once), portable
-/// elsewhere; both write the same values.
+/// Writes row v of bins j0 .. j1 (`row`, [u][j - j0], as the filter takes them) into heading-major
+/// `log_prob` as x - lse (values at or below kLogZero as kLogZero): with the AVX2 loops where they
+/// apply, portable elsewhere; both write the same values.
 void write_row(const float* row, int v, int j0, int j1, int height, int width, float lse, float* log_prob) {
-#if defined(__x86_64__)
-  static const bool avx = __builtin_cpu_supports("avx");
-  if (avx) return write_row_avx(row, v, j0, j1, height, width, lse, log_prob);
-#endif
+  const std::size_t slice = static_cast<std::size_t>(height) * width;
+  if (detail::intake_simd_available() && (j1 - j0) % 8 == 0 && width % 16 == 0) {
+    const detail::IntakeSource source{row, VolumeType::float32, 1, width, static_cast<std::size_t>(j1 - j0)};
+    (void)detail::intake_write_row_simd(
+        source, 0, 0, j1 - j0, 1.0f, lse,
+        log_prob + static_cast<std::size_t>(j0) * slice + static_cast<std::size_t>(v) * width, slice);
+    return;
+  }
   write_cells(row, j1 - j0, v, j0, 0, j1 - j0, 0, width, height, width, lse, log_prob);
 }
 
@@ -346,6 +283,11 @@ std::size_t find_in_row(const float* log_prob, int v, int j0, int j1, int height
     if (at != log_prob + begin + width) return static_cast<std::size_t>(at - log_prob);
   }
   return none;
+}
+
+/// The volume as the AVX2 loops read it.
+detail::IntakeSource source_of(const FrameVolume& volume) {
+  return {volume.data, volume.type, volume.height, volume.width, static_cast<std::size_t>(volume.bins)};
 }
 
 /// Names the first bad cell of a volume (by its index in the file's (H, W, N) order).
@@ -372,9 +314,17 @@ std::size_t find_in_row(const float* log_prob, int v, int j0, int j1, int height
 Softmax sum_pass(const FrameVolume& volume, float power, int chunks, double log_cells, const std::string& where) {
   std::vector<std::optional<BinSums>> chunk_sums(static_cast<std::size_t>(chunks));
   std::vector<char> chunk_bad(static_cast<std::size_t>(chunks), 0);
+  const bool simd = detail::intake_simd_available() && volume.values == VolumeValues::log_prob;
   core::parallel_chunks(volume.bins, chunks, [&](int j0, int j1, int t) {
-    AlignedVector<float> row(static_cast<std::size_t>(volume.width) * static_cast<std::size_t>(j1 - j0));
     BinSums& sums = chunk_sums[static_cast<std::size_t>(t)].emplace(j1 - j0);
+    if (simd) {
+      if (!detail::intake_sums_simd(source_of(volume), j0, j1, power, sums.max.data(), sums.sum.data(),
+                                    sums.ex.data())) {
+        chunk_bad[static_cast<std::size_t>(t)] = 1;
+      }
+      return;
+    }
+    AlignedVector<float> row(static_cast<std::size_t>(volume.width) * static_cast<std::size_t>(j1 - j0));
     for (int v = 0; v < volume.height; ++v) {
       if (read_row(volume, v, j0, j1, power, row.data())) {
         chunk_bad[static_cast<std::size_t>(t)] = 1;
@@ -398,17 +348,26 @@ std::size_t write_pass(const FrameVolume& volume, float power, int chunks, float
   std::vector<std::size_t> chunk_first(static_cast<std::size_t>(chunks), cells);
   core::parallel_chunks(volume.bins, chunks, [&](int j0, int j1, int t) {
     const std::size_t len = static_cast<std::size_t>(W) * static_cast<std::size_t>(j1 - j0);
-    AlignedVector<float> row(len);
+    const bool direct = detail::intake_simd_available() && !is_prob && (j1 - j0) % 8 == 0 && W % 16 == 0;
+    AlignedVector<float> row(direct ? 0 : len);
     std::size_t& first = chunk_first[static_cast<std::size_t>(t)];
     for (int v = 0; v < H; ++v) {
-      // Log-probabilities at power 1 go in as converted (the write takes the zeros); otherwise
-      // the values are made as the first pass made them.
-      convert_row(volume, v, j0, j1, row.data());
-      if (is_prob || power != 1.0f) (void)to_log_prob(row.data(), len, is_prob, power, /*check=*/false);
-      write_row(row.data(), v, j0, j1, H, W, shift, log_prob);
+      float row_max = kLogZero;
+      if (direct) {  // converted, raised and written in registers
+        row_max = detail::intake_write_row_simd(
+            source_of(volume), v, j0, j1, power, shift,
+            log_prob + static_cast<std::size_t>(j0) * slice + static_cast<std::size_t>(v) * static_cast<std::size_t>(W),
+            slice);
+      } else {
+        // Log-probabilities at power 1 go in as converted (the write takes the zeros); otherwise
+        // the values are made as the first pass made them.
+        convert_row(volume, v, j0, j1, row.data());
+        if (is_prob || power != 1.0f) (void)to_log_prob(row.data(), len, is_prob, power, /*check=*/false);
+        write_row(row.data(), v, j0, j1, H, W, shift, log_prob);
+        row_max = ConstArrayMap(row.data(), static_cast<Eigen::Index>(len)).maxCoeff();
+      }
       // Rounding is monotonic: only a row whose largest value lands on `top` can hold it, and a
       // cell of a later row comes first only in a bin before the one found.
-      const float row_max = ConstArrayMap(row.data(), static_cast<Eigen::Index>(len)).maxCoeff();
       const int last_bin = first < cells ? std::min(j1, static_cast<int>(first / slice)) : j1;
       if (row_max > kLogZero && row_max - shift == top && last_bin > j0) {
         first = std::min(first, find_in_row(log_prob, v, j0, last_bin, H, W, top, cells));
@@ -419,6 +378,16 @@ std::size_t write_pass(const FrameVolume& volume, float power, int chunks, float
 }
 
 }  // namespace
+
+int intake_vector_lanes() { return detail::intake_lanes(); }
+
+int limit_intake_vector_lanes(int lanes) {
+  if (lanes != 1 && lanes != 8 && lanes != 16) {
+    throw FilterError("limit_intake_vector_lanes: 16, 8 or 1 lanes, not " + std::to_string(lanes),
+                      ErrorCategory::usage);
+  }
+  return detail::cap_intake_lanes(lanes);
+}
 
 PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads, double power) {
   std::ostringstream where;

@@ -2,6 +2,7 @@
 // random inputs, the analytic cases of conventions.md section 6, and robust intake.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -440,9 +441,14 @@ TEST(Intake, MinusInfinityIsAZeroWithoutNaN) {
   }
 }
 
-TEST(Intake, Float16EqualsFloat32AndProbEqualsLogProb) {
+// On a shape the vectorized intake writes from the volume directly (16 cells a row, bins in
+// eights) and on one it does not.
+class Float16Intake : public ::testing::TestWithParam<std::array<int, 3>> {};
+
+TEST_P(Float16Intake, Float16EqualsFloat32AndProbEqualsLogProb) {
+  const auto [H, W, N] = GetParam();
   std::mt19937 rng(8);
-  const Volume f32 = random_volume(rng, 5, 6, 8);
+  const Volume f32 = random_volume(rng, H, W, N);
   // float16 values of exactly representable numbers (multiples of 1/64 in range).
   std::vector<float> exact(f32.values.size());
   std::vector<std::uint16_t> halves(f32.values.size());
@@ -461,17 +467,20 @@ TEST(Intake, Float16EqualsFloat32AndProbEqualsLogProb) {
     halves[i] = h;
     ASSERT_EQ(half_to_float(h), exact[i]) << i;
   }
-  FrameVolume a{exact.data(), VolumeType::float32, VolumeValues::log_prob, 5, 6, 8, 0.5};
-  FrameVolume b{halves.data(), VolumeType::float16, VolumeValues::log_prob, 5, 6, 8, 0.5};
+  FrameVolume a{exact.data(), VolumeType::float32, VolumeValues::log_prob, H, W, N, 0.5};
+  FrameVolume b{halves.data(), VolumeType::float16, VolumeValues::log_prob, H, W, N, 0.5};
   EXPECT_EQ(prepare_frame(a, 16).log_prob, prepare_frame(b, 16).log_prob);
   std::vector<float> probs(exact.size());
   for (std::size_t i = 0; i < probs.size(); ++i) probs[i] = std::exp(exact[i]);
-  FrameVolume p{probs.data(), VolumeType::float32, VolumeValues::prob, 5, 6, 8, 0.5};
+  FrameVolume p{probs.data(), VolumeType::float32, VolumeValues::prob, H, W, N, 0.5};
   const auto from_prob = prepare_frame(p, 16), from_log = prepare_frame(a, 16);
   for (std::size_t i = 0; i < probs.size(); ++i) EXPECT_NEAR(from_prob.log_prob[i], from_log.log_prob[i], 1e-5);
   EXPECT_EQ(half_to_float(0x7C00), std::numeric_limits<float>::infinity());
   EXPECT_EQ(half_to_float(0x0001), std::ldexp(1.0f, -24));
 }
+
+INSTANTIATE_TEST_SUITE_P(Shapes, Float16Intake,
+                         ::testing::Values(std::array<int, 3>{5, 6, 8}, std::array<int, 3>{3, 16, 16}));
 
 // prepare_frame against a plain double-precision log-softmax of the same values raised to the same
 // power, on shapes whose widths and bin counts are and are not whole blocks of the vectorized
@@ -481,13 +490,22 @@ TEST(Intake, Float16EqualsFloat32AndProbEqualsLogProb) {
 TEST(Intake, MatchesADoublePrecisionLogSoftmaxForAnyNumberOfThreads) {
   struct Shape {
     int h, w, n;
+    float rise = 0;  ///< nats every value gains from one row to the next
   };
   std::mt19937 rng(21);
   std::normal_distribution<float> noise(0, 3);
-  for (const Shape shape : {Shape{16, 32, 16}, Shape{9, 21, 12}, Shape{7, 13, 4}}) {
+  // Rows rising by 20 nats take exps far above 1 against the rows before; rising by 45 (more
+  // than the SIMD loops' headroom) or falling, each row's maximum comes and goes. (The rows are
+  // centred on 0: values of hundreds of nats would leave float's precision behind.)
+  for (const Shape shape : {Shape{16, 32, 16}, Shape{9, 21, 12}, Shape{7, 13, 4}, Shape{4, 16, 24, 20},
+                            Shape{3, 16, 8, 45}, Shape{4, 17, 12, -30}}) {
     const std::size_t cells = static_cast<std::size_t>(shape.h) * shape.w * shape.n;
+    const std::size_t row = static_cast<std::size_t>(shape.w) * shape.n;
     std::vector<float> values(cells);
-    for (auto& x : values) x = std::min(4.0f, noise(rng));  // clipped: many cells tie at the top
+    for (std::size_t i = 0; i < cells; ++i) {
+      const float offset = shape.rise * (static_cast<float>(i / row) - static_cast<float>(shape.h - 1) / 2);
+      values[i] = std::min(4.0f, noise(rng)) + offset;  // clipped: many cells tie at each row's top
+    }
     for (std::size_t i = 5; i < cells; i += 17) values[i] = -std::numeric_limits<float>::infinity();
     for (const double power : {1.0, 0.3, 2.5}) {
       const FrameVolume volume{values.data(), VolumeType::float32, VolumeValues::log_prob, shape.h, shape.w, shape.n,
@@ -513,7 +531,8 @@ TEST(Intake, MatchesADoublePrecisionLogSoftmaxForAnyNumberOfThreads) {
         ex += std::exp(y - max) * y;
       }
       const double lse = max + std::log(sum);
-      EXPECT_NEAR(f.entropy, (lse - ex / sum) / std::log(static_cast<double>(cells)), 1e-6);
+      EXPECT_NEAR(f.entropy, (lse - ex / sum) / std::log(static_cast<double>(cells)), 1e-6)
+          << shape.h << "x" << shape.w << "x" << shape.n << " rising " << shape.rise << " power " << power;
       const std::size_t first =
           static_cast<std::size_t>(std::max_element(x.begin(), x.end()) - x.begin());  // the first largest
       EXPECT_EQ(f.argmax_bin, static_cast<int>(first / slice)) << power;
@@ -536,6 +555,59 @@ TEST(Intake, MatchesADoublePrecisionLogSoftmaxForAnyNumberOfThreads) {
       }
     }
   }
+}
+
+// prepare_frame's loops at each vector width this CPU runs (16: AVX-512, 8: AVX2, 1: portable):
+// 16 and 8 give the same frame bit for bit (the same operations lane by lane), the portable loops
+// the same within 1e-6; float16 and float32, odd shapes whose bins leave a partial vector, rows
+// far above the ones before them, and a power.
+TEST(Intake, EveryVectorWidthGivesTheSameFrame) {
+  const int widest = intake_vector_lanes();
+  struct Restore {
+    ~Restore() { (void)limit_intake_vector_lanes(16); }
+  } restore;
+  std::mt19937 rng(33);
+  std::normal_distribution<float> noise(-6, 3);
+  for (const auto& [h, w, n] : {std::array<int, 3>{8, 32, 64}, std::array<int, 3>{5, 19, 24}}) {
+    const std::size_t cells = static_cast<std::size_t>(h) * w * n;
+    std::vector<float> floats(cells);
+    for (std::size_t i = 0; i < cells; ++i) {
+      floats[i] = std::round((noise(rng) + (i / (static_cast<std::size_t>(w) * n) == 3 ? 50.0f : 0.0f)) * 64) / 64;
+    }
+    for (std::size_t i = 2; i < cells; i += 13) floats[i] = -std::numeric_limits<float>::infinity();
+    std::vector<std::uint16_t> halves(cells);
+    for (std::size_t i = 0; i < cells; ++i) halves[i] = float_to_half(floats[i]);
+    for (const bool half : {false, true}) {
+      const FrameVolume volume{half ? static_cast<const void*>(halves.data()) : floats.data(),
+                               half ? VolumeType::float16 : VolumeType::float32,
+                               VolumeValues::log_prob,
+                               h,
+                               w,
+                               n,
+                               0.5};
+      for (const double power : {1.0, 0.6}) {
+        std::vector<PreparedFrame> frames;
+        for (const int lanes : {16, 8, 1}) {
+          (void)limit_intake_vector_lanes(lanes);
+          ASSERT_EQ(intake_vector_lanes(), std::min(lanes, widest));
+          frames.push_back(prepare_frame(volume, n, 2, power));
+        }
+        EXPECT_EQ(frames[0].log_prob, frames[1].log_prob) << h << "x" << w << "x" << n << " half " << half;
+        EXPECT_EQ(frames[0].entropy, frames[1].entropy);
+        for (std::size_t i = 0; i < cells; ++i) {
+          ASSERT_NEAR(frames[2].log_prob[i], frames[1].log_prob[i],
+                      1e-6 * std::max(1.0f, std::abs(frames[1].log_prob[i])))
+              << i << " half " << half << " power " << power;
+        }
+        EXPECT_NEAR(frames[2].entropy, frames[1].entropy, 1e-6);
+        for (const auto& f : frames) {
+          EXPECT_EQ(f.argmax_bin * h * w + f.argmax_v * w + f.argmax_u,
+                    frames[1].argmax_bin * h * w + frames[1].argmax_v * w + frames[1].argmax_u);
+        }
+      }
+    }
+  }
+  EXPECT_THROW((void)limit_intake_vector_lanes(4), FilterError);
 }
 
 // The power given to prepare_frame is temper_frame's: p^k / sum p^k.

@@ -54,9 +54,21 @@ struct PreparedFrame {
 /// power, in the same passes: p^power / sum p^power). Throws FilterError for a wrong shape, NaN,
 /// +inf, negative probabilities or a volume without mass (naming the first bad cell by its index in
 /// (H, W, N) order), or a power that is not finite and > 0; a -inf log-probability is a valid zero.
-/// Two passes over the volume as given and one write of the frame (docs/localize.md, "Speed").
+/// Two passes over the volume as given and one write of the frame, in SIMD where the CPU has it
+/// (intake_vector_lanes; docs/localize.md, "Speed").
 [[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1,
                                           double power = 1.0);
+
+/// The width, in floats, of the vectors prepare_frame's loops use here: 16 where the CPU has
+/// AVX-512F, 8 where it has AVX2, FMA and F16C (log-probabilities; probabilities take the portable
+/// sums), 1 (the portable loops) elsewhere and off x86-64; at most the limit below. Widths 16 and 8
+/// give the same frame bit for bit; the portable loops agree with them within 1e-6.
+[[nodiscard]] int intake_vector_lanes();
+
+/// Limits intake_vector_lanes() to `lanes` (16, 8 or 1; 16 at start: the widest the CPU has), for
+/// tests, benchmarks and machines whose clock drops under AVX-512. Returns the limit before; throws
+/// FilterError (usage) for another number. Applies to every thread.
+int limit_intake_vector_lanes(int lanes);
 
 /// Recomputes a frame's entropy, max_log_prob and argmax from its values as they stand (after
 /// they were rounded, say), leaving the values untouched: what the filter reads of a frame then
