@@ -395,7 +395,7 @@ int main(int argc, char** argv) {
   const double smooth_s = std::chrono::duration<double>(Clock::now() - t3).count();
   const double smooth_peak_mb = static_cast<double>(peak_kb()) / 1024.0;
   std::printf(
-      "smooth: %.1f s = %.1f frames/s, %.2fx seqloc's time per frame (target <= 3); filter %.1f s, "
+      "smooth: %.1f s = %.1f frames/s, %.2fx seqloc's time per frame (target <= 2); filter %.1f s, "
       "read+prepare %.1f s (every volume read twice); peak memory %.0f MB (target < 2048)\n",
       smooth_s, frames / smooth_s, smooth_s / run_s, smooth.filter_seconds, smooth.prepare_seconds, smooth_peak_mb);
   const double hand_over = hand_over_ms(pre, options, work);
