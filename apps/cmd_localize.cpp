@@ -77,8 +77,9 @@ class LocalizeCommand : public Command, public WithOverwrite, public WithProgres
         ->check(CLI::IsMember({"cpu", "cuda", "cuda-host"}))
         ->capture_default_str();
     app.add_flag("--beliefs", options_.keep_beliefs,
-                 "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings) and beliefs.csv "
-                 "(their windows), which seqloc render then draws without running the filter again");
+                 "Online and seqloc: also write beliefs.npy (each frame's belief summed over headings), beliefs.csv "
+                 "(their windows) and likelihoods.npy (each frame's own likelihood in its window), which seqloc "
+                 "render draws");
     app.add_flag("--mcap", mcap_,
                  "Also write each route's poses as a ROS 2 bag (MCAP, CDR) for Foxglove and rosbag2, in\n"
                  "OUT/<route>/<mode>/bag/ for the modes with a belief: online, seqloc, smooth (docs/ros.md)");

@@ -1,9 +1,15 @@
+#include <unistd.h>
+
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
+#include <span>
 
 #include "command.hpp"
 #include "seqloc/core/error.hpp"
 #include "seqloc/io/run_folder.hpp"
+#include "seqloc/pipeline/localize.hpp"
 #include "seqloc/render/render.hpp"
 
 namespace seqloc::app {
@@ -18,16 +24,16 @@ class RenderCommand : public Command {
     app.add_option("route", route_dir_, "Route folder (route.json + frames.csv)")->required();
     app.add_option("-o,--output", out_, "Folder for the PNG figures (created)")->required();
     app.add_option("--localized", localized_,
-                   "An output folder of seqloc localize for this route (its modes' poses are drawn, and the SeqLoc "
-                   "beliefs it kept with --beliefs, without running the filter again); without it, single and seqloc "
-                   "are run here");
+                   "An output folder of seqloc localize for this route: its modes' poses are drawn, and the SeqLoc "
+                   "beliefs and frame likelihoods it kept with --beliefs; without it (or without its beliefs), "
+                   "single and seqloc are run here first");
     app.add_option("--frame", frame_,
                    "Frame of the likelihood figure (index from 0); 'collapse': the frame on which the SeqLoc belief "
-                   "kept by localize --beliefs shrinks most while its error falls to 5 m or less (needs --localized); "
-                   "'sharpest': the frame after the first whose own likelihood has the lowest entropy")
+                   "shrinks most while its error falls to 5 m or less; 'sharpest': the frame after the first whose "
+                   "own likelihood has the lowest entropy")
         ->default_val("0");
     app.add_option("--window", window_, "Belief window, cells")->capture_default_str();
-    app.add_option("--threads", options_.localize.filter.threads, "Threads")->default_val(2);
+    app.add_option("--threads", localize_.filter.threads, "Threads")->default_val(2);
     app.footer(
         "Writes overview.png (the route's estimates over the map, coloured by position error, and the ground\n"
         "truth), likelihood_K.png (the frame's own likelihood and the SeqLoc belief over the map, the ground\n"
@@ -36,12 +42,10 @@ class RenderCommand : public Command {
   }
 
   void check() override {
-    options_.localize.filter.width = options_.localize.filter.height = window_;
-    options_.localize.matcher.threads = options_.localize.filter.threads;
-    validate_options([&] { options_.localize.validate(); });
-    if (frame_ == "collapse" && localized_.empty()) {
-      throw seqloc::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
-    }
+    localize_.filter.width = localize_.filter.height = window_;
+    localize_.matcher.threads = localize_.filter.threads;
+    localize_.keep_beliefs = true;
+    validate_options([&] { localize_.validate(); });
     if (frame_ != "collapse" && frame_ != "sharpest") options_.frame = parse_frame(frame_);
   }
 
@@ -58,17 +62,16 @@ class RenderCommand : public Command {
       // Every mode the run has (smooth's too), in the recall table's order.
       for (auto& [mode, mode_poses] : run.route_poses(route.name))
         poses.emplace_back(io::mode_name(mode), std::move(mode_poses));
-      // Used when localize kept the beliefs (--beliefs).
+    }
+    // The figure draws what localize --beliefs kept: the given run's, else a run made here.
+    std::optional<ScratchRun> scratch;
+    if (!localized_.empty() && run.has_beliefs(route.name, io::Mode::seqloc)) {
       options_.beliefs_dir = run.mode_dir(route.name, io::Mode::seqloc);
     } else {
-      // Both modes side by side on the route's shared frames, as seqloc localize runs them.
-      auto batch = pipeline::localize_routes({route}, cache, options_.localize, {io::Mode::single, io::Mode::seqloc});
-      for (auto& result : batch.results) poses.emplace_back(io::mode_name(result.mode), std::move(result.poses));
+      scratch.emplace();
+      options_.beliefs_dir = scratch->localize(route, cache, localize_, poses);
     }
     if (frame_ == "collapse") {
-      if (!run.has_beliefs(route.name, io::Mode::seqloc)) {
-        throw seqloc::UsageError("--frame collapse: needs --localized with the beliefs of seqloc localize --beliefs");
-      }
       std::span<const io::FramePose> seqloc;
       for (const auto& [mode, p] : poses) {
         if (mode == "seqloc") seqloc = p;
@@ -100,9 +103,43 @@ class RenderCommand : public Command {
     return best;
   }
 
+  // A run of seqloc localize --beliefs made for the figure in a temporary folder, removed after.
+  class ScratchRun {
+   public:
+    ScratchRun()
+        : root_(fs::temp_directory_path() / ("seqloc-render-" + std::to_string(::getpid()) + "-" +
+                                             std::to_string(reinterpret_cast<std::uintptr_t>(this)))) {}
+    ScratchRun(const ScratchRun&) = delete;
+    ScratchRun& operator=(const ScratchRun&) = delete;
+    ~ScratchRun() {
+      std::error_code ec;
+      fs::remove_all(root_, ec);
+    }
+    // Runs seqloc (and single, when `poses` is empty, adding both to it) and returns the folder of
+    // seqloc's beliefs.
+    fs::path localize(const io::Route& route, raster::CacheReader& cache, const pipeline::LocalizeOptions& options,
+                      std::vector<std::pair<std::string, std::vector<io::FramePose>>>& poses) {
+      const bool both = poses.empty();
+      const std::vector<io::Mode> modes =
+          both ? std::vector{io::Mode::single, io::Mode::seqloc} : std::vector{io::Mode::seqloc};
+      auto batch = pipeline::localize_routes({route}, cache, options, modes);
+      fs::create_directories(dir(route.name));
+      for (auto& result : batch.results) {
+        if (result.mode == io::Mode::seqloc) io::write_route_outputs(dir(route.name), result);
+        if (both) poses.emplace_back(io::mode_name(result.mode), std::move(result.poses));
+      }
+      return dir(route.name);
+    }
+
+   private:
+    [[nodiscard]] fs::path dir(const std::string& route) const { return root_ / route / "seqloc"; }
+    fs::path root_;
+  };
+
   fs::path cache_path_, route_dir_, out_, localized_;
   std::string frame_;
   render::RenderOptions options_;
+  pipeline::LocalizeOptions localize_;
   int window_ = filter::FilterConfig{}.width;
 };
 

@@ -7,7 +7,8 @@ cmake_minimum_required(VERSION 3.20)
 #   volume and odometry, the road prior) under all;
 #   osm <- raster <- io <- ingest (the preprocess report); filter (Eigen and core only) <- gpu (its CUDA backend);
 #   osm + raster <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + filter + gpu + ros <- pipeline
-#   (the driver) <- render; raster <- serve; pipeline <- python; everything <- apps.
+#   (the driver); io + raster <- render (it draws what localize wrote); raster <- serve; pipeline <- python;
+#   everything <- apps.
 if(NOT ROOT)
   message(FATAL_ERROR "CheckLayers: set -DROOT=<source tree>")
 endif()
@@ -22,7 +23,7 @@ set(allowed_matcher core osm raster io matcher)
 set(allowed_sim core osm raster io sim)
 set(allowed_ros core osm raster io ros)
 set(allowed_pipeline core osm raster filter gpu io matcher ros pipeline)
-set(allowed_render core osm raster filter gpu io matcher ros pipeline render)
+set(allowed_render core osm raster io render)
 set(allowed_serve core osm raster serve)
 set(allowed_python core osm raster filter gpu io matcher ros pipeline)
 set(violations 0)

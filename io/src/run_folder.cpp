@@ -180,6 +180,10 @@ void write_route_outputs(const std::filesystem::path& dir, const RouteResult& r)
     const auto frames = static_cast<int>(r.belief_origins.size());
     core::write_file(dir / "beliefs.npy",
                      encode_npy_float32(frames, r.belief_height, r.belief_width, r.beliefs.data()));
+    if (r.likelihoods.size() == r.beliefs.size()) {
+      core::write_file(dir / "likelihoods.npy",
+                       encode_npy_float32(frames, r.belief_height, r.belief_width, r.likelihoods.data()));
+    }
     std::string origins = "frame,origin_u,origin_v\n";
     for (std::size_t i = 0; i < r.belief_origins.size(); ++i) {
       origins += core::csv_field(r.poses.at(i).frame) + "," + std::to_string(r.belief_origins[i][0]) + "," +
@@ -403,11 +407,35 @@ KeptBeliefs::KeptBeliefs(const std::filesystem::path& dir, std::size_t frames) :
     throw DataError(path.string() + ": " + std::to_string(origins_.size()) + " rows for a route of " +
                     std::to_string(frames) + " frames");
   }
+  const auto likelihoods = dir / "likelihoods.npy";
+  std::error_code ec;
+  if (std::filesystem::exists(likelihoods, ec)) {
+    likelihoods_.emplace(likelihoods);
+    if (likelihoods_->type() != core::VolumeType::float32 || likelihoods_->extent(0) != npy_.extent(0) ||
+        likelihoods_->extent(1) != npy_.extent(1) || likelihoods_->extent(2) != npy_.extent(2)) {
+      throw DataError(likelihoods.string() + ": expected float32 of beliefs.npy's shape (" +
+                      std::to_string(npy_.extent(0)) + ", " + std::to_string(npy_.extent(1)) + ", " +
+                      std::to_string(npy_.extent(2)) + ")");
+    }
+  } else {
+    likelihoods_path_ = likelihoods;
+  }
 }
 
 std::vector<double> KeptBeliefs::marginal(std::size_t frame) const {
   const std::size_t cells = static_cast<std::size_t>(width()) * static_cast<std::size_t>(height());
   const float* p = static_cast<const float*>(npy_.data()) + frame * cells;
+  return {p, p + cells};
+}
+
+std::vector<double> KeptBeliefs::likelihood(std::size_t frame) const {
+  if (!likelihoods_) {
+    throw DataError(likelihoods_path_.string() +
+                    ": missing (a run of an older seqloc); run seqloc localize --beliefs again to keep the frames' "
+                    "likelihoods");
+  }
+  const std::size_t cells = static_cast<std::size_t>(width()) * static_cast<std::size_t>(height());
+  const float* p = static_cast<const float*>(likelihoods_->data()) + frame * cells;
   return {p, p + cells};
 }
 

@@ -19,6 +19,22 @@ std::vector<double> position_marginal(const filter::PreparedFrame& frame) {
   return marginal;
 }
 
+std::vector<float> window_marginal(const filter::PreparedFrame& frame, const filter::CropPose& crop, int width,
+                                   int height) {
+  std::vector<double> placed(static_cast<std::size_t>(width) * static_cast<std::size_t>(height), 0.0);
+  const std::vector<double> own = position_marginal(frame);
+  for (int v = 0; v < frame.height; ++v) {
+    for (int u = 0; u < frame.width; ++u) {
+      const filter::Pose cell = filter::volume_cell_pose(frame, crop, v, u, 0);
+      const auto wu = std::lround(cell.u), wv = std::lround(cell.v);
+      if (wu >= 0 && wu < width && wv >= 0 && wv < height) {
+        placed[static_cast<std::size_t>(wv * width + wu)] += own[core::flat(v, u, frame.width)];
+      }
+    }
+  }
+  return {placed.begin(), placed.end()};
+}
+
 VolumeShape volume_shape(const filter::PreparedFrame& frame, double heading_deg) {
   const std::vector<double> marginal = position_marginal(frame);
   const std::size_t slice = marginal.size();

@@ -20,7 +20,6 @@
 #include "seqloc/io/npy.hpp"
 #include "seqloc/io/run_folder.hpp"
 #include "seqloc/osm/classes.hpp"
-#include "seqloc/pipeline/volume_shape.hpp"
 #include "seqloc/raster/palette.hpp"
 #include "seqloc/raster/png_codec.hpp"
 
@@ -454,8 +453,6 @@ struct FrameScene {
   std::vector<io::FramePose> poses;                          // SeqLoc's poses the titles quote (empty: none)
 };
 
-std::vector<double> as_double(const std::vector<float>& v) { return {v.begin(), v.end()}; }
-
 // Where a point falls in region pixels.
 cv::Point2d region_pixel(const raster::RegionGrid& grid, const osm::RegionProjection& projection,
                          const osm::GeoPoint& where) {
@@ -463,29 +460,8 @@ cv::Point2d region_pixel(const raster::RegionGrid& grid, const osm::RegionProjec
   return {grid.region_u(g.x_m), grid.region_v(g.y_m)};
 }
 
-// Frame K's own likelihood, placed into the scene's window by its crop as the filter places it.
-void place_frame(FrameScene& scene, const filter::PreparedFrame& f, const pipeline::GridCrop& crop,
-                 const raster::RegionGrid& grid) {
-  scene.entropy = f.entropy;
-  const int bw = scene.width, bh = scene.height;
-  scene.frame_mass.assign(static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh), 0.0);
-  const filter::CropPose where{grid.region_u(crop.x) - static_cast<double>(scene.origin_u),
-                               grid.region_v(crop.y) - static_cast<double>(scene.origin_v), crop.rotation_deg};
-  const std::vector<double> own = pipeline::position_marginal(f);
-  for (int v = 0; v < f.height; ++v) {
-    for (int u = 0; u < f.width; ++u) {
-      const filter::Pose cell = filter::volume_cell_pose(f, where, v, u, 0);
-      const auto wu = std::lround(cell.u), wv = std::lround(cell.v);
-      if (wu >= 0 && wu < bw && wv >= 0 && wv < bh) {
-        scene.frame_mass[static_cast<std::size_t>(wv * bw + wu)] += own[core::flat(v, u, f.width)];
-      }
-    }
-  }
-}
-
 // The scene from what `localize --beliefs` kept.
-FrameScene scene_from_kept(raster::CacheReader& cache, const io::Route& route, const PosesByMode& poses_by_mode,
-                           const RenderOptions& options) {
+FrameScene scene_from_kept(const io::Route& route, const PosesByMode& poses_by_mode, const RenderOptions& options) {
   const std::size_t k = options.frame;
   const io::KeptBeliefs beliefs(options.beliefs_dir, route.frames.size());
   FrameScene scene;
@@ -499,38 +475,15 @@ FrameScene scene_from_kept(raster::CacheReader& cache, const io::Route& route, c
     scene.before_u = beliefs.origin(k - 1)[0];
     scene.before_v = beliefs.origin(k - 1)[1];
   }
-  const auto frame = pipeline::stored_route_frames(route, cache, options.localize)(k);  // as localize saw it
-  place_frame(scene, *frame, pipeline::frame_crop(route.frames[k], cache.grid(), cache.metadata().projection()),
-              cache.grid());
+  scene.frame_mass = beliefs.likelihood(k);  // the frame as localize placed it in the window
+  // The frame's entropy as given (single's poses), else as SeqLoc raised it (seqloc's).
   for (const auto& [mode, p] : poses_by_mode) {
     if (mode == "seqloc" && p.size() == route.frames.size()) scene.poses = p;
   }
-  return scene;
-}
-
-// The scene by running SeqLoc over frames 0 .. K.
-FrameScene scene_by_running(raster::CacheReader& cache, const io::Route& route, const RenderOptions& options) {
-  const std::size_t k = options.frame;
-  io::Route head = route;
-  head.frames.resize(k + 1);
-  FrameScene scene;
-  scene.poses = pipeline::localize_route(head, cache, options.localize, io::Mode::seqloc, {}, {},
-                                         [&](const pipeline::FrameInspection& in) {
-                                           if (k > 0 && in.index + 1 == k) {  // the belief the frame arrives on
-                                             scene.before_mass = as_double(in.belief->position_marginal());
-                                             scene.before_u = in.origin_u;
-                                             scene.before_v = in.origin_v;
-                                             return;
-                                           }
-                                           if (in.index != k) return;
-                                           scene.width = in.belief->width();
-                                           scene.height = in.belief->height();
-                                           scene.origin_u = in.origin_u;
-                                           scene.origin_v = in.origin_v;
-                                           scene.belief_mass = as_double(in.belief->position_marginal());
-                                           place_frame(scene, *in.frame, in.crop, cache.grid());
-                                         })
-                    .poses;
+  for (const auto& [mode, p] : poses_by_mode) {
+    if (mode == "single" && p.size() == route.frames.size()) scene.entropy = p[k].entropy;
+  }
+  if (scene.entropy == 0 && !scene.poses.empty()) scene.entropy = scene.poses[k].entropy;
   return scene;
 }
 
@@ -698,11 +651,14 @@ std::vector<std::filesystem::path> render_route(raster::CacheReader& cache, cons
   std::filesystem::create_directories(out_dir);
   std::vector<std::filesystem::path> written;
 
-  // 1. The SeqLoc belief before and after the frame, from what localize kept (beliefs.npy) or by
-  // running SeqLoc up to the frame, and the frame's own likelihood.
-  const bool kept = !options.beliefs_dir.empty() && std::filesystem::exists(options.beliefs_dir / "beliefs.npy");
-  const FrameScene scene =
-      kept ? scene_from_kept(cache, route, poses_by_mode, options) : scene_by_running(cache, route, options);
+  // 1. The SeqLoc belief before and after the frame and the frame's own likelihood, from what
+  // localize kept (beliefs.npy, likelihoods.npy).
+  if (options.beliefs_dir.empty() || !std::filesystem::exists(options.beliefs_dir / "beliefs.npy")) {
+    throw UsageError("render: the likelihood figure draws what seqloc localize --beliefs kept, and " +
+                     (options.beliefs_dir.empty() ? std::string("no run folder was given")
+                                                  : (options.beliefs_dir / "beliefs.npy").string() + " is missing"));
+  }
+  const FrameScene scene = scene_from_kept(route, poses_by_mode, options);
   written.push_back(out_dir / ("likelihood_" + std::to_string(options.frame) + ".png"));
   write_picture(written.back(), likelihood_figure(cache, route, scene, options.frame));
 

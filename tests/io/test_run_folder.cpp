@@ -237,6 +237,7 @@ TEST(RunFolder, KeptBeliefsReadBackWithQuotedIds) {
   r.belief_width = 3;
   r.belief_height = 2;
   r.beliefs = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11};
+  r.likelihoods = {20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31};
   r.belief_origins = {{{-5, 7}}, {{100, 200}}};
   const auto out = dir / "out";
   RunFolderWriter writer(out);
@@ -250,7 +251,19 @@ TEST(RunFolder, KeptBeliefsReadBackWithQuotedIds) {
   EXPECT_EQ(kept.origin(0), (std::array<std::int64_t, 2>{-5, 7}));
   EXPECT_EQ(kept.origin(1), (std::array<std::int64_t, 2>{100, 200}));
   EXPECT_EQ(kept.marginal(1), (std::vector<double>{6, 7, 8, 9, 10, 11}));
+  EXPECT_EQ(kept.likelihood(0), (std::vector<double>{20, 21, 22, 23, 24, 25}));
   EXPECT_THROW(KeptBeliefs(run.mode_dir(r.route, Mode::seqloc), 3), DataError) << "not the route's frames";
+  // A run that did not keep the likelihoods (an older seqloc's): the beliefs still read, the
+  // likelihood is an error naming the file.
+  std::filesystem::remove(run.mode_dir(r.route, Mode::seqloc) / "likelihoods.npy");
+  const KeptBeliefs older(run.mode_dir(r.route, Mode::seqloc), 2);
+  EXPECT_EQ(older.marginal(0), (std::vector<double>{0, 1, 2, 3, 4, 5}));
+  try {
+    (void)older.likelihood(0);
+    FAIL() << "no error";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("likelihoods.npy"), std::string::npos) << e.what();
+  }
 }
 
 TEST(RunFolder, AWriterNotCommittedLeavesThePreviousFolder) {

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -50,6 +51,38 @@ TEST(VolumeShape, ARidgeIsLongAlongItsAxisAndAPeakIsRound) {
   EXPECT_NEAR(peak.major_sigma_m, 2.0, 0.1);
   // North-south ridge, heading east: across.
   EXPECT_NEAR(volume_shape(gaussian(0, 6, 1.5, 0.0), 90).axis_to_heading_deg, 90.0, 0.5);
+}
+
+// Each volume cell's mass lands on the window cell its centre falls in, worked out here by hand for
+// a crop as given and one turned a quarter clockwise (north-up crop whose north is the window's
+// east): cell (v, u) of the 129 x 129 frame at window (cu + (u - 64), cv + (v - 64)), and turned,
+// at (cu - (v - 64), cv + (u - 64)); cells falling outside the window are dropped.
+TEST(WindowMarginal, PlacesEachCellWhereItsCentreFalls) {
+  const auto frame = gaussian(30, 8, 1, 0.2);
+  const std::vector<double> own = position_marginal(frame);
+  constexpr int kW = 200, kH = 180, kCu = 100, kCv = 90;
+  const auto as_given = window_marginal(frame, {kCu, kCv, 0}, kW, kH);
+  const auto turned = window_marginal(frame, {kCu, kCv, 90}, kW, kH);
+  ASSERT_EQ(as_given.size(), static_cast<std::size_t>(kW * kH));
+  for (int v = 0; v < frame.height; ++v) {
+    for (int u = 0; u < frame.width; ++u) {
+      const double mass = own[static_cast<std::size_t>(v * frame.width + u)];
+      const int au = kCu + (u - 64), av = kCv + (v - 64), tu = kCu - (v - 64), tv = kCv + (u - 64);
+      ASSERT_NEAR(as_given[static_cast<std::size_t>(av * kW + au)], mass, 1e-7 * std::max(1.0, mass)) << v << "," << u;
+      ASSERT_NEAR(turned[static_cast<std::size_t>(tv * kW + tu)], mass, 1e-7 * std::max(1.0, mass)) << v << "," << u;
+    }
+  }
+  // Near the window's corner: what falls outside is dropped, nothing else.
+  const auto corner = window_marginal(frame, {10, 20, 0}, kW, kH);
+  double inside = 0, placed = 0;
+  for (int v = 0; v < frame.height; ++v) {
+    for (int u = 0; u < frame.width; ++u) {
+      if (10 + (u - 64) >= 0 && 20 + (v - 64) >= 0) inside += own[static_cast<std::size_t>(v * frame.width + u)];
+    }
+  }
+  for (const float x : corner) placed += x;
+  EXPECT_NEAR(placed, inside, 1e-5);
+  EXPECT_LT(inside, 0.9);  // a good part of the frame did fall outside
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include "seqloc/ingest/preprocess.hpp"
 #include "seqloc/io/npy.hpp"
+#include "seqloc/io/run_folder.hpp"
 #include "seqloc/osm/synthetic.hpp"
 #include "seqloc/pipeline/backbone_calibration.hpp"
 #include "seqloc/pipeline/localize.hpp"
@@ -215,6 +216,7 @@ TEST(Simulate, CleanObservationsAreLocalizedAtTheTruth) {
   }
   // Urban, noise-free, 15 m panorama: nearly every frame alone is exact to a cell or two.
   EXPECT_GE(within, 10) << "of 12";
+  lo.keep_beliefs = true;  // what the likelihood figure draws
   const auto seqloc = pipeline::localize_route(route, cache, lo, io::Mode::seqloc);
   EXPECT_LT(*seqloc.poses.back().position_error_m, 1.0);
   EXPECT_LT(*seqloc.poses.back().heading_error_deg, 3.0);
@@ -222,7 +224,9 @@ TEST(Simulate, CleanObservationsAreLocalizedAtTheTruth) {
   // The pictures of that route.
   render::RenderOptions ro;
   ro.frame = 6;
-  ro.localize = lo;
+  ro.beliefs_dir = out / "run" / route.name / "seqloc";
+  std::filesystem::create_directories(ro.beliefs_dir);
+  io::write_route_outputs(ro.beliefs_dir, seqloc);
   const auto files =
       render::render_route(cache, route, {{"single", single.poses}, {"seqloc", seqloc.poses}}, ro, out / "figures");
   ASSERT_EQ(files.size(), 4u);  // likelihood_6, entropy_route, overview, error_over_time

@@ -10,6 +10,7 @@
 #include "factories.hpp"
 #include "seqloc/core/error.hpp"
 #include "seqloc/pipeline/sequential_localizer.hpp"
+#include "seqloc/pipeline/volume_shape.hpp"
 
 namespace seqloc::pipeline::modes {
 namespace {
@@ -42,6 +43,7 @@ class SequentialMode final : public LocalizationMode {
       result.belief_width = localizer_.config().width;
       result.belief_height = localizer_.config().height;
       result.beliefs = std::move(beliefs_);
+      result.likelihoods = std::move(likelihoods_);
       result.belief_origins = std::move(belief_origins_);
     }
   }
@@ -63,8 +65,11 @@ class SequentialMode final : public LocalizationMode {
       context_.inspect({j, frame.get(), crop, &localizer_.filter()->belief(), window.origin_u(), window.origin_v()});
     }
     if (context_.options.keep_beliefs) {
-      const auto marginal = localizer_.filter()->belief().position_marginal();
+      const auto& belief = localizer_.filter()->belief();
+      const auto marginal = belief.position_marginal();
       beliefs_.insert(beliefs_.end(), marginal.begin(), marginal.end());
+      const auto own = window_marginal(*frame, window.crop_pose(crop), belief.width(), belief.height());
+      likelihoods_.insert(likelihoods_.end(), own.begin(), own.end());
       belief_origins_.push_back({window.origin_u(), window.origin_v()});
     }
     frames.release(j);  // the localizer keeps what its lag needs
@@ -73,7 +78,7 @@ class SequentialMode final : public LocalizationMode {
   SequentialLocalizer localizer_;
   std::size_t next_ = 0;
   std::map<std::size_t, FrameEstimate> final_;
-  std::vector<float> beliefs_;
+  std::vector<float> beliefs_, likelihoods_;
   std::vector<std::array<std::int64_t, 2>> belief_origins_;
 };
 

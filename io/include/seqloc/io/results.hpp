@@ -74,8 +74,11 @@ struct RouteResult {
   /// With LocalizeOptions::keep_beliefs (online and seqloc): after each frame, the position marginal of
   /// the belief, (frames, belief_height, belief_width) row-major, and the region pixel of each
   /// frame's window cell (0, 0).
+  /// `likelihoods`: each frame's own likelihood over position in the same window, (frames,
+  /// belief_height, belief_width) (its volume summed over headings, each cell's mass at the window
+  /// cell its centre falls in), what the likelihood figure draws.
   int belief_width = 0, belief_height = 0;
-  std::vector<float> beliefs;
+  std::vector<float> beliefs, likelihoods;
   std::vector<std::array<std::int64_t, 2>> belief_origins;
 };
 

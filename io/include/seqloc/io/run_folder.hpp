@@ -7,7 +7,8 @@
 //   OUT/<route>/<mode>/track.geojson       RFC 7946: the estimated and true tracks, a point per frame
 //   OUT/<route>/<mode>/trajectory.tum      and groundtruth.tum, for evo
 //   OUT/<route>/<mode>/metrics.json        the route's recall and errors
-//   OUT/<route>/<mode>/beliefs.npy, .csv   with --beliefs: each frame's belief over position
+//   OUT/<route>/<mode>/beliefs.npy, .csv   with --beliefs: each frame's belief over position,
+//   OUT/<route>/<mode>/likelihoods.npy     and the frame's own likelihood in the same window
 //
 // The writer stages the folder beside OUT and puts it in place whole (core::commit_directory).
 
@@ -15,6 +16,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -80,7 +82,8 @@ struct PosesFile {
 [[nodiscard]] MetricsByMode evaluate_poses_files(const std::vector<PosesFile>& files);
 
 /// What `localize --beliefs` kept for a route and mode: beliefs.npy, (frames, height, width)
-/// float32, and each frame window's origin in beliefs.csv.
+/// float32, each frame window's origin in beliefs.csv, and each frame's own likelihood in that
+/// window in likelihoods.npy (same shape).
 class KeptBeliefs {
  public:
   /// Reads `dir` (OUT/<route>/<mode>). Throws DataError naming the file when they are missing or
@@ -90,11 +93,16 @@ class KeptBeliefs {
   [[nodiscard]] int height() const { return npy_.extent(1); }
   /// Frame `frame`'s belief over position, height x width, row-major.
   [[nodiscard]] std::vector<double> marginal(std::size_t frame) const;
+  /// Frame `frame`'s own likelihood over position in its window, height x width, row-major. Throws
+  /// DataError naming likelihoods.npy when the run did not keep it.
+  [[nodiscard]] std::vector<double> likelihood(std::size_t frame) const;
   /// The region pixel of frame `frame`'s window cell (0, 0).
   [[nodiscard]] const std::array<std::int64_t, 2>& origin(std::size_t frame) const { return origins_.at(frame); }
 
  private:
-  NpyArray npy_;  ///< (frames, height, width)
+  NpyArray npy_;                            ///< (frames, height, width)
+  std::optional<NpyArray> likelihoods_;     ///< the same shape, when the run kept it
+  std::filesystem::path likelihoods_path_;  ///< where it was looked for, when it was not
   std::vector<std::array<std::int64_t, 2>> origins_;
 };
 

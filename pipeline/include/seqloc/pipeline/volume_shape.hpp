@@ -22,6 +22,12 @@ struct VolumeShape {
 /// The frame's probability per position, summed over headings: height x width, row-major (v, u).
 [[nodiscard]] std::vector<double> position_marginal(const filter::PreparedFrame& frame);
 
+/// The frame's position marginal placed in a width x height window as the filter places the frame
+/// at `crop` (window cells): each volume cell's mass added at the window cell its centre falls in,
+/// cells falling outside dropped. What `localize --beliefs` keeps of each frame (likelihoods.npy).
+[[nodiscard]] std::vector<float> window_marginal(const filter::PreparedFrame& frame, const filter::CropPose& crop,
+                                                 int width, int height);
+
 /// The shape of the frame's position marginal (summed over headings). Only the mass above the
 /// marginal's 10th percentile counts, so a uniform floor (a calibrated volume's "no information"
 /// share) does not hide the structure. `heading_deg`: clockwise from the crop's north.

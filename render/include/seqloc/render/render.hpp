@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "seqloc/io/results.hpp"
 #include "seqloc/io/route.hpp"
-#include "seqloc/pipeline/localize.hpp"
 #include "seqloc/raster/cache.hpp"
 
 namespace seqloc::render {
@@ -78,10 +78,9 @@ struct MapFigure {
 
 struct RenderOptions {
   std::size_t frame = 0;  ///< the frame of the likelihood figure
-  pipeline::LocalizeOptions localize;
-  /// A localize output folder of the route's seqloc mode (OUT/<route>/seqloc): when it holds
-  /// beliefs.npy (localize --beliefs), the likelihood figure draws the beliefs kept there and
-  /// scores the one frame, instead of running the filter up to the frame.
+  /// A localize output folder of the route's seqloc mode (OUT/<route>/seqloc) holding what
+  /// `seqloc localize --beliefs` kept (beliefs.npy, beliefs.csv, likelihoods.npy): the likelihood
+  /// figure draws the beliefs and the frame's own likelihood from there.
   std::filesystem::path beliefs_dir;
 };
 
@@ -101,8 +100,9 @@ struct RenderOptions {
 
 /// Writes overview.png, likelihood_FRAME.png, entropy_route.png and error_over_time.png for `route` into
 /// `out_dir` (created). `poses_by_mode` are localize's results for the same route (any modes;
-/// "seqloc" gives the entropy colours); the likelihood figure runs the filter itself up to the
-/// frame unless options.beliefs_dir has what localize kept. Returns the files written.
+/// "seqloc" gives the entropy colours); the likelihood figure draws what localize kept in
+/// options.beliefs_dir (UsageError when it holds no beliefs.npy; DataError naming a file that is
+/// missing or not the route's). Returns the files written.
 std::vector<std::filesystem::path> render_route(
     raster::CacheReader& cache, const io::Route& route,
     const std::vector<std::pair<std::string, std::vector<io::FramePose>>>& poses_by_mode, const RenderOptions& options,
