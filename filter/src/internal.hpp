@@ -18,29 +18,8 @@ namespace seqloc::filter::detail {
 using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 
-/// out = exp(scale * (x - shift)) where x > kLogZero, exactly 0 where x is kLogZero or -inf.
-/// Eigen 3.4 evaluates select() one coefficient at a time, with scalar expf (a third of a step's
-/// time): this keeps the exp in SIMD and blends the zeros in after. The exp is taken in an aligned
-/// buffer a block at a time, so that which elements take Eigen's scalar path (a block's last
-/// n % 8) depends on n alone, never on where out lies: results do not change with the heap or the
-/// number of threads as long as callers cut the same n.
-/// Values below the smallest normal float (1.2e-38 of the maximum) are 0 too: arithmetic on
-/// subnormals takes a hundred cycles a value on x86, and a steep frame holds a band of them around
-/// its support, which made every later pass over the frame and the belief up to seven times slower.
-inline void exp_or_zero(const float* x, std::size_t n, float scale, float shift, float* out) {
-  constexpr std::size_t kBlock = 1024;
-  Eigen::Array<float, static_cast<Eigen::Index>(kBlock), 1> y;
-  for (std::size_t start = 0; start < n; start += kBlock) {
-    const std::size_t len = std::min(kBlock, n - start);
-    const float* in = x + start;
-    y.head(static_cast<Eigen::Index>(len)) =
-        (scale * (Eigen::Map<const Eigen::ArrayXf>(in, static_cast<Eigen::Index>(len)) - shift)).exp();
-    for (std::size_t i = 0; i < len; ++i) {
-      const float e = y[static_cast<Eigen::Index>(i)];
-      out[start + i] = in[i] > kLogZero && e >= math::kSmallestNormal ? e : 0.0f;
-    }
-  }
-}
+/// out = exp(scale * (x - shift)), 0 for zero cells and subnormal results (intake/frame.hpp).
+using intake::exp_or_zero;
 
 /// dst(u, v) = src sampled bilinearly at (u + ou, v + ov) for a dw x dh destination from a sw x sh
 /// source; `fill` where that point lies outside the source [0, sw - 1] x [0, sh - 1]. At the

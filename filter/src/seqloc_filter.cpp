@@ -542,4 +542,20 @@ Pose SeqLocFilter::refine(const Peak& peak) const {
                            [this](int u, int v, int k) { return static_cast<double>(belief_.prob(u, v, k)); });
 }
 
+Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {
+  // Inverse of the sampling map in SeqLocFilter::Impl::sample_frame.
+  const double east = (u - (frame.width - 1) / 2.0) * frame.cell_m;
+  const double north = -(v - (frame.height - 1) / 2.0) * frame.cell_m;
+  const double a = crop.rotation_deg * kDegToRad;
+  // Crop axes are the window's rotated by a clockwise.
+  const double dx = east * std::cos(a) + north * std::sin(a);
+  const double dy = -east * std::sin(a) + north * std::cos(a);
+  return {crop.centre_u + dx / kCellM, crop.centre_v - dy / kCellM,
+          core::wrap360(bin * 360.0 / frame.bins + crop.rotation_deg)};
+}
+
+Pose single_frame_pose(const PreparedFrame& frame, const CropPose& crop) {
+  return volume_cell_pose(frame, crop, frame.argmax_v, frame.argmax_u, frame.argmax_bin);
+}
+
 }  // namespace seqloc::filter

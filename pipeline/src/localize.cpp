@@ -15,13 +15,13 @@
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
-#include "seqloc/filter/uncertainty.hpp"
 #include "seqloc/io/npy.hpp"
 #include "seqloc/io/observation.hpp"
 #include "seqloc/matcher/calibration.hpp"
 #include "seqloc/pipeline/frame_store.hpp"
 #include "seqloc/pipeline/modes.hpp"
 #include "seqloc/pipeline/region_catalog.hpp"
+#include "seqloc/uncertainty/pose_uncertainty.hpp"
 
 namespace seqloc::pipeline {
 
@@ -96,8 +96,8 @@ FrameSource frames_from(const io::Route& route, std::function<raster::CacheReade
       const filter::FrameVolume volume = io::frame_volume(route, f, npy, transposed);
       try {
         return prepared(volume);
-      } catch (const filter::FilterError& e) {
-        // The filter checks the values (NaN, infinities, negative probabilities); the user needs
+      } catch (const intake::IntakeError& e) {
+        // The intake checks the values (NaN, infinities, negative probabilities); the user needs
         // to know which file holds them.
         throw DataError(f.volume.string() + " (frames.csv line " + std::to_string(f.line) + "): " + e.what());
       }
@@ -226,7 +226,7 @@ void check_crops(const io::Route& route, const raster::RegionGrid& grid, const o
 
 io::FramePose::Uncertainty uncertainty_of(const filter::BeliefVolume& belief, const filter::Pose& estimate,
                                           int threads) {
-  const filter::PoseUncertainty u = filter::pose_uncertainty(belief, estimate, threads);
+  const uncertainty::PoseUncertainty u = uncertainty::pose_uncertainty(belief, estimate, threads);
   return {u.cov_ee_m2, u.cov_en_m2, u.cov_nn_m2, u.heading_sd_deg, u.mass_within_5m, u.second_mode_share, u.multimodal};
 }
 

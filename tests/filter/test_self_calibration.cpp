@@ -344,8 +344,8 @@ TEST(SelfCalibration, ResetStartsFromThePrior) {
   e.reset();
   EXPECT_EQ(e.power(), 1.0);
   EXPECT_EQ(e.frames(), 0);
-  EXPECT_THROW(PowerEstimator(0.0, 0.1), FilterError);
-  EXPECT_THROW(PowerEstimator(2.0, 1.0), FilterError);
+  EXPECT_THROW(PowerEstimator(0.0, 0.1), EstimatorError);
+  EXPECT_THROW(PowerEstimator(2.0, 1.0), EstimatorError);
 }
 
 }  // namespace

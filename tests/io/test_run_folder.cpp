@@ -14,8 +14,8 @@
 
 #include "seqloc/core/error.hpp"
 #include "seqloc/filter/belief.hpp"
-#include "seqloc/filter/uncertainty.hpp"
 #include "seqloc/io/run_folder.hpp"
+#include "seqloc/uncertainty/pose_uncertainty.hpp"
 #include "support/test_support.hpp"
 
 namespace seqloc::io {
@@ -196,7 +196,7 @@ SimulatedFrame simulated_frame(std::mt19937& rng) {
                tv = static_cast<double>(t / kSize) + uniform(rng) - 0.5;
   const auto best = static_cast<std::size_t>(std::max_element(m.begin(), m.end()) - m.begin());
   const double eu = static_cast<double>(best % kSize), ev = static_cast<double>(best / kSize);
-  const filter::PoseUncertainty u = filter::pose_uncertainty(b, {eu, ev, 0});
+  const uncertainty::PoseUncertainty u = uncertainty::pose_uncertainty(b, {eu, ev, 0});
   f.pose.x_m = eu * kCell;
   f.pose.y_m = -ev * kCell;
   f.pose.truth = FramePose::Truth{tu * kCell, -tv * kCell, 0, 0, std::nullopt, std::nullopt};

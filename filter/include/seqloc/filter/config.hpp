@@ -45,7 +45,7 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// (docs/filter.md, "Outside the crop").
   double outside_crop_nats = 1.0;
 
-  /// Self-calibration at test time (ours; self_calibration.hpp): each frame is raised to the power
+  /// Self-calibration at test time (ours; selfcal/estimator.hpp): each frame is raised to the power
   /// kappa that maximizes the predictive likelihood of the frames before it under the belief, so
   /// that an overconfident (or timid) backbone is tempered without ground truth.
   bool self_calibrate = true;

@@ -175,7 +175,7 @@ SEQLOC_HD inline float pool_2x2(const float* slice, int width, int height, int c
   return left + next;
 }
 
-/// A cell's terms in a DepthHistogram (self_calibration.hpp): its depth d = -r clamped to
+/// A cell's terms in a DepthHistogram (selfcal/estimator.hpp): its depth d = -r clamped to
 /// [0, max_depth], the bin d * per_nat (clamped to [0, last_bin]), and its weight w and w d in fixed
 /// point (w >= 0 and d >= 0, so adding 0.5 before the cast rounds half up).
 struct DepthTerm {

@@ -37,10 +37,11 @@
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/intake/frame.hpp"
 
 namespace seqloc::filter {
 
-struct PreparedFrame;
+using intake::PreparedFrame;
 
 class PowerBank {
  public:

@@ -29,68 +29,24 @@
 #include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/step_decisions.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/intake/frame.hpp"
 
 namespace seqloc::filter {
 
 class PowerBank;
 
-/// log(0) stands for this finite value inside the filter, so that no interpolation weight of 0
-/// times -inf can produce a NaN; exp() of it is 0 in float and double.
-inline constexpr float kLogZero = -1e30f;
-
-/// A frame volume checked, converted and normalized (log-softmax over its own H * W * N cells),
-/// stored heading-major for sampling.
-struct PreparedFrame {
-  int height = 0, width = 0, bins = 0;
-  double cell_m = core::kCellM;
-  UninitializedAlignedVector<float> log_prob;  ///< [bin][v][u]; resize leaves new values unwritten
-  double log_cells = 0;                        ///< log M
-  double entropy = 0;                          ///< H_hat = -sum p log p / log M, in [0, 1]
-  float max_log_prob = 0;                      ///< the largest normalized log-probability
-  int argmax_v = 0, argmax_u = 0, argmax_bin = 0;
-};
-
-/// Checks and normalizes a volume (with `threads` workers), raised to `power` first (temper_frame's
-/// power, in the same passes: p^power / sum p^power). Throws FilterError for a wrong shape, NaN,
-/// +inf, negative probabilities or a volume without mass (naming the first bad cell by its index in
-/// (H, W, N) order), or a power that is not finite and > 0; a -inf log-probability is a valid zero.
-/// Two passes over the volume as given and one write of the frame, in SIMD where the CPU has it
-/// (intake_vector_lanes; docs/localize.md, "Speed").
-[[nodiscard]] PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int threads = 1,
-                                          double power = 1.0);
-
-/// The width, in floats, of the vectors prepare_frame's loops use here: 16 where the CPU has
-/// AVX-512F, 8 where it has AVX2, FMA and F16C (log-probabilities; probabilities take the portable
-/// sums), 1 (the portable loops) elsewhere and off x86-64; at most the limit below. Widths 16 and 8
-/// give the same frame bit for bit; the portable loops agree with them within 1e-6.
-[[nodiscard]] int intake_vector_lanes();
-
-/// Limits intake_vector_lanes() to `lanes` (16, 8 or 1; 16 at start: the widest the CPU has), for
-/// tests, benchmarks and machines whose clock drops under AVX-512. Returns the limit before; throws
-/// FilterError (usage) for another number. Applies to every thread.
-int limit_intake_vector_lanes(int lanes);
-
-/// Recomputes a frame's entropy, max_log_prob and argmax from its values as they stand (after
-/// they were rounded, say), leaving the values untouched: what the filter reads of a frame then
-/// describes the values it multiplies in.
-void summarize_frame(PreparedFrame& frame, int threads = 1);
-
-/// The log-softmax of the frame's values in place, with its entropy, max_log_prob and argmax:
-/// for values changed after prepare_frame (a backbone calibration's blur and floor, say).
-void normalize_frame(PreparedFrame& frame, int threads = 1);
-
-/// temper_frame in place (the frame's storage is reused).
-void temper_frame_in_place(PreparedFrame& frame, double power, int threads = 1);
-
-/// The frame's volume raised to `power` and renormalized: p^k / sum p^k, i.e. its log-probabilities
-/// divided by a temperature T = 1 / k. k > 1 sharpens (a backbone more confident than it should
-/// be), k < 1 flattens; entropy and argmax are recomputed. Throws FilterError unless k is finite
-/// and > 0.
-[[nodiscard]] PreparedFrame temper_frame(PreparedFrame frame, double power, int threads = 1);
-
-/// The largest log-probability of the frame raised to `power` and renormalized (temper_frame's
-/// max_log_prob, without writing the frame): a FrameWeighting's peak_log_prob at that power.
-[[nodiscard]] float powered_peak_log_prob(const PreparedFrame& frame, double power, int threads = 1);
+// The frame as the filter takes it, and its tempering, are the intake's (intake/frame.hpp).
+using intake::intake_vector_lanes;
+using intake::IntakeError;
+using intake::kLogZero;
+using intake::limit_intake_vector_lanes;
+using intake::normalize_frame;
+using intake::powered_peak_log_prob;
+using intake::prepare_frame;
+using intake::PreparedFrame;
+using intake::summarize_frame;
+using intake::temper_frame;
+using intake::temper_frame_in_place;
 
 /// The road prior of MGR before normalization (conventions.md section 6, step 4): g at a distance
 /// or over a block of them, the base layer's one definition (core/road_prior.hpp).

@@ -46,7 +46,7 @@ struct FramePose {
   std::optional<Truth> truth;
   /// The region (cache file stem) whose CRS x_m, y_m and the errors are in.
   std::string region;
-  /// How far to trust the pose, from the belief it came from (filter/uncertainty.hpp): the modes
+  /// How far to trust the pose, from the belief it came from (uncertainty/pose_uncertainty.hpp): the modes
   /// with a belief (online, seqloc, smooth) give it, single and offline do not.
   struct Uncertainty {
     double cov_xx_m2 = 0, cov_xy_m2 = 0,

@@ -29,7 +29,7 @@ struct FrameEstimate {
   double etu_weight = 1;
   double volume_power = 1;  ///< self-calibration's power for the frame (1 where it does not apply)
   bool relocalized = false;
-  /// From the belief the estimate came from (modes that have one; filter/uncertainty.hpp).
+  /// From the belief the estimate came from (modes that have one; uncertainty/pose_uncertainty.hpp).
   std::optional<io::FramePose::Uncertainty> uncertainty;
 };
 

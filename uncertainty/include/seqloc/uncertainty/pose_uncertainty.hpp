@@ -20,7 +20,10 @@
 #include "seqloc/filter/belief.hpp"
 #include "seqloc/filter/types.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::uncertainty {
+
+using filter::BeliefVolume;
+using filter::Pose;
 
 struct PoseUncertainty {
   double cov_ee_m2 = 0, cov_en_m2 = 0, cov_nn_m2 = 0;  ///< position covariance, east/north, m^2
@@ -49,4 +52,4 @@ struct Ellipse {
 /// Whether an offset lies inside the covariance's ellipse of probability `p` (core/ellipse.hpp).
 using core::inside_ellipse;
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::uncertainty

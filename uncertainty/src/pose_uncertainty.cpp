@@ -1,6 +1,6 @@
-// A pose's uncertainty from its belief (uncertainty.hpp).
+// A pose's uncertainty from its belief (pose_uncertainty.hpp).
 
-#include "seqloc/filter/uncertainty.hpp"
+#include "seqloc/uncertainty/pose_uncertainty.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -13,7 +13,7 @@
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::uncertainty {
 namespace {
 
 using core::kCellM;
@@ -171,4 +171,4 @@ Ellipse covariance_ellipse(double cov_ee, double cov_en, double cov_nn, double p
   return {std::sqrt(scale * major), std::sqrt(scale * minor), bearing};
 }
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::uncertainty

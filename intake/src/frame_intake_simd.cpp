@@ -8,8 +8,7 @@
 #include <cmath>
 #include <limits>
 
-#include "seqloc/filter/aligned.hpp"
-#include "seqloc/filter/device_math.hpp"
+#include "seqloc/intake/frame.hpp"
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -22,7 +21,7 @@
 #define SEQLOC_INTAKE_AVX512 0
 #endif
 
-namespace seqloc::filter::detail {
+namespace seqloc::intake::detail {
 
 #if defined(__x86_64__)
 
@@ -47,7 +46,7 @@ namespace {
 
 #define SEQLOC_SIMD __attribute__((target("avx2,fma,f16c"))) inline
 
-constexpr float kZero = math::kLogZeroValue;
+constexpr float kZero = kLogZero;
 
 /// Eight values of a cell's bins as float: `lanes` of them from `at`, the rest -inf (a zero).
 SEQLOC_SIMD __m256 load8(const std::uint16_t* at, int lanes) {
@@ -454,4 +453,4 @@ float intake_write_row_simd(const IntakeSource&, int, int, int, float, float, fl
 
 #endif
 
-}  // namespace seqloc::filter::detail
+}  // namespace seqloc::intake::detail

@@ -1,4 +1,4 @@
-#include "seqloc/filter/self_calibration.hpp"
+#include "seqloc/selfcal/estimator.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,9 +6,7 @@
 
 #include <Eigen/Core>
 
-#include "seqloc/filter/types.hpp"
-
-namespace seqloc::filter {
+namespace seqloc::selfcal {
 namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
@@ -66,9 +64,9 @@ void DepthHistogram::add_each(std::span<const float> r, std::span<const float> w
 
 void DepthHistogram::add_bins(std::span<const std::int64_t> weight, std::span<const std::int64_t> depth_sum) {
   if (weight.size() != bins() || depth_sum.size() != bins()) {
-    throw FilterError("DepthHistogram::add_bins: " + std::to_string(weight.size()) + " and " +
-                          std::to_string(depth_sum.size()) + " bins given, not " + std::to_string(bins()),
-                      ErrorCategory::internal);
+    throw EstimatorError("DepthHistogram::add_bins: " + std::to_string(weight.size()) + " and " +
+                             std::to_string(depth_sum.size()) + " bins given, not " + std::to_string(bins()),
+                         ErrorCategory::internal);
   }
   for (std::size_t i = 0; i < bins(); ++i) {
     weight_[i * kLanes] += weight[i];
@@ -121,17 +119,17 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
 PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Hold hold)
     : prior_sigma_log2_(prior_sigma_log2), outlier_share_(outlier_share), hold_(hold) {
   if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
-    throw FilterError(
+    throw EstimatorError(
         "self-calibration: the prior's sigma must be finite and > 0, not " + std::to_string(prior_sigma_log2),
         ErrorCategory::usage);
   }
   if (!(outlier_share >= 0 && outlier_share < 1)) {
-    throw FilterError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share),
-                      ErrorCategory::usage);
+    throw EstimatorError("self-calibration: the outlier share must be in [0, 1), not " + std::to_string(outlier_share),
+                         ErrorCategory::usage);
   }
   if (!(hold.below >= 0 && hold.below <= 4) || !(hold.above >= 0 && hold.above <= 4) ||
       !(hold.follow_below >= 0 && hold.follow_below <= 10) || !(hold.share >= 0 && hold.share <= 1)) {
-    throw FilterError(
+    throw EstimatorError(
         "self-calibration: the hold's band must reach 0 to 4 octaves each way, its share be in [0, 1] and its "
         "following reach 0 to 10 octaves, not " +
             std::to_string(hold.below) + ", " + std::to_string(hold.above) + ", " + std::to_string(hold.share) +
@@ -161,10 +159,10 @@ std::vector<double> PowerEstimator::log_predictive(const CalibrationEvidence& e,
   const auto log_a = e.belief_in_crop.log_sum_exp(kappas);
   const auto log_z = e.frame_cells.log_sum_exp(kappas);
   const double log_out = e.belief_outside > 0 ? std::log(e.belief_outside) + e.log_outside : kNegInf;
-  const double log_uniform =
-      outlier_share_ > 0 && e.window_cells > 0
-          ? std::log(outlier_share_) + log_add(0.0, std::log(e.outside_cells) + e.log_outside) - std::log(e.window_cells)
-          : kNegInf;
+  const double log_uniform = outlier_share_ > 0 && e.window_cells > 0
+                                 ? std::log(outlier_share_) + log_add(0.0, std::log(e.outside_cells) + e.log_outside) -
+                                       std::log(e.window_cells)
+                                 : kNegInf;
   const double log_keep = std::log1p(-outlier_share_);
   std::vector<double> out(kappas.size());
   for (std::size_t k = 0; k < kappas.size(); ++k) {
@@ -209,4 +207,4 @@ void PowerEstimator::add(const CalibrationEvidence& evidence) {
   power_ = held_ && log2_power >= -hold_.follow_below ? 1.0 : mode_;
 }
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::selfcal

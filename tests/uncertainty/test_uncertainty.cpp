@@ -8,13 +8,15 @@
 #include <gtest/gtest.h>
 
 #include "seqloc/filter/belief.hpp"
-#include "seqloc/filter/uncertainty.hpp"
+#include "seqloc/uncertainty/pose_uncertainty.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::uncertainty {
+
+using filter::BeliefVolume;
 namespace {
 
 constexpr double kCell = 0.5;
-constexpr double kQuantization = kCell * kCell / 12;  // a cell's own variance (uncertainty.hpp)
+constexpr double kQuantization = kCell * kCell / 12;  // a cell's own variance (pose_uncertainty.hpp)
 
 // Adds `weight` times a Gaussian in position (east/north sigmas in m, correlation rho) centred
 // at window cell (u0, v0), uniform in heading, to `b`.
@@ -153,4 +155,4 @@ TEST(Uncertainty, TheNinetyFivePercentEllipseHoldsNinetyFivePercentOfItsGaussian
 }
 
 }  // namespace
-}  // namespace seqloc::filter
+}  // namespace seqloc::uncertainty

@@ -10,7 +10,7 @@
 
 #include "seqloc/core/volume.hpp"
 
-namespace seqloc::filter::detail {
+namespace seqloc::intake::detail {
 
 /// The width of the vectors the loops below use (floats): 16 where the CPU has AVX-512F, 8 where it
 /// has AVX2, FMA and F16C, at most the cap (cap_intake_lanes); 1 (the portable loops) otherwise and
@@ -45,4 +45,4 @@ struct IntakeSource {
 float intake_write_row_simd(const IntakeSource& source, int v, int j0, int j1, float power, float shift, float* out,
                             std::size_t slice);
 
-}  // namespace seqloc::filter::detail
+}  // namespace seqloc::intake::detail

@@ -1,7 +1,7 @@
-// Frame intake (conventions.md section 4): a backbone volume made ready for the filter, its
-// tempering, the route's reference entropy for ETU, and the pose of a volume cell in the window.
+// Frame intake (conventions.md section 4): a backbone volume made ready for the filter, and its
+// tempering.
 
-#include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/intake/frame.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -15,19 +15,36 @@
 #include <Eigen/Core>
 
 #include "frame_intake_simd.hpp"
-#include "internal.hpp"
-#include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
-#include "seqloc/core/units.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::intake {
+
+void exp_or_zero(const float* x, std::size_t n, float scale, float shift, float* out) {
+  constexpr std::size_t kBlock = 1024;
+  Eigen::Array<float, static_cast<Eigen::Index>(kBlock), 1> y;
+  for (std::size_t start = 0; start < n; start += kBlock) {
+    const std::size_t len = std::min(kBlock, n - start);
+    const float* in = x + start;
+    y.head(static_cast<Eigen::Index>(len)) =
+        (scale * (Eigen::Map<const Eigen::ArrayXf>(in, static_cast<Eigen::Index>(len)) - shift)).exp();
+    for (std::size_t i = 0; i < len; ++i) {
+      const float e = y[static_cast<Eigen::Index>(i)];
+      out[start + i] = in[i] > kLogZero && e >= kSmallestNormal ? e : 0.0f;
+    }
+  }
+}
+
 namespace {
 
-using core::kCellM;
-using core::kDegToRad;
+using core::FrameVolume;
+using core::half_to_float;
+using core::halves_to_floats;
+using core::VolumeType;
+using core::VolumeValues;
 
-using detail::ArrayMap;
-using detail::ConstArrayMap;
+/// A float buffer as an Eigen array, in place.
+using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
+using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
 
 /// Log-softmax of f.log_prob in place (max: its largest value), with the normalized entropy and
 /// the argmax; `chunks` workers. With `shift` false the values stay as they are and only the
@@ -50,7 +67,7 @@ void normalize(PreparedFrame& f, float max, int chunks, bool shift = true) {
       const Eigen::Index len = std::min<Eigen::Index>(kBlock, static_cast<Eigen::Index>(cells) - start);
       ConstArrayMap x(f.log_prob.data() + start, len);
       auto eb = e.head(len);
-      detail::exp_or_zero(x.data(), static_cast<std::size_t>(len), 1.0f, max, eb.data());
+      exp_or_zero(x.data(), static_cast<std::size_t>(len), 1.0f, max, eb.data());
       s_sum += eb.sum();
       s_ex += (eb * x.max(kLogZero)).sum();  // 0 * kLogZero at a zero cell, which may hold -inf (rounded)
     }
@@ -200,7 +217,7 @@ struct BinSums {
       padded.head(nb) = ConstArrayMap(x, nb) - max;
       e = padded.exp();
       for (Eigen::Index j = 0; j < nb; ++j) {
-        const float ej = x[j] > kLogZero && ex_u[j] >= math::kSmallestNormal ? ex_u[j] : 0.0f;
+        const float ej = x[j] > kLogZero && ex_u[j] >= kSmallestNormal ? ex_u[j] : 0.0f;
         s[j] += ej;
         sx[j] += ej * x[j];  // x > kLogZero where ej > 0
       }
@@ -304,12 +321,12 @@ detail::IntakeSource source_of(const FrameVolume& volume) {
     if (std::isnan(raw)) what = "NaN";
     if (raw == kInf) what = is_prob ? "probability +inf" : "log-probability +inf";
     if (is_prob && raw < 0) what = "probability " + std::to_string(raw) + " < 0";
-    if (!what.empty()) throw FilterError(where + ": " + what + " at cell " + std::to_string(i));
+    if (!what.empty()) throw IntakeError(where + ": " + what + " at cell " + std::to_string(i));
   }
-  throw FilterError(where + ": a bad value", ErrorCategory::internal);
+  throw IntakeError(where + ": a bad value", ErrorCategory::internal);
 }
 
-/// The first pass: each worker's bins checked (throws FilterError naming the first bad cell) and
+/// The first pass: each worker's bins checked (throws IntakeError naming the first bad cell) and
 /// summed; the log-softmax's normalizer and the entropy of the whole volume raised to `power`.
 Softmax sum_pass(const FrameVolume& volume, float power, int chunks, double log_cells, const std::string& where) {
   std::vector<std::optional<BinSums>> chunk_sums(static_cast<std::size_t>(chunks));
@@ -383,7 +400,7 @@ int intake_vector_lanes() { return detail::intake_lanes(); }
 
 int limit_intake_vector_lanes(int lanes) {
   if (lanes != 1 && lanes != 8 && lanes != 16) {
-    throw FilterError("limit_intake_vector_lanes: 16, 8 or 1 lanes, not " + std::to_string(lanes),
+    throw IntakeError("limit_intake_vector_lanes: 16, 8 or 1 lanes, not " + std::to_string(lanes),
                       ErrorCategory::usage);
   }
   return detail::cap_intake_lanes(lanes);
@@ -393,16 +410,16 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   std::ostringstream where;
   where << "volume of shape (" << volume.height << ", " << volume.width << ", " << volume.bins << ")";
   if (volume.data == nullptr || volume.height <= 0 || volume.width <= 0 || volume.bins <= 0) {
-    throw FilterError(where.str() + ": empty volume");
+    throw IntakeError(where.str() + ": empty volume");
   }
   if (window_headings % volume.bins != 0 && volume.bins % window_headings != 0) {
-    throw FilterError(where.str() + ": " + std::to_string(volume.bins) +
+    throw IntakeError(where.str() + ": " + std::to_string(volume.bins) +
                       " heading bins neither divide nor are a multiple of the filter's " +
                       std::to_string(window_headings));
   }
-  if (!(volume.cell_m > 0)) throw FilterError(where.str() + ": cell size must be > 0");
+  if (!(volume.cell_m > 0)) throw IntakeError(where.str() + ": cell size must be > 0");
   if (!(power > 0) || !std::isfinite(power)) {
-    throw FilterError("prepare_frame: the power must be finite and > 0, not " + std::to_string(power),
+    throw IntakeError("prepare_frame: the power must be finite and > 0, not " + std::to_string(power),
                       ErrorCategory::usage);
   }
   PreparedFrame f;
@@ -421,7 +438,7 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   const int chunks = std::max(1, std::min(threads, volume.bins));
   const auto k = static_cast<float>(power);
   const Softmax softmax = sum_pass(volume, k, chunks, f.log_cells, where.str());
-  if (softmax.max <= kLogZero) throw FilterError(where.str() + ": no probability mass (every cell is zero)");
+  if (softmax.max <= kLogZero) throw IntakeError(where.str() + ": no probability mass (every cell is zero)");
   f.entropy = softmax.entropy;
   const auto shift = static_cast<float>(softmax.lse);
   f.max_log_prob = softmax.max - shift;  // the argmax's value, computed as write_row computes it
@@ -439,7 +456,7 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
 
 void temper_frame_in_place(PreparedFrame& frame, double power, int threads) {
   if (!(power > 0) || !std::isfinite(power)) {
-    throw FilterError("temper_frame: the power must be finite and > 0, not " + std::to_string(power),
+    throw IntakeError("temper_frame: the power must be finite and > 0, not " + std::to_string(power),
                       ErrorCategory::usage);
   }
   if (power == 1.0) return;
@@ -451,13 +468,13 @@ void temper_frame_in_place(PreparedFrame& frame, double power, int threads) {
 }
 
 void normalize_frame(PreparedFrame& frame, int threads) {
-  if (frame.log_prob.empty()) throw FilterError("normalize_frame: the frame has no cells");
+  if (frame.log_prob.empty()) throw IntakeError("normalize_frame: the frame has no cells");
   ConstArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
   normalize(frame, x.maxCoeff(), std::max(1, std::min(threads, frame.bins)));
 }
 
 void summarize_frame(PreparedFrame& frame, int threads) {
-  if (frame.log_prob.empty()) throw FilterError("summarize_frame: the frame has no cells");
+  if (frame.log_prob.empty()) throw IntakeError("summarize_frame: the frame has no cells");
   ConstArrayMap x(frame.log_prob.data(), static_cast<Eigen::Index>(frame.log_prob.size()));
   normalize(frame, x.maxCoeff(), std::max(1, std::min(threads, frame.bins)), /*shift=*/false);
 }
@@ -470,8 +487,8 @@ float powered_peak_log_prob(const PreparedFrame& frame, double power, int thread
   core::parallel_chunks(frame.bins, std::max(1, std::min(threads, frame.bins)), [&](int j0, int j1, int) {
     std::vector<float> e(slice);
     for (int j = j0; j < j1; ++j) {
-      detail::exp_or_zero(frame.log_prob.data() + static_cast<std::size_t>(j) * slice, slice, static_cast<float>(power),
-                          frame.max_log_prob, e.data());
+      exp_or_zero(frame.log_prob.data() + static_cast<std::size_t>(j) * slice, slice, static_cast<float>(power),
+                  frame.max_log_prob, e.data());
       double sum = 0;
       for (const float x : e) sum += x;
       sums[static_cast<std::size_t>(j)] = sum;
@@ -487,20 +504,4 @@ PreparedFrame temper_frame(PreparedFrame frame, double power, int threads) {
   return frame;
 }
 
-Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {
-  // Inverse of the sampling map in SeqLocFilter::Impl::sample_frame.
-  const double east = (u - (frame.width - 1) / 2.0) * frame.cell_m;
-  const double north = -(v - (frame.height - 1) / 2.0) * frame.cell_m;
-  const double a = crop.rotation_deg * kDegToRad;
-  // Crop axes are the window's rotated by a clockwise.
-  const double dx = east * std::cos(a) + north * std::sin(a);
-  const double dy = -east * std::sin(a) + north * std::cos(a);
-  return {crop.centre_u + dx / kCellM, crop.centre_v - dy / kCellM,
-          core::wrap360(bin * 360.0 / frame.bins + crop.rotation_deg)};
-}
-
-Pose single_frame_pose(const PreparedFrame& frame, const CropPose& crop) {
-  return volume_cell_pose(frame, crop, frame.argmax_v, frame.argmax_u, frame.argmax_bin);
-}
-
-}  // namespace seqloc::filter
+}  // namespace seqloc::intake
