@@ -11,6 +11,7 @@
 #include "seqloc/intake/frame.hpp"
 
 #if defined(__x86_64__)
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 
@@ -31,7 +32,10 @@ std::atomic<int> lanes_cap{16};
 /// The vector width (in floats) the CPU runs: 16 with AVX-512F, 8 with AVX2, FMA and F16C, else 1.
 int hardware_lanes() {
   static const int lanes = [] {
-    if (!(__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("f16c"))) return 1;
+    // F16C from CPUID leaf 1 (clang's __builtin_cpu_supports does not know "f16c").
+    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+    const bool f16c = __get_cpuid(1, &eax, &ebx, &ecx, &edx) != 0 && (ecx & bit_F16C) != 0;
+    if (!(__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && f16c)) return 1;
     return SEQLOC_INTAKE_AVX512 && __builtin_cpu_supports("avx512f") ? 16 : 8;
   }();
   return lanes;
@@ -156,8 +160,9 @@ SEQLOC_SIMD void prefetch(const void* at, std::size_t bytes) {
 /// float, sum e, sum e x and the largest x. `next` (the next row, or null): its lines of these
 /// groups fetched on the way. Returns false where a value is NaN or +inf.
 template <int G, bool Raised, class T>
-SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, __m256 power,
+SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, float raised_to,
                             RowSums& r) {
+  const __m256 power = _mm256_set1_ps(raised_to);
   const __m256 lowest = _mm256_set1_ps(kLogSmallestNormal);
   const std::size_t first = 8 * static_cast<std::size_t>(g0);
   __m256 bad = _mm256_setzero_ps(), ref[G], top[G], sum[G], ex[G];
@@ -193,14 +198,13 @@ SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, 
 /// maxima (the first row, a bin's first values). Returns false where a value is NaN or +inf.
 template <bool Raised, class T>
 SEQLOC_SIMD bool row_pass(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
-  const __m256 k = _mm256_set1_ps(power);
   const int groups = (nb + 7) / 8;
   std::copy(r.ref.begin(), r.ref.end(), r.against.begin());
   for (int g0 = 0; g0 < groups; g0 += 2) {
     const int count = std::min(2, groups - g0), lanes = std::min(8, nb - 8 * (g0 + count - 1));
     auto pass = [&](const T* fetch) {
-      return count == 2 ? block_pass<2, Raised>(row, fetch, s, g0, lanes, k, r)
-                        : block_pass<1, Raised>(row, fetch, s, g0, lanes, k, r);
+      return count == 2 ? block_pass<2, Raised>(row, fetch, s, g0, lanes, power, r)
+                        : block_pass<1, Raised>(row, fetch, s, g0, lanes, power, r);
     };
     if (!pass(next)) return false;
     if (rose_too_far(r, 8 * g0, std::min(nb, 8 * (g0 + count)))) (void)pass(nullptr);
@@ -251,8 +255,9 @@ SEQLOC_AVX512 __m512 exp_normal16(__m512 a) {
 
 /// block_pass in sixteen lanes: groups g0 .. g0 + G of sixteen bins.
 template <int G, bool Raised, class T>
-SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, __m512 power,
+SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, float raised_to,
                                 RowSums& r) {
+  const __m512 power = _mm512_set1_ps(raised_to);
   const __m512 zero = _mm512_set1_ps(kZero), lowest = _mm512_set1_ps(kLogSmallestNormal);
   const __m512 largest = _mm512_set1_ps(std::numeric_limits<float>::max());
   const std::size_t first = 16 * static_cast<std::size_t>(g0);
@@ -290,7 +295,6 @@ SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource&
 /// row_pass in sixteen lanes.
 template <bool Raised, class T>
 SEQLOC_AVX512 bool row_pass16(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
-  const __m512 k = _mm512_set1_ps(power);
   const int groups = (nb + 15) / 16;
   std::copy(r.ref.begin(), r.ref.end(), r.against.begin());
   for (int g0 = 0; g0 < groups; g0 += 4) {
@@ -298,13 +302,13 @@ SEQLOC_AVX512 bool row_pass16(const T* row, const T* next, const IntakeSource& s
     auto pass = [&](const T* fetch) {
       switch (count) {
         case 4:
-          return block_pass16<4, Raised>(row, fetch, s, g0, lanes, k, r);
+          return block_pass16<4, Raised>(row, fetch, s, g0, lanes, power, r);
         case 3:
-          return block_pass16<3, Raised>(row, fetch, s, g0, lanes, k, r);
+          return block_pass16<3, Raised>(row, fetch, s, g0, lanes, power, r);
         case 2:
-          return block_pass16<2, Raised>(row, fetch, s, g0, lanes, k, r);
+          return block_pass16<2, Raised>(row, fetch, s, g0, lanes, power, r);
         default:
-          return block_pass16<1, Raised>(row, fetch, s, g0, lanes, k, r);
+          return block_pass16<1, Raised>(row, fetch, s, g0, lanes, power, r);
       }
     };
     if (!pass(next)) return false;

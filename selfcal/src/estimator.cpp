@@ -117,7 +117,7 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
 }
 
 PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Hold hold)
-    : prior_sigma_log2_(prior_sigma_log2), outlier_share_(outlier_share), hold_(hold) {
+    : outlier_share_(outlier_share), hold_(hold) {
   if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
     throw EstimatorError(
         "self-calibration: the prior's sigma must be finite and > 0, not " + std::to_string(prior_sigma_log2),

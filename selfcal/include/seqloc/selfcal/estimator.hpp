@@ -136,7 +136,7 @@ class PowerEstimator {
   void reset();
 
  private:
-  double prior_sigma_log2_, outlier_share_;
+  double outlier_share_;
   Hold hold_;
   std::vector<double> kappas_, log_prior_, score_;
   double power_ = 1, mode_ = 1;
