@@ -1,5 +1,7 @@
-// The frame intake's AVX2 loops (frame_intake_simd.hpp). Compiled for AVX2, FMA and F16C by each
-// function's target attribute whatever the build's -march, and run only where the CPU has them.
+// The frame intake's SIMD loops (frame_intake_simd.hpp): eight lanes (AVX2, FMA, F16C) and sixteen
+// (AVX-512F), each function compiled for its instructions by its target attribute whatever the
+// build's -march, and run only where the CPU has them. The two widths take the same operations
+// lane by lane, so they give the same values bit for bit.
 
 #include "frame_intake_simd.hpp"
 
@@ -84,7 +86,8 @@ SEQLOC_SIMD __m256 bad_lanes(__m256 raw) {
 /// log of the smallest normal float: an exp below it counts zero.
 constexpr float kLogSmallestNormal = -87.3365448f;
 
-/// exp(a) for -87 <= a <= 88 (a below -87 is taken as -87, the result stays a normal float):
+/// exp(a) for -87 <= a <= 88 (a below -87 is taken as -87, the result stays a normal float; above
+/// 88 the result is not an exp, and the caller takes that row again against a larger reference):
 /// 2^n p(r), r = a - n log 2 in [-log 2 / 2, log 2 / 2], p the degree-6 Taylor polynomial
 /// (relative error under 2e-7).
 SEQLOC_SIMD __m256 exp_normal(__m256 a) {
@@ -117,6 +120,15 @@ struct RowSums {
 /// own maximum (e^40 times a row's cells and values stays far from the largest float).
 constexpr float kHeadroom = 40;
 
+/// A row starts with its exps taken against the bins' references; a bin without a value yet (its
+/// reference kLogZero) against +inf, so that its zero cells add nothing (a = -inf) and its first
+/// values are taken again against their own maximum (rose_too_far).
+void start_row(RowSums& r) {
+  for (std::size_t j = 0; j < r.ref.size(); ++j) {
+    r.against[j] = r.ref[j] > kZero ? r.ref[j] : std::numeric_limits<float>::infinity();
+  }
+}
+
 /// Where bins j0 .. j1 of a row rose more than kHeadroom above their reference: their exps are to
 /// be taken against the row's maximum instead (r.against). Returns whether any did.
 bool rose_too_far(RowSums& r, int j0, int j1) {
@@ -141,9 +153,11 @@ void fold_row(RowSums& r, int nb, double* sum, double* ex) {
       sum[j] *= rescale;
       ex[j] *= rescale;
     }
-    const double row_scale = against == top ? 1.0 : std::exp(double{against} - top);
-    sum[j] += r.sum[j] * row_scale;
-    ex[j] += r.ex[j] * row_scale;
+    if (r.sum[j] > 0) {  // (nothing where every e was 0, against +inf among them)
+      const double row_scale = against == top ? 1.0 : std::exp(double{against} - top);
+      sum[j] += r.sum[j] * row_scale;
+      ex[j] += r.ex[j] * row_scale;
+    }
     r.ref[j] = top;
   }
 }
@@ -182,7 +196,7 @@ SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, 
       const __m256 a = _mm256_sub_ps(x, ref[i]);
       const __m256 e = _mm256_and_ps(exp_normal(a), _mm256_cmp_ps(a, lowest, _CMP_GE_OQ));
       sum[i] = _mm256_add_ps(sum[i], e);
-      ex[i] = _mm256_fmadd_ps(e, x, ex[i]);  // x is finite (a zero cell's is kLogZero, its e 0)
+      ex[i] = _mm256_fmadd_ps(e, x, ex[i]);  // x is finite: a zero cell's is kLogZero, its e 0
     }
   }
   for (int i = 0; i < G; ++i) {
@@ -199,7 +213,7 @@ SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, 
 template <bool Raised, class T>
 SEQLOC_SIMD bool row_pass(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
   const int groups = (nb + 7) / 8;
-  std::copy(r.ref.begin(), r.ref.end(), r.against.begin());
+  start_row(r);
   for (int g0 = 0; g0 < groups; g0 += 2) {
     const int count = std::min(2, groups - g0), lanes = std::min(8, nb - 8 * (g0 + count - 1));
     auto pass = [&](const T* fetch) {
@@ -296,7 +310,7 @@ SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource&
 template <bool Raised, class T>
 SEQLOC_AVX512 bool row_pass16(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
   const int groups = (nb + 15) / 16;
-  std::copy(r.ref.begin(), r.ref.end(), r.against.begin());
+  start_row(r);
   for (int g0 = 0; g0 < groups; g0 += 4) {
     const int count = std::min(4, groups - g0), lanes = std::min(16, nb - 16 * (g0 + count - 1));
     auto pass = [&](const T* fetch) {

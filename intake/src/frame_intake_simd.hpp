@@ -1,8 +1,8 @@
 #pragma once
-// The frame intake's inner loops in AVX2 (with FMA and F16C), for CPUs that have them: the
-// values converted from float16 in registers, checked, raised to the power, their online softmax
-// summed with a polynomial exp, and written heading-major through 8 x 8 transposes, each value
-// read from the volume as given without an intermediate row. frame_intake.cpp asks
+// The frame intake's inner loops in SIMD (AVX-512F, or AVX2 with FMA and F16C), for CPUs that
+// have them: the values converted from float16 in registers, checked, raised to the power, their
+// online softmax summed with a polynomial exp, and written heading-major through 8 x 8 transposes,
+// each value read from the volume as given without an intermediate row. frame_intake.cpp asks
 // intake_simd_available() and falls back to its portable loops where it says no.
 
 #include <cstddef>
