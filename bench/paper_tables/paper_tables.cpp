@@ -106,6 +106,11 @@ std::vector<Config> configs() {
     c.push_back({"tempered", tempered_name("SeqLoc", k), M::seqloc, none, 0, 0, k});
     c.push_back({"tempered", tempered_name("SeqLoc without self-calibration", k), M::seqloc, no_self_calibration, 0, 0, k});
   }
+  // The batch modes on the same volumes (k = 1: the smoothing table's smooth and lag 10).
+  for (const double k : kTempering) {
+    c.push_back({"tempered", tempered_name("smooth", k), M::smooth, none, 0, 0, k});
+    c.push_back({"tempered", tempered_name("SeqLoc, lag 10", k), M::seqloc, none, 0, 0, k, 10, 10});
+  }
   c.push_back({"tempered", tempered_name("online (naive recursion)", kSharpen), M::online, none, 0, 0, kSharpen});
   c.push_back({"tempered", tempered_name("SeqLoc, paper's configuration", kSharpen), M::seqloc, paper, 0, 0, kSharpen});
   // Batch routes: the whole route's evidence (smooth), and real time with a delay of L frames.

@@ -110,6 +110,15 @@ class Page:
             cells = [f"{self.r5(on, c):.1f} / {self.r5(off, c):.1f}" for c in COLUMNS]
             self.out(row(f"{k:g}", *cells))
         self.out("")
+        if self.has(tempered("smooth", KS[-1])):
+            self.out("The batch modes on the same volumes, smooth / SeqLoc with a lag of 10 frames, R@5m (k = 1: the "
+                     "batch table's):", "")
+            self.out(*header("k", *COLUMNS, left=0))
+            for k in KS:
+                smooth = SMOOTH if k == 1 else tempered("smooth", k)
+                lag = "SeqLoc, lag 10" if k == 1 else tempered("SeqLoc, lag 10", k)
+                self.out(row(f"{k:g}", *(f"{self.r5(smooth, c):.1f} / {self.r5(lag, c):.1f}" for c in COLUMNS)))
+            self.out("")
         naive, paper = tempered("online (naive recursion)", 4), tempered("SeqLoc, paper's configuration", 4)
         self.out(f"At k = 4 the naive recursion gives {self.r5(naive, 'feature-sparse'):.1f} feature-sparse "
                  f"({self.r5(naive, 'urban'):.1f} urban) and the paper's configuration "
