@@ -1,6 +1,3 @@
-#include <unistd.h>
-
-#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <optional>
@@ -8,6 +5,7 @@
 
 #include "command.hpp"
 #include "seqloc/core/error.hpp"
+#include "seqloc/core/files.hpp"
 #include "seqloc/io/run_folder.hpp"
 #include "seqloc/pipeline/localize.hpp"
 #include "seqloc/render/render.hpp"
@@ -106,9 +104,8 @@ class RenderCommand : public Command {
   // A run of seqloc localize --beliefs made for the figure in a temporary folder, removed after.
   class ScratchRun {
    public:
-    ScratchRun()
-        : root_(fs::temp_directory_path() / ("seqloc-render-" + std::to_string(::getpid()) + "-" +
-                                             std::to_string(reinterpret_cast<std::uintptr_t>(this)))) {}
+    // This process's folder, after removing those that killed runs left behind.
+    ScratchRun() : root_(core::staging_directory(fs::temp_directory_path() / "seqloc-render")) {}
     ScratchRun(const ScratchRun&) = delete;
     ScratchRun& operator=(const ScratchRun&) = delete;
     ~ScratchRun() {

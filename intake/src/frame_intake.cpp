@@ -252,17 +252,16 @@ Softmax combine(const std::vector<std::optional<BinSums>>& chunks, double log_ce
   return s;
 }
 
-/// Writes cells u0 .. u1 of bins j0 + b0 .. j0 + b1 of row v (`row`, [u][b], nb bins a cell) into
-/// heading-major `log_prob` as x - lse (values at or below kLogZero, -inf among them, as kLogZero):
-/// the portable version, in tiles that keep both sides in the first-level cache.
-void write_cells(const float* row, int nb, int v, int j0, int b0, int b1, int u0, int u1, int height, int width,
-                 float lse, float* log_prob) {
+/// Writes row v of bins j0 .. j0 + nb (`row`, [u][b], nb bins a cell) into heading-major
+/// `log_prob` as x - lse (values at or below kLogZero, -inf among them, as kLogZero): the portable
+/// version, in tiles that keep both sides in the first-level cache.
+void write_cells(const float* row, int nb, int v, int j0, int height, int width, float lse, float* log_prob) {
   constexpr int kTileBins = 8, kTileCells = 32;
   const std::size_t slice = static_cast<std::size_t>(height) * width;
-  for (int tb = b0; tb < b1; tb += kTileBins) {
-    const int tb1 = std::min(b1, tb + kTileBins);
-    for (int tu = u0; tu < u1; tu += kTileCells) {
-      const int tu1 = std::min(u1, tu + kTileCells);
+  for (int tb = 0; tb < nb; tb += kTileBins) {
+    const int tb1 = std::min(nb, tb + kTileBins);
+    for (int tu = 0; tu < width; tu += kTileCells) {
+      const int tu1 = std::min(width, tu + kTileCells);
       for (int b = tb; b < tb1; ++b) {
         float* dst = log_prob + static_cast<std::size_t>(j0 + b) * slice + static_cast<std::size_t>(v) * width;
         const float* src = row + b;
@@ -287,7 +286,7 @@ void write_row(const float* row, int v, int j0, int j1, int height, int width, f
         log_prob + static_cast<std::size_t>(j0) * slice + static_cast<std::size_t>(v) * width, slice);
     return;
   }
-  write_cells(row, j1 - j0, v, j0, 0, j1 - j0, 0, width, height, width, lse, log_prob);
+  write_cells(row, j1 - j0, v, j0, height, width, lse, log_prob);
 }
 
 /// The first cell of heading-major `log_prob` (bins j0 .. j1, row v) holding `top`, or `none`.

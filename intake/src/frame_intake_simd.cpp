@@ -220,7 +220,8 @@ SEQLOC_SIMD bool row_pass(const T* row, const T* next, const IntakeSource& s, in
       return count == 2 ? block_pass<2, Raised>(row, fetch, s, g0, lanes, power, r)
                         : block_pass<1, Raised>(row, fetch, s, g0, lanes, power, r);
     };
-    if (!pass(next)) return false;
+    // The next row's lines: each by the block that starts it (two blocks share a line of float16).
+    if (!pass((8 * g0 * sizeof(T)) % 64 == 0 ? next : nullptr)) return false;
     if (rose_too_far(r, 8 * g0, std::min(nb, 8 * (g0 + count)))) (void)pass(nullptr);
   }
   return true;

@@ -9,6 +9,7 @@
 #include <cstdint>
 
 #include "seqloc/core/angles.hpp"
+#include "seqloc/intake/frame.hpp"
 
 #if defined(__CUDACC__)
 #define SEQLOC_HD __host__ __device__
@@ -18,11 +19,10 @@
 
 namespace seqloc::filter::math {
 
-/// log(0) inside the filter (seqloc_filter.hpp's kLogZero, repeated here for device code).
-inline constexpr float kLogZeroValue = -1e30f;
-
-/// The smallest normal float (FLT_MIN, spelt out for device code).
-inline constexpr float kSmallestNormal = 1.17549435e-38f;
+/// log(0) inside the filter and the smallest normal float: the intake's (intake/frame.hpp), named
+/// here for the device code.
+inline constexpr float kLogZeroValue = intake::kLogZero;
+inline constexpr float kSmallestNormal = intake::kSmallestNormal;
 
 /// exp(scale * (x - shift)) where x > log(0), exactly 0 where x is log(0) or -inf, and 0 where the
 /// result would be subnormal (the host's detail::exp_or_zero says why).
