@@ -1,6 +1,8 @@
-// bench/ridge_routes: self-calibration's criteria on the ridge routes of the tests
-// (tests/filter/ridge_routes.hpp), against the naive recursion and the best fixed power per route.
-// Prints a table per kind of route and ends with one line of JSON.
+// bench/ridge_routes: self-calibration on the ridge routes of the tests (tests/filter/ridge_routes.hpp),
+// against the naive recursion, SeqLoc without self-calibration and the best fixed power per route:
+// the defaults (the one-step criterion with the frames' shared errors), the one-step criterion
+// alone (self_calibration_shared_lag 0) and the bank. Prints a table per kind of route and ends
+// with one line of JSON.
 
 #include <cmath>
 #include <cstdio>
@@ -18,23 +20,25 @@ using seqloc::filter::test::RidgeKind;
 using seqloc::filter::test::RidgeRoute;
 
 struct Row {
-  double naive = 0, off = 0, one_step = 0, bank = 0, best_fixed = 0;
+  double naive = 0, off = 0, defaults = 0, one_step = 0, bank = 0, best_fixed = 0;
 };
 
-Row measure(const RidgeKind& kind, int routes, int frames) {
+Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed) {
   FilterConfig naive = RidgeRoute::config();
   naive.etu = naive.mgr = naive.pas = naive.self_calibrate = false;
   FilterConfig off = RidgeRoute::config();
   off.self_calibrate = false;
+  const FilterConfig defaults = RidgeRoute::config();
   FilterConfig one_step = RidgeRoute::config();
-  one_step.self_calibration_bank = false;
+  one_step.self_calibration_shared_lag = 0;
   FilterConfig bank = RidgeRoute::config();
   bank.self_calibration_bank = true;
   Row mean;
   for (int r = 0; r < routes; ++r) {
-    const auto seed = static_cast<unsigned>(1000 + r);  // seeds the tests do not use
-    Row row{ridge_recall(kind, seed, naive, frames), ridge_recall(kind, seed, off, frames),
-            ridge_recall(kind, seed, one_step, frames), ridge_recall(kind, seed, bank, frames), 0};
+    const auto seed = first_seed + static_cast<unsigned>(r);
+    Row row{ridge_recall(kind, seed, naive, frames),    ridge_recall(kind, seed, off, frames),
+            ridge_recall(kind, seed, defaults, frames), ridge_recall(kind, seed, one_step, frames),
+            ridge_recall(kind, seed, bank, frames),     0};
     double best_power = 1;
     for (int i = -8; i <= 4; ++i) {  // fixed powers 2^-4 .. 2^2 in half octaves, as given otherwise
       const double power = std::exp2(i / 2.0), recall = ridge_recall(kind, seed, off, frames, power);
@@ -44,10 +48,13 @@ Row measure(const RidgeKind& kind, int routes, int frames) {
       }
     }
     std::printf(
-        "  route %d: naive %5.1f  no self-cal %5.1f  one-step %5.1f  bank %5.1f  best fixed %5.1f (power %.3g)\n", r,
-        row.naive, row.off, row.one_step, row.bank, row.best_fixed, best_power);
+        "  route %d: naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  best fixed "
+        "%5.1f "
+        "(power %.3g)\n",
+        r, row.naive, row.off, row.defaults, row.one_step, row.bank, row.best_fixed, best_power);
     mean.naive += row.naive / routes;
     mean.off += row.off / routes;
+    mean.defaults += row.defaults / routes;
     mean.one_step += row.one_step / routes;
     mean.bank += row.bank / routes;
     mean.best_fixed += row.best_fixed / routes;
@@ -59,14 +66,17 @@ Row measure(const RidgeKind& kind, int routes, int frames) {
 
 int main(int argc, char** argv) {
   int routes = 6, frames = 60;
+  unsigned first_seed = 1000;  // seeds the tests do not use
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string flag = argv[i];
     if (flag == "--routes") {
       routes = std::atoi(argv[i + 1]);
     } else if (flag == "--frames") {
       frames = std::atoi(argv[i + 1]);
+    } else if (flag == "--seed") {
+      first_seed = static_cast<unsigned>(std::strtoul(argv[i + 1], nullptr, 10));
     } else {
-      std::fprintf(stderr, "usage: bench_ridge_routes [--routes N] [--frames N]\n");
+      std::fprintf(stderr, "usage: bench_ridge_routes [--routes N] [--frames N] [--seed FIRST]\n");
       return 2;
     }
   }
@@ -76,18 +86,20 @@ int main(int argc, char** argv) {
   }
   const std::vector<std::pair<std::string, RidgeKind>> kinds{{"sharp_shared", seqloc::filter::test::sharp_shared()},
                                                              {"timid", seqloc::filter::test::timid()}};
-  std::string json =
-      "{\"bench\": \"ridge_routes\", \"routes\": " + std::to_string(routes) + ", \"frames\": " + std::to_string(frames);
+  std::string json = "{\"bench\": \"ridge_routes\", \"routes\": " + std::to_string(routes) +
+                     ", \"frames\": " + std::to_string(frames) + ", \"first_seed\": " + std::to_string(first_seed);
   for (const auto& [name, kind] : kinds) {
-    std::printf("%s (R@5m, %d routes x %d frames):\n", name.c_str(), routes, frames);
-    const Row m = measure(kind, routes, frames);
-    std::printf("  mean:    naive %5.1f  no self-cal %5.1f  one-step %5.1f  bank %5.1f  best fixed %5.1f\n", m.naive,
-                m.off, m.one_step, m.bank, m.best_fixed);
+    std::printf("%s (R@5m, %d routes x %d frames, seeds from %u):\n", name.c_str(), routes, frames, first_seed);
+    const Row m = measure(kind, routes, frames, first_seed);
+    std::printf(
+        "  mean:    naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  best fixed "
+        "%5.1f\n",
+        m.naive, m.off, m.defaults, m.one_step, m.bank, m.best_fixed);
     char buffer[256];
     std::snprintf(buffer, sizeof buffer,
-                  ", \"%s\": {\"naive\": %.1f, \"no_self_calibration\": %.1f, \"one_step\": %.1f, \"bank\": %.1f, "
-                  "\"best_fixed\": %.1f}",
-                  name.c_str(), m.naive, m.off, m.one_step, m.bank, m.best_fixed);
+                  ", \"%s\": {\"naive\": %.1f, \"no_self_calibration\": %.1f, \"defaults\": %.1f, "
+                  "\"one_step_alone\": %.1f, \"bank\": %.1f, \"best_fixed\": %.1f}",
+                  name.c_str(), m.naive, m.off, m.defaults, m.one_step, m.bank, m.best_fixed);
     json += buffer;
   }
   std::printf("%s}\n", json.c_str());

@@ -227,6 +227,7 @@ void SeqLocFilter::rebase(BeliefVolume belief, const std::optional<Pose>& last_e
 void SeqLocFilter::recentre(int du, int dv) {
   belief_.recentre(du, dv);
   cached_min_.reset();
+  decisions_.recentre(du, dv);
   if (impl_->bank) impl_->bank->recentre(du, dv);
   if (last_estimate_) {
     last_estimate_->u -= du;
@@ -305,7 +306,10 @@ void SeqLocFilter::predict(const Odometry& odometry) {
 
 FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
                                std::span<const float> road_distance_m, const std::optional<GpsFix>& gps) {
-  if (!first_) predict(odometry);
+  if (!first_) {
+    predict(odometry);
+    decisions_.track(odometry, last_estimate_);
+  }
   FrameResult result = update(frame, crop, road_distance_m, gps);
   if (last_estimate_ && !first_) result.relocalized = decisions_.relocalized(*last_estimate_, odometry, result.argmax);
   last_estimate_ = result.pose;
@@ -332,6 +336,7 @@ FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& cro
   // Where ETU's weight does not read the powered frame's entropy, the pass over the frame that
   // finds it is left to temper(), which may hand it the powered frame it computes anyway.
   const bool shape_in_temper = calibrating && !decisions_.etu_reads_powered_frame();
+  if (calibrating) decisions_.observe(given, crop);
   FrameResult result = weigh(given, weighting, calibrating, shape_in_temper);
   if (calibrating) retemper();
   const float outside = temper(given, result, shape_in_temper);
@@ -351,7 +356,7 @@ FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const std::optional<
   // the given frame, which also bins the frame's cells by depth for the estimator.
   FrameResult result;
   result.volume_power =
-      StepDecisions::power(weighting, calibrating, impl_->bank ? impl_->bank->power() : impl_->estimator.power());
+      decisions_.frame_power(weighting, calibrating, impl_->bank ? impl_->bank->power() : impl_->estimator.power());
   if (calibrating && !impl_->bank) {
     for (auto& worker : impl_->workers) worker.frame_cells.clear();
   }
@@ -400,8 +405,8 @@ void SeqLocFilter::retemper() {
   // the one the belief was last raised to (frames between go in at the power of their step). The
   // one-step criterion: once, when the hold is released (it is not taken again), from the power
   // held until then (1, or an estimate followed far under 1). StepDecisions decides when.
-  const double ratio = impl_->bank ? decisions_.bank_ratio(impl_->bank->power())
-                                   : decisions_.hold_ratio(impl_->estimator.power(), impl_->estimator.held());
+  const double ratio = impl_->bank ? decisions_.bank_belief_ratio(impl_->bank->power())
+                                   : decisions_.belief_ratio(impl_->estimator.power(), impl_->estimator.held());
   retemper_by(static_cast<float>(ratio));
 }
 

@@ -1,13 +1,20 @@
 #include "seqloc/filter/step_decisions.hpp"
 
 #include <cmath>
+#include <limits>
 
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/units.hpp"
 #include "seqloc/filter/belief.hpp"
+#include "seqloc/filter/seqloc_filter.hpp"
 
 namespace seqloc::filter {
+namespace {
+
+const double kHalfOctaveDown = std::exp2(-0.5);
+
+}  // namespace
 
 double route_reference_entropy(std::span<const double> entropies) {
   const std::size_t n = std::min(entropies.size(), kEtuRouteFrames);
@@ -20,7 +27,70 @@ void StepDecisions::reset() {
   entropies_.clear();
   was_held_ = true;
   last_power_ = 1;
+  shared_.reset();
+  dead_u_ = dead_v_ = 0;
+  predicted_.reset();
+  last_factor_ = 1;
 }
+
+void StepDecisions::track(const Odometry& odometry, const std::optional<Pose>& estimate) {
+  predicted_.reset();
+  if (!estimate) return;
+  double du = 0, dv = 0;
+  detail::displacement_cells(odometry, estimate->heading_deg, du, dv);
+  dead_u_ += du;
+  dead_v_ += dv;
+  predicted_ = Pose{estimate->u + du, estimate->v + dv, estimate->heading_deg};
+}
+
+void StepDecisions::recentre(int du, int dv) {
+  dead_u_ -= du;
+  dead_v_ -= dv;
+  if (predicted_) {
+    predicted_->u -= du;
+    predicted_->v -= dv;
+  }
+}
+
+void StepDecisions::observe(const PreparedFrame& frame, const CropPose& crop) {
+  if (config_.self_calibration_shared_lag == 0) return;
+  const Pose peak = single_frame_pose(frame, crop);
+  if (predicted_ &&
+      std::hypot(peak.u - predicted_->u, peak.v - predicted_->v) * core::kCellM > config_.relocalization_jump_m) {
+    shared_.add(std::numeric_limits<double>::quiet_NaN(), 0);
+    return;
+  }
+  shared_.add((peak.u - dead_u_) * core::kCellM, -(peak.v - dead_v_) * core::kCellM);
+}
+
+double StepDecisions::shared_factor() const {
+  return config_.self_calibration_shared_lag == 0 ? 1.0 : shared_.factor();
+}
+
+double StepDecisions::shared_cap(double estimate) const {
+  const int lag = config_.self_calibration_shared_lag;
+  const bool independent = lag == 0 || (shared_.pairs() >= lag && shared_factor() >= kHalfOctaveDown);
+  return independent ? estimate : std::min(estimate, 1.0);
+}
+
+double StepDecisions::frame_power(const std::optional<FrameWeighting>& weighting, bool calibrating,
+                                  double estimate) const {
+  return power(weighting, calibrating, shared_cap(estimate) * shared_factor());
+}
+
+double StepDecisions::shared_ratio() {
+  const double factor = shared_factor();
+  if (std::abs(std::log2(factor / last_factor_)) < 0.5) return 1.0;
+  const double ratio = factor / last_factor_;
+  last_factor_ = factor;
+  return ratio;
+}
+
+double StepDecisions::belief_ratio(double estimate, bool held) {
+  return hold_ratio(shared_cap(estimate), held) * shared_ratio();
+}
+
+double StepDecisions::bank_belief_ratio(double power) { return bank_ratio(shared_cap(power)) * shared_ratio(); }
 
 double StepDecisions::power(const std::optional<FrameWeighting>& weighting, bool calibrating, double estimate) {
   if (weighting) return weighting->volume_power;

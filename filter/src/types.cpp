@@ -43,6 +43,9 @@ std::span<const FilterConfigField> filter_config_fields() {
       {"self_calibration_replay_frames", &C::self_calibration_replay_frames,
        "Self-calibration: the route's first this many frames are filtered again at the power it settles on (0: "
        "never)"},
+      {"self_calibration_shared_lag", &C::self_calibration_shared_lag,
+       "Self-calibration: the lag (frames) at which the frames' peaks are compared to read how much consecutive "
+       "frames share their errors (0: off)"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},
@@ -108,6 +111,9 @@ void FilterConfig::validate() const {
   }
   if (self_calibration_replay_frames < 0 || self_calibration_replay_frames > 64) {
     fail("self_calibration_replay_frames", self_calibration_replay_frames, "must be in [0, 64] frames");
+  }
+  if (self_calibration_shared_lag != 0 && (self_calibration_shared_lag < 2 || self_calibration_shared_lag > 1000)) {
+    fail("self_calibration_shared_lag", self_calibration_shared_lag, "must be 0 or in [2, 1000] frames");
   }
   if (threads < 1 || threads > 256) fail("threads", threads, "must be in [1, 256]");
 }

@@ -130,6 +130,7 @@ void DeviceFilter::rebase(const filter::BeliefVolume& belief, const std::optiona
 void DeviceFilter::recentre(int du, int dv) {
   engine_->recentre(du, dv);
   cached_min_.reset();
+  decisions_.recentre(du, dv);
   if (last_estimate_) {
     last_estimate_->u -= du;
     last_estimate_->v -= dv;
@@ -158,7 +159,10 @@ void DeviceFilter::predict(const filter::Odometry& odometry) {
 FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                                const filter::Odometry& odometry, std::span<const float> road_distance_m,
                                const std::optional<filter::GpsFix>& gps) {
-  if (!first_) predict(odometry);
+  if (!first_) {
+    predict(odometry);
+    decisions_.track(odometry, last_estimate_);
+  }
   FrameResult result = update(frame, crop, road_distance_m, gps);
   if (last_estimate_ && !first_) result.relocalized = decisions_.relocalized(*last_estimate_, odometry, result.argmax);
   last_estimate_ = result.pose;
@@ -169,7 +173,7 @@ FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter:
 FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame,
                                 const std::optional<filter::FrameWeighting>& weighting, bool calibrating) {
   FrameResult result;
-  result.volume_power = filter::StepDecisions::power(weighting, calibrating, estimator_.power());
+  result.volume_power = decisions_.frame_power(weighting, calibrating, estimator_.power());
   // The powered frame's peak and entropy (SeqLocFilter's scan_frame): -log Z and
   // log Z - k sum(e^{k r} r) / Z.
   float peak = weighting.has_value() ? weighting->peak_log_prob : frame.max_log_prob;
@@ -189,7 +193,7 @@ FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame,
 void DeviceFilter::retemper() {
   // SeqLocFilter::retemper: once the hold releases, the belief is raised to the ratio of the new
   // power to the one its frames went in at (StepDecisions::hold_ratio).
-  const auto ratio = static_cast<float>(decisions_.hold_ratio(estimator_.power(), estimator_.held()));
+  const auto ratio = static_cast<float>(decisions_.belief_ratio(estimator_.power(), estimator_.held()));
   if (first_ || ratio == 1.0f) return;
   if (engine_->raise(ratio)) cached_min_.reset();
 }
@@ -207,6 +211,7 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   }
   const bool calibrating = config_.self_calibrate && !weighting;
   engine_->load_frame(frame);
+  if (calibrating) decisions_.observe(frame, crop);
   FrameResult result = weigh(frame, weighting, calibrating);
   if (calibrating) retemper();
 

@@ -132,5 +132,108 @@ TEST(StepDecisions, ThePoweredPeakIsTheTemperedFramesPeak) {
   }
 }
 
+// A frame whose only peak is at crop cell (v, u), heading bin 0, on a 9 x 9 crop of 8 bins.
+PreparedFrame peak_at(int v, int u) {
+  std::vector<float> values(9 * 9 * 8, -30.0f);
+  values[(static_cast<std::size_t>(v) * 9 + static_cast<std::size_t>(u)) * 8] = 0.0f;
+  return prepare_frame({values.data(), VolumeType::float32, VolumeValues::log_prob, 9, 9, 8, 0.5}, 8);
+}
+
+TEST(StepDecisions, FramesThatShareTheirErrorsAreFlattenedAndNotSharpened) {
+  // The vehicle stands still heading north with its estimate at the crop's centre (10, 10). Route
+  // A's peaks drift one cell a frame along u and back every 16 frames (consecutive peaks 0.5 m
+  // apart, peaks 10 frames apart 1 to 4 m apart: shared errors); route B's alternate between two
+  // cells 2 m apart (2 m at odd lags, none at even ones: nothing shared).
+  FilterConfig c = small();
+  c.relocalization_jump_m = 100;
+  const CropPose crop{10, 10, 0};
+  const Pose estimate{10, 10, 0};
+  StepDecisions shared(c), independent(c);
+  for (int t = 0; t < 40; ++t) {
+    shared.track({}, estimate);
+    independent.track({}, estimate);
+    const int drift = t % 16 < 8 ? t % 16 : 16 - t % 16;
+    shared.observe(peak_at(4, drift), crop);
+    independent.observe(peak_at(4, t % 2 == 0 ? 0 : 4), crop);
+  }
+  EXPECT_GT(shared.shared_errors().correlation(), 0.5);
+  EXPECT_LT(shared.shared_factor(), 0.5);
+  EXPECT_EQ(shared.shared_cap(4.0), 1.0) << "the estimator may not sharpen shared frames";
+  EXPECT_EQ(shared.shared_cap(0.25), 0.25) << "it may flatten them";
+  EXPECT_DOUBLE_EQ(shared.frame_power(std::nullopt, true, 4.0), shared.shared_factor());
+  EXPECT_EQ(shared.frame_power(FrameWeighting{0.3, 1, 0}, true, 4.0), 0.3) << "a repeated pass's power stands";
+  EXPECT_EQ(shared.frame_power(std::nullopt, false, 4.0), 1.0);
+
+  EXPECT_EQ(independent.shared_errors().correlation(), 0.0) << "lag 10 is even: the same 2 m at both lags";
+  EXPECT_EQ(independent.shared_factor(), 1.0);
+  EXPECT_EQ(independent.shared_cap(4.0), 4.0) << "independent frames may be sharpened";
+
+  c.self_calibration_shared_lag = 0;
+  StepDecisions off(c);
+  off.observe(peak_at(4, 0), crop);
+  EXPECT_EQ(off.shared_factor(), 1.0);
+  EXPECT_EQ(off.shared_cap(4.0), 4.0);
+}
+
+TEST(StepDecisions, TheEstimatorSharpensOnlyAfterLagPairsHaveShownIndependentFrames) {
+  FilterConfig c = small();
+  c.relocalization_jump_m = 100;
+  StepDecisions d(c);
+  const CropPose crop{10, 10, 0};
+  for (int t = 0; t < 2 * c.self_calibration_shared_lag; ++t) {
+    EXPECT_EQ(d.shared_cap(4.0), 1.0) << "frame " << t << ": " << d.shared_errors().pairs() << " pairs";
+    d.track({}, Pose{10, 10, 0});
+    d.observe(peak_at(4, t % 2 == 0 ? 0 : 4), crop);
+  }
+  EXPECT_EQ(d.shared_errors().pairs(), c.self_calibration_shared_lag);
+  EXPECT_EQ(d.shared_cap(4.0), 4.0);
+}
+
+TEST(StepDecisions, APeakFartherThanARelocalizationsJumpIsLeftOut) {
+  FilterConfig c = small();
+  c.relocalization_jump_m = 2;
+  c.self_calibration_shared_lag = 2;
+  StepDecisions d(c);
+  const CropPose crop{10, 10, 0};
+  // The estimate heads north and moves 1 m (2 cells) a frame: each prediction is 2 cells north of
+  // the estimate it moves. Peaks at the crop's centre (10, 10) are where the first three are
+  // predicted; the fourth prediction is (10, 12), and a peak at crop row 0, window (10, 6), lies
+  // 3 m from it.
+  Pose estimate{10, 12, 0};
+  const Odometry step{1, 0, 0};
+  d.track(step, estimate);
+  d.observe(peak_at(4, 4), crop);
+  d.track(step, estimate);
+  d.observe(peak_at(4, 4), crop);
+  d.track(step, estimate);
+  d.observe(peak_at(4, 4), crop);
+  EXPECT_EQ(d.shared_errors().pairs(), 1);
+  d.track(step, Pose{10, 14, 0});  // predicted at (10, 12): the peak at crop row 0 is (10, 6), 3 m off
+  d.observe(peak_at(0, 4), crop);
+  EXPECT_EQ(d.shared_errors().pairs(), 1) << "left out: no pair";
+  d.reset();
+  EXPECT_EQ(d.shared_errors().pairs(), 0);
+}
+
+TEST(StepDecisions, TheBeliefIsRaisedWhenTheSharedFactorMovesHalfAnOctave) {
+  FilterConfig c = small();
+  c.relocalization_jump_m = 100;
+  StepDecisions d(c);
+  const CropPose crop{10, 10, 0};
+  double product = 1;
+  for (int t = 0; t < 40; ++t) {
+    d.track({}, Pose{10, 10, 0});
+    const int drift = t % 16 < 8 ? t % 16 : 16 - t % 16;
+    d.observe(peak_at(4, drift), crop);
+    const double ratio = d.belief_ratio(1.0, true);
+    EXPECT_TRUE(ratio == 1.0 || std::abs(std::log2(ratio)) >= 0.5) << t << ": " << ratio;
+    product *= ratio;
+  }
+  // The belief's frames went in at the last factor it was raised to: within half an octave of
+  // the factor now.
+  EXPECT_LT(std::abs(std::log2(product / d.shared_factor())), 0.5);
+  EXPECT_LT(product, 0.75);
+}
+
 }  // namespace
 }  // namespace seqloc::filter

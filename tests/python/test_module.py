@@ -234,7 +234,8 @@ class FilterOnline(unittest.TestCase):
                 value = not default
             elif isinstance(default, int):
                 value = {"width": 64, "height": 48, "headings": 32, "threads": 2, "pas_radius": 5,
-                         "subbin_half_width": 3, "self_calibration_replay_frames": 8}[name]
+                         "subbin_half_width": 3, "self_calibration_replay_frames": 8,
+                         "self_calibration_shared_lag": 5}[name]
             else:
                 value = default * 0.5 if default else 0.5
             config = {"width": 64, "height": 48, "headings": 32}

@@ -16,8 +16,12 @@
 
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/types.hpp"
+#include "seqloc/intake/frame.hpp"
+#include "seqloc/selfcal/shared_errors.hpp"
 
 namespace seqloc::filter {
+
+using intake::PreparedFrame;
 
 /// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
 /// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
@@ -53,7 +57,8 @@ using CellValue = std::function<double(int u, int v, int k)>;
 
 class StepDecisions {
  public:
-  explicit StepDecisions(const FilterConfig& config) : config_(config) {}
+  explicit StepDecisions(const FilterConfig& config)
+      : config_(config), shared_(config.self_calibration_shared_lag > 0 ? config.self_calibration_shared_lag : 2) {}
 
   /// A new route: ETU's route reference and the hold's memory start again.
   void reset();
@@ -82,6 +87,35 @@ class StepDecisions {
   /// moved half an octave or more from the one the belief was last raised to, else 1.
   [[nodiscard]] double bank_ratio(double power);
 
+  /// Errors the frames share (FilterConfig::self_calibration_shared_lag; selfcal/shared_errors.hpp).
+  /// Each backend tells the decisions where the route goes: `track` after each prediction (the
+  /// dead-reckoned point moves by the odometry along the last estimate's heading), `recentre` with
+  /// the window, and `observe` with each frame it calibrates from (its single-frame peak against
+  /// that point; a peak farther than relocalization_jump_m from the last estimate moved by the
+  /// odometry is left out as another place).
+  void track(const Odometry& odometry, const std::optional<Pose>& estimate);
+  void recentre(int du, int dv);
+  void observe(const PreparedFrame& frame, const CropPose& crop);
+  /// c = (1 - rho) / (1 + rho), the power the frames' correlation asks for on top of the
+  /// estimator's (1 with the lag 0).
+  [[nodiscard]] double shared_factor() const;
+  /// The estimator's power as the frames' correlation lets it stand: at most 1 until the frames
+  /// have shown that they do not share their errors (a factor within half an octave of 1 from at
+  /// least `lag` pairs), because what the estimator reads as sharpness is what shared errors
+  /// inflate.
+  [[nodiscard]] double shared_cap(double estimate) const;
+  [[nodiscard]] const selfcal::SharedErrors& shared_errors() const { return shared_; }
+
+  /// The power a frame goes in at: a repeated pass's; while calibrating, the estimator's
+  /// `estimate` capped (shared_cap) and times shared_factor(); else 1.
+  [[nodiscard]] double frame_power(const std::optional<FrameWeighting>& weighting, bool calibrating,
+                                   double estimate) const;
+  /// The ratio the belief is raised by at this step: the one-step criterion's hold_ratio (or, for
+  /// the bank, bank_ratio) of the capped estimate, times the shared factor's ratio to the one the
+  /// belief's frames went in at when it has moved half an octave or more.
+  [[nodiscard]] double belief_ratio(double estimate, bool held);
+  [[nodiscard]] double bank_belief_ratio(double power);
+
   /// The early replay's rule (FilterConfig::self_calibration_replay_frames): the kept frames are
   /// filtered again when any of them went in (`kept_powers`) half an octave or more away from
   /// `power`, the power of the newest frame, and the route has been replayed fewer than
@@ -103,10 +137,18 @@ class StepDecisions {
   [[nodiscard]] const std::vector<double>& route_entropies() const { return entropies_; }
 
  private:
+  /// shared_factor()'s ratio to the one the belief's frames went in at, when it has moved half an
+  /// octave or more since (1 otherwise).
+  [[nodiscard]] double shared_ratio();
+
   FilterConfig config_;
   std::vector<double> entropies_;
   bool was_held_ = true;   ///< the estimator's hold at the last frame
   double last_power_ = 1;  ///< the power the belief's frames went in at
+  selfcal::SharedErrors shared_;
+  double dead_u_ = 0, dead_v_ = 0;  ///< the dead-reckoned point, window cells
+  double last_factor_ = 1;          ///< the shared factor the belief's frames went in at
+  std::optional<Pose> predicted_;   ///< the last estimate moved by this step's odometry
 };
 
 }  // namespace seqloc::filter
