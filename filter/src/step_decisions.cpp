@@ -29,34 +29,33 @@ void StepDecisions::reset() {
   last_power_ = 1;
   shared_.reset();
   dead_u_ = dead_v_ = 0;
-  predicted_.reset();
+  previous_.reset();
   last_factor_ = 1;
 }
 
 void StepDecisions::track(const Odometry& odometry, const std::optional<Pose>& estimate) {
-  predicted_.reset();
+  previous_ = estimate;
+  step_ = odometry;
   if (!estimate) return;
   double du = 0, dv = 0;
   detail::displacement_cells(odometry, estimate->heading_deg, du, dv);
   dead_u_ += du;
   dead_v_ += dv;
-  predicted_ = Pose{estimate->u + du, estimate->v + dv, estimate->heading_deg};
 }
 
 void StepDecisions::recentre(int du, int dv) {
   dead_u_ -= du;
   dead_v_ -= dv;
-  if (predicted_) {
-    predicted_->u -= du;
-    predicted_->v -= dv;
+  if (previous_) {
+    previous_->u -= du;
+    previous_->v -= dv;
   }
 }
 
 void StepDecisions::observe(const PreparedFrame& frame, const CropPose& crop) {
   if (config_.self_calibration_shared_lag == 0) return;
   const Pose peak = single_frame_pose(frame, crop);
-  if (predicted_ &&
-      std::hypot(peak.u - predicted_->u, peak.v - predicted_->v) * core::kCellM > config_.relocalization_jump_m) {
+  if (previous_ && relocalized(*previous_, step_, peak)) {
     shared_.add(std::numeric_limits<double>::quiet_NaN(), 0);
     return;
   }

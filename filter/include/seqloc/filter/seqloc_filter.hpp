@@ -126,7 +126,6 @@ class SeqLocFilter {
   /// Self-calibration's one-step estimator (its power is what the next step uses when the bank is
   /// off; unused otherwise).
   [[nodiscard]] const PowerEstimator& calibration() const;
-  [[nodiscard]] const StepDecisions& decisions() const { return decisions_; }
   /// Self-calibration's bank (power_bank.hpp; its power is what the next step uses), or nullptr
   /// when self-calibration or the bank is off.
   [[nodiscard]] const PowerBank* power_bank() const;

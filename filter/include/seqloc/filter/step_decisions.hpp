@@ -148,7 +148,8 @@ class StepDecisions {
   selfcal::SharedErrors shared_;
   double dead_u_ = 0, dead_v_ = 0;  ///< the dead-reckoned point, window cells
   double last_factor_ = 1;          ///< the shared factor the belief's frames went in at
-  std::optional<Pose> predicted_;   ///< the last estimate moved by this step's odometry
+  std::optional<Pose> previous_;    ///< the estimate before this step and its odometry (track), by
+  Odometry step_;                   ///< which observe() judges a peak with relocalized()
 };
 
 }  // namespace seqloc::filter
