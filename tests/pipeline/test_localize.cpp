@@ -435,7 +435,14 @@ namespace seqloc::pipeline::localize_tests {
 namespace {
 
 TEST(Localize, MemoryStaysConstantAlongA20KmRoute) {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(__SANITIZE_ADDRESS__)  // GCC
+#define SEQLOC_UNDER_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)  // clang, which does not define GCC's macro before clang 17
+#define SEQLOC_UNDER_ASAN 1
+#endif
+#endif
+#if defined(SEQLOC_UNDER_ASAN)
   // ASan keeps freed blocks resident in its quarantine (up to 256 MB by default), so RSS there
   // measures the quarantine, not the program; the developer build runs this check.
   GTEST_SKIP() << "RSS is not the program's memory under AddressSanitizer";
