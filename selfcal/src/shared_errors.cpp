@@ -10,8 +10,9 @@
 namespace seqloc::selfcal {
 namespace {
 
-double median(const std::deque<double>& values) {
-  std::vector<double> v(values.begin(), values.end());
+bool valid(const std::array<double, 2>& e) { return std::isfinite(e[0]) && std::isfinite(e[1]); }
+
+double median(std::vector<double> v) {
   const auto middle = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
   std::nth_element(v.begin(), middle, v.end());
   if (v.size() % 2 == 1) return *middle;
@@ -30,39 +31,43 @@ SharedErrors::SharedErrors(int lag, double floor_m) : lag_(lag), floor2_(floor_m
 }
 
 void SharedErrors::reset() {
-  recent_.clear();
-  short_.clear();
-  long_.clear();
+  errors_.clear();
   pairs_ = 0;
+  lag_read_ = kShortestLag;
   ratio_ = 1;
   rho_ = 0;
 }
 
 void SharedErrors::add(double east_m, double north_m) {
-  recent_.push_back({east_m, north_m});
-  if (recent_.size() > static_cast<std::size_t>(lag_) + 1) recent_.pop_front();
-  if (recent_.size() <= static_cast<std::size_t>(lag_)) return;
-  const auto valid = [](const std::array<double, 2>& e) { return std::isfinite(e[0]) && std::isfinite(e[1]); };
-  if (!valid(recent_.back())) return;
-  const auto squared_distance = [](const std::array<double, 2>& a, const std::array<double, 2>& b) {
-    const double dx = a[0] - b[0], dy = a[1] - b[1];
-    return dx * dx + dy * dy;
-  };
-  // The newest frame against the one before and the one H before, each pair where both frames
-  // were taken; the last kPairs pairs of each lag are kept.
-  const auto keep = [](std::deque<double>& pairs, double d2) {
-    pairs.push_back(d2);
-    if (pairs.size() > kPairs) pairs.pop_front();
-  };
-  if (valid(recent_[recent_.size() - 2])) keep(short_, squared_distance(recent_.back(), recent_[recent_.size() - 2]));
-  if (valid(recent_.front())) keep(long_, squared_distance(recent_.back(), recent_.front()));
-  pairs_ = static_cast<int>(std::min(short_.size(), long_.size()));
-  if (pairs_ == 0) return;
+  errors_.push_back({east_m, north_m});
+  if (errors_.size() > kPairs + static_cast<std::size_t>(lag_)) errors_.pop_front();
+  if (!valid(errors_.back())) return;
+  // The lag read: H once the route has 2H frames, before that the longest lag with as many frames
+  // after it as before (at least kShortestLag), so that a route shows shared errors over its first
+  // frames.
+  const int lag = std::clamp(static_cast<int>(errors_.size() / 2), std::min(kShortestLag, lag_), lag_);
+  const std::vector<double> ones = squared_steps(1), longs = squared_steps(lag);
+  pairs_ = lag == lag_ ? static_cast<int>(longs.size()) : 0;
+  lag_read_ = lag;
+  const int pairs = static_cast<int>(std::min(ones.size(), longs.size()));
+  if (pairs == 0) return;
   // The ratio of the medians, shrunk towards 1 (independent frames) in its log as if `lag` pairs
   // of each had shown no difference: a few pairs cannot make the frames look shared.
-  const double log_ratio = std::log((median(long_) + floor2_) / (median(short_) + floor2_));
-  ratio_ = std::exp(log_ratio * pairs_ / (pairs_ + lag_));
-  rho_ = correlation_for_ratio(ratio_, lag_);
+  const double log_ratio = std::log((median(longs) + floor2_) / (median(ones) + floor2_));
+  ratio_ = std::exp(log_ratio * pairs / (pairs + lag));
+  rho_ = correlation_for_ratio(ratio_, lag);
+}
+
+std::vector<double> SharedErrors::squared_steps(int lag) const {
+  const std::size_t n = errors_.size(), h = static_cast<std::size_t>(lag);
+  std::vector<double> d2;
+  d2.reserve(std::min(n, kPairs));
+  for (std::size_t i = std::max(h, n - std::min(n, kPairs)); i < n; ++i) {
+    const auto& a = errors_[i];
+    const auto& b = errors_[i - h];
+    if (valid(a) && valid(b)) d2.push_back((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]));
+  }
+  return d2;
 }
 
 double SharedErrors::correlation_for_ratio(double r, int lag) {

@@ -243,8 +243,10 @@ TEST_P(Correlated, SelfCalibrationCostsNothingAgainstTheFramesAsGiven) {
   // self-calibration must do within 5 % of the frames as given (its mean position error), and the
   // brute-forced best fixed power is reported beside it (docs/filter.md, "Self-calibration": on
   // this generator the best power is set by PAS over a broad belief, not by the correlation).
+  // Sixteen routes: over four (61 .. 64, as this test had) one route moves the mean by 5 %.
   const double rho = GetParam();
-  const std::vector<unsigned> seeds{61, 62, 63, 64};
+  std::vector<unsigned> seeds;
+  for (unsigned seed = 61; seed <= 76; ++seed) seeds.push_back(seed);
   Generator probe(1);
   FilterConfig fixed = probe.config();
   fixed.self_calibrate = false;
@@ -357,10 +359,11 @@ TEST(SelfCalibration, ResetStartsFromThePrior) {
 // The ridge routes (ridge_routes.hpp): frames whose errors consecutive frames share, sharp and at
 // times distinctive and wrong (sharp_shared), or timid with the heading read backwards (timid).
 // The one-step criterion alone reads the shared errors as sharpness; the frames' correlation
-// (selfcal/shared_errors.hpp) must win back at least 5 points R@5m of what that costs, over six
-// routes of each kind (seeds the benchmark, bench/ridge_routes, does not use). It does not bring
-// the defaults to the naive recursion on every set of routes (docs/filter.md, "Where it fails"):
-// the message reports both beside it.
+// (selfcal/shared_errors.hpp) must win back at least 5 points R@5m of what that costs, and the
+// defaults must come within a point of the filter without self-calibration, over six routes of each
+// kind (seeds the benchmark, bench/ridge_routes, does not use). It does not bring the defaults to
+// the naive recursion on every set of routes (docs/filter.md, "Where it fails"): the message
+// reports it beside them.
 class Ridge : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(Ridge, TheFramesSharedErrorsWinBackWhatTheOneStepCriterionLoses) {
@@ -379,9 +382,13 @@ TEST_P(Ridge, TheFramesSharedErrorsWinBackWhatTheOneStepCriterionLoses) {
     recall_alone += test::ridge_recall(kind, seed, one_step_alone, 60) / 6;
     recall_defaults += test::ridge_recall(kind, seed, defaults, 60) / 6;
   }
-  EXPECT_GE(recall_defaults, recall_alone + 5)
-      << "defaults " << recall_defaults << ", the one-step criterion alone " << recall_alone << ", naive "
-      << recall_naive << ", without self-calibration " << recall_off;
+  const auto figures = [&] {
+    return "defaults " + std::to_string(recall_defaults) + ", the one-step criterion alone " +
+           std::to_string(recall_alone) + ", naive " + std::to_string(recall_naive) + ", without self-calibration " +
+           std::to_string(recall_off);
+  };
+  EXPECT_GE(recall_defaults, recall_alone + 5) << figures();
+  EXPECT_GE(recall_defaults, recall_off - 1) << figures();
 }
 
 INSTANTIATE_TEST_SUITE_P(SelfCalibration, Ridge, ::testing::Values("sharp_shared", "timid"),

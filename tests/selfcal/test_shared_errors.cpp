@@ -74,20 +74,34 @@ TEST(SharedErrors, TheFactorCountsTheFramesAsIndependentLooks) {
   EXPECT_EQ(read(0.999, 4000, 3).factor(), SharedErrors::kMinFactor) << "never under one look in 16";
 }
 
-TEST(SharedErrors, SaysNothingBeforeTheLagAndLittleFromAFewPairs) {
+TEST(SharedErrors, ReadsShortLagsOverTheFirstFramesAndLittleFromAFewPairs) {
   SharedErrors shared(10);
-  for (int t = 0; t <= 9; ++t) shared.add(t, 0);  // a steady drift: fully shared
-  EXPECT_EQ(shared.pairs(), 0);
-  EXPECT_EQ(shared.correlation(), 0.0);
-  EXPECT_EQ(shared.factor(), 1.0);
-  shared.add(10, 0);
-  EXPECT_EQ(shared.pairs(), 1);
-  // Log ratio log(100 + eps^2) - log(1 + eps^2), shrunk by 1 / (1 + 10).
   const double eps2 = 0.05 * 0.05;
-  EXPECT_NEAR(std::log(shared.ratio()), (std::log(100 + eps2) - std::log(1 + eps2)) / 11, 1e-12);
+  shared.add(0, 0);  // a steady drift of 1 m a frame: fully shared
+  shared.add(1, 0);
+  shared.add(2, 0);
+  EXPECT_EQ(shared.correlation(), 0.0) << "no pair at lag 3 yet";
+  EXPECT_EQ(shared.factor(), 1.0);
+  shared.add(3, 0);
+  // Four frames: lag 3 (one pair, |d|^2 = 9) against lag 1 (median 1), shrunk by 1 / (1 + 3).
+  EXPECT_EQ(shared.lag_read(), 3);
+  EXPECT_EQ(shared.pairs(), 0) << "pairs of the full lag only";
+  EXPECT_NEAR(std::log(shared.ratio()), (std::log(9 + eps2) - std::log(1 + eps2)) / 4, 1e-12);
+  const double rho = shared.correlation();
+  EXPECT_NEAR(1 + rho + rho * rho, shared.ratio(), 1e-9) << "(1 - rho^3) / (1 - rho)";
+  EXPECT_LT(shared.factor(), 1.0);
+  for (int t = 4; t <= 12; ++t) shared.add(t, 0);
+  EXPECT_EQ(shared.lag_read(), 6) << "13 frames: the longest lag with as many frames after it as before";
+  for (int t = 13; t <= 19; ++t) shared.add(t, 0);
+  EXPECT_EQ(shared.lag_read(), 10);
+  EXPECT_EQ(shared.pairs(), 10);
+  // Log ratio log(100 + eps^2) - log(1 + eps^2), shrunk by 10 / (10 + 10).
+  EXPECT_NEAR(std::log(shared.ratio()), (std::log(100 + eps2) - std::log(1 + eps2)) / 2, 1e-12);
+  EXPECT_EQ(shared.factor(), SharedErrors::kMinFactor) << "a drift that never changes: shared";
   shared.reset();
   EXPECT_EQ(shared.pairs(), 0);
   EXPECT_EQ(shared.ratio(), 1.0);
+  EXPECT_EQ(shared.factor(), 1.0);
 }
 
 TEST(SharedErrors, FramesLeftOutMakeNoPair) {
@@ -95,11 +109,16 @@ TEST(SharedErrors, FramesLeftOutMakeNoPair) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   shared.add(0, 0);
   shared.add(1, 0);
-  shared.add(nan, 0);  // the newest left out: no pair
   EXPECT_EQ(shared.pairs(), 0);
-  shared.add(3, 0);  // against a frame left out (lag 1) and frame 1 (lag 2): one long pair only
+  shared.add(nan, 0);  // left out: no pair with it
   EXPECT_EQ(shared.pairs(), 0);
-  shared.add(4, 0);  // lag 1 against frame 3, lag 2 against the frame left out
+  shared.add(3, 0);  // lag 2 against frame 1; lag 1 against the frame left out
+  EXPECT_EQ(shared.pairs(), 1);
+  const double after_three = shared.ratio();
+  // Pairs (1, 0) at lag 1 and (3, 1) at lag 2: log(4 + eps^2) - log(1 + eps^2), shrunk by 1 / 3.
+  const double eps2 = 0.05 * 0.05;
+  EXPECT_NEAR(std::log(after_three), (std::log(4 + eps2) - std::log(1 + eps2)) / 3, 1e-12);
+  shared.add(4, 0);  // lag 1 against frame 3; lag 2 against the frame left out
   EXPECT_EQ(shared.pairs(), 1);
   EXPECT_TRUE(std::isfinite(shared.ratio()));
 }

@@ -22,12 +22,16 @@
 // counts as one above the median, not as a hundred frames wrong by 2 m, and for Gaussian errors
 // the median's shape constant cancels (a mean of log |d|^2 would be as robust, but a floor under
 // it, needed where peaks on a grid coincide, biases it by the square root of floor over
-// variance). Then rho solves the equation above, and c follows.
+// variance). Then rho solves the equation above, and c follows. A route's first 2H frames are read
+// at the longest lag h < H with as many frames after it as before, at least 3 (gamma(h) / gamma(1) =
+// (1 - rho^h) / (1 - rho)): the frames that would lock a belief onto a shared error are its first,
+// and a lag of 3 already tells errors that persist from errors that do not.
 
 #include <algorithm>
 #include <array>
 #include <cstddef>
 #include <deque>
+#include <vector>
 
 namespace seqloc::selfcal {
 
@@ -42,27 +46,36 @@ class SharedErrors {
   /// that is not finite marks a frame left out (a peak at another place), and no pair is taken
   /// with it.
   void add(double east_m, double north_m);
-  /// rho from the frames so far: 0 until `lag` + 1 frames have come.
+  /// rho from the frames so far: 0 until a pair of each lag read has come.
   [[nodiscard]] double correlation() const { return rho_; }
   /// c = (1 - rho) / (1 + rho) in (0, 1]: the power that counts the frames as independent looks.
   [[nodiscard]] double factor() const { return std::max((1 - rho_) / (1 + rho_), kMinFactor); }
   static constexpr double kMinFactor = 1.0 / 16;
-  /// The pairs of each lag the medians are taken over (the route's last ones).
+  /// The shortest lag read over a route's first frames (lag 2 read on the ridge routes' first frames
+  /// swung the factor between 1/16 and 1 from one frame to the next).
+  static constexpr int kShortestLag = 3;
+  /// The frames the pairs of each lag are taken among (the route's last ones).
   static constexpr std::size_t kPairs = 1024;
-  /// gamma(H) / gamma(1) from the frames so far (1 until lag + 1 frames have come).
+  /// gamma(h) / gamma(1) from the frames so far, h the lag read (1 until a pair of each has come).
   [[nodiscard]] double ratio() const { return ratio_; }
+  /// The lag h the ratio compares with lag 1: the longest with as many frames after it as before,
+  /// from kShortestLag (or H if shorter) up to H, reached once the route has 2H frames.
+  [[nodiscard]] int lag_read() const { return lag_read_; }
+  /// Pairs of the full lag H the ratio was taken over (0 while a shorter lag is read).
   [[nodiscard]] int pairs() const { return pairs_; }
   void reset();
 
-  /// rho in [0, 1) with (1 - rho^H) / (1 - rho) = r (0 for r <= 1; near 1 for r near H).
+  /// rho in [0, 1) with (1 - rho^h) / (1 - rho) = r (0 for r <= 1; near 1 for r near h).
   [[nodiscard]] static double correlation_for_ratio(double r, int lag);
 
  private:
+  /// |d|^2 of the pairs (t, t - lag) whose frames are both among the last kPairs and were taken.
+  [[nodiscard]] std::vector<double> squared_steps(int lag) const;
+
   int lag_;
   double floor2_;
-  std::deque<std::array<double, 2>> recent_;  ///< the last lag + 1 errors, newest last
-  std::deque<double> short_, long_;           ///< |d|^2 of the last kPairs pairs at lags 1 and H
-  int pairs_ = 0;
+  std::deque<std::array<double, 2>> errors_;  ///< the last kPairs + H errors, newest last
+  int pairs_ = 0, lag_read_ = kShortestLag;
   double ratio_ = 1, rho_ = 0;
 };
 
