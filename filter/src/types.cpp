@@ -44,8 +44,8 @@ std::span<const FilterConfigField> filter_config_fields() {
        "Self-calibration: the route's first this many frames are filtered again at the power it settles on (0: "
        "never)"},
       {"self_calibration_shared_lag", &C::self_calibration_shared_lag,
-       "Self-calibration: the lag (frames) at which the frames' peaks are compared to read how much consecutive "
-       "frames share their errors (0: off)"},
+       "Self-calibration: the longest lag (frames) at which the frames' peaks are compared to read how much "
+       "consecutive frames share their errors (0: off)"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},

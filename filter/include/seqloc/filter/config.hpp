@@ -86,7 +86,8 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   int self_calibration_replay_frames = 24;
   /// Errors that consecutive frames share (selfcal/shared_errors.hpp): the frames are also raised
   /// to c = (1 - rho) / (1 + rho), rho their errors' correlation from frame to frame read from a
-  /// variogram of their peaks at lags 1 and this many frames (0: off).
+  /// variogram of their peaks at lags 1 and this many frames (over a route's first twice this many
+  /// frames, a shorter lag, from 3; 0: off).
   int self_calibration_shared_lag = 10;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the
