@@ -14,6 +14,17 @@ namespace {
 
 const double kHalfOctaveDown = std::exp2(-0.5);
 
+bool half_an_octave_apart(double a, double b) { return std::abs(std::log2(a / b)) >= 0.5; }
+
+/// now / last once `now` has moved half an octave or more from `last` (which then becomes `now`),
+/// else 1: the belief is raised only by moves that matter.
+double ratio_once_half_an_octave(double now, double& last) {
+  if (!half_an_octave_apart(now, last)) return 1.0;
+  const double ratio = now / last;
+  last = now;
+  return ratio;
+}
+
 }  // namespace
 
 double route_reference_entropy(std::span<const double> entropies) {
@@ -77,13 +88,7 @@ double StepDecisions::frame_power(const std::optional<FrameWeighting>& weighting
   return power(weighting, calibrating, shared_cap(estimate) * shared_factor());
 }
 
-double StepDecisions::shared_ratio() {
-  const double factor = shared_factor();
-  if (std::abs(std::log2(factor / last_factor_)) < 0.5) return 1.0;
-  const double ratio = factor / last_factor_;
-  last_factor_ = factor;
-  return ratio;
-}
+double StepDecisions::shared_ratio() { return ratio_once_half_an_octave(shared_factor(), last_factor_); }
 
 double StepDecisions::belief_ratio(double estimate, bool held) {
   return hold_ratio(shared_cap(estimate), held) * shared_ratio();
@@ -118,15 +123,10 @@ double StepDecisions::hold_ratio(double power, bool held) {
 bool StepDecisions::replay_due(double power, std::span<const double> kept_powers, int replays) {
   if (replays >= kMaxReplays) return false;
   return std::any_of(kept_powers.begin(), kept_powers.end(),
-                     [power](double kept) { return std::abs(std::log2(kept / power)) >= 0.5; });
+                     [power](double kept) { return half_an_octave_apart(kept, power); });
 }
 
-double StepDecisions::bank_ratio(double power) {
-  if (std::abs(std::log2(power / last_power_)) < 0.5) return 1.0;
-  const double ratio = power / last_power_;
-  last_power_ = power;
-  return ratio;
-}
+double StepDecisions::bank_ratio(double power) { return ratio_once_half_an_octave(power, last_power_); }
 
 Pose StepDecisions::refine(int u_star, int v_star, int k_star, int width, int height, const PositionMasses& masses,
                            const CellValue& value) const {

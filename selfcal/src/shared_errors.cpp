@@ -33,7 +33,6 @@ SharedErrors::SharedErrors(int lag, double floor_m) : lag_(lag), floor2_(floor_m
 void SharedErrors::reset() {
   errors_.clear();
   pairs_ = 0;
-  lag_read_ = kShortestLag;
   ratio_ = 1;
   rho_ = 0;
 }
@@ -42,13 +41,9 @@ void SharedErrors::add(double east_m, double north_m) {
   errors_.push_back({east_m, north_m});
   if (errors_.size() > kPairs + static_cast<std::size_t>(lag_)) errors_.pop_front();
   if (!valid(errors_.back())) return;
-  // The lag read: H once the route has 2H frames, before that the longest lag with as many frames
-  // after it as before (at least kShortestLag), so that a route shows shared errors over its first
-  // frames.
-  const int lag = std::clamp(static_cast<int>(errors_.size() / 2), std::min(kShortestLag, lag_), lag_);
+  const int lag = lag_for(errors_.size());
   const std::vector<double> ones = squared_steps(1), longs = squared_steps(lag);
   pairs_ = lag == lag_ ? static_cast<int>(longs.size()) : 0;
-  lag_read_ = lag;
   const int pairs = static_cast<int>(std::min(ones.size(), longs.size()));
   if (pairs == 0) return;
   // The ratio of the medians, shrunk towards 1 (independent frames) in its log as if `lag` pairs
@@ -56,6 +51,12 @@ void SharedErrors::add(double east_m, double north_m) {
   const double log_ratio = std::log((median(longs) + floor2_) / (median(ones) + floor2_));
   ratio_ = std::exp(log_ratio * pairs / (pairs + lag));
   rho_ = correlation_for_ratio(ratio_, lag);
+}
+
+int SharedErrors::lag_for(std::size_t frames) const {
+  // H once the route has 2H frames, before that the longest lag with as many frames after it as
+  // before (at least kShortestLag), so that a route shows shared errors over its first frames.
+  return std::clamp(static_cast<int>(std::min(frames / 2, kPairs)), std::min(kShortestLag, lag_), lag_);
 }
 
 std::vector<double> SharedErrors::squared_steps(int lag) const {

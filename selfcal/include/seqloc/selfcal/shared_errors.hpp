@@ -60,7 +60,7 @@ class SharedErrors {
   [[nodiscard]] double ratio() const { return ratio_; }
   /// The lag h the ratio compares with lag 1: the longest with as many frames after it as before,
   /// from kShortestLag (or H if shorter) up to H, reached once the route has 2H frames.
-  [[nodiscard]] int lag_read() const { return lag_read_; }
+  [[nodiscard]] int lag_read() const { return lag_for(errors_.size()); }
   /// Pairs of the full lag H the ratio was taken over (0 while a shorter lag is read).
   [[nodiscard]] int pairs() const { return pairs_; }
   void reset();
@@ -69,13 +69,15 @@ class SharedErrors {
   [[nodiscard]] static double correlation_for_ratio(double r, int lag);
 
  private:
+  /// The lag read among `frames` kept errors (lag_read()).
+  [[nodiscard]] int lag_for(std::size_t frames) const;
   /// |d|^2 of the pairs (t, t - lag) whose frames are both among the last kPairs and were taken.
   [[nodiscard]] std::vector<double> squared_steps(int lag) const;
 
   int lag_;
   double floor2_;
   std::deque<std::array<double, 2>> errors_;  ///< the last kPairs + H errors, newest last
-  int pairs_ = 0, lag_read_ = kShortestLag;
+  int pairs_ = 0;
   double ratio_ = 1, rho_ = 0;
 };
 
