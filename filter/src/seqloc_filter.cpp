@@ -30,7 +30,7 @@ using detail::displacement_cells;
 namespace {
 
 // The CPU belief's position masses for StepDecisions::refine.
-PositionMasses position_masses(const BeliefVolume& belief) {
+PositionMasses masses_of(const BeliefVolume& belief) {
   return [&belief](int u0, int v0, int u1, int v1, std::span<double> out) {
     std::size_t i = 0;
     for (int v = v0; v <= v1; ++v) {
@@ -47,28 +47,17 @@ Pose peak_anchored_position(const BeliefVolume& belief, int u_star, int v_star, 
   pas_alone.pas = true;
   pas_alone.pas_radius = radius;
   pas_alone.subbin_heading = false;
-  const Pose p = StepDecisions(pas_alone).refine(u_star, v_star, 0, belief.width(), belief.height(),
-                                                 position_masses(belief), nullptr);
+  const Pose p =
+      StepDecisions(pas_alone).refine(u_star, v_star, 0, belief.width(), belief.height(), masses_of(belief), nullptr);
   return {p.u, p.v, 0};
 }
 
 // ---------------------------------------------------------------------------------------------
 // The filter
 
-namespace {
-
-/// What the filter reads of a frame raised to a power: its peak log-probability and entropy.
-struct FrameShape {
-  float max_log_prob;
-  double entropy;
-};
-
-}  // namespace
-
 struct SeqLocFilter::Impl {
   BeliefVolume scratch;           // the other buffer of predict
   AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
-  PowerEstimator estimator;
   std::optional<PowerBank> bank;  // self-calibration's judge when FilterConfig::self_calibration_bank
   // Self-calibration's view of the predicted belief: each slice summed over 2 x 2 cells as the
   // update reads it, then `pooling` slices into one coarse bin (detail::pool_headings).
@@ -82,11 +71,7 @@ struct SeqLocFilter::Impl {
   std::vector<Worker> workers;
 
   explicit Impl(const FilterConfig& c)
-      : scratch(c.width, c.height, c.headings),
-        estimator(c.self_calibration_prior_octaves, c.self_calibration_outlier_share,
-                  {c.self_calibration_hold_below_octaves, c.self_calibration_hold_above_octaves,
-                   c.self_calibration_hold_share, c.self_calibration_hold_follow_octaves}),
-        workers(static_cast<std::size_t>(c.threads)) {
+      : scratch(c.width, c.height, c.headings), workers(static_cast<std::size_t>(c.threads)) {
     for (auto& w : workers) w.sample.resize(static_cast<std::size_t>(c.width) * c.height);
     if (c.self_calibrate && c.self_calibration_bank) bank.emplace(c);
     if (c.self_calibrate && !c.self_calibration_bank) {
@@ -189,9 +174,6 @@ SeqLocFilter::~SeqLocFilter() = default;
 void SeqLocFilter::reset_uniform() {
   belief_.set_uniform();
   cached_min_.reset();
-  first_ = true;
-  last_estimate_.reset();
-  impl_->estimator.reset();
   if (impl_->bank) impl_->bank->reset();
   decisions_.reset();
 }
@@ -199,14 +181,9 @@ void SeqLocFilter::reset_uniform() {
 void SeqLocFilter::reset_gaussian(double u, double v, double sigma_m) {
   belief_.set_gaussian(u, v, sigma_m / kCellM);
   cached_min_.reset();
-  first_ = true;
-  last_estimate_.reset();
-  impl_->estimator.reset();
   if (impl_->bank) impl_->bank->reset(belief_);
   decisions_.reset();
 }
-
-const PowerEstimator& SeqLocFilter::calibration() const { return impl_->estimator; }
 
 const PowerBank* SeqLocFilter::power_bank() const { return impl_->bank ? &*impl_->bank : nullptr; }
 
@@ -220,7 +197,7 @@ void SeqLocFilter::rebase(BeliefVolume belief, const std::optional<Pose>& last_e
   }
   belief_ = std::move(belief);
   cached_min_.reset();
-  last_estimate_ = last_estimate;
+  decisions_.rebase(last_estimate);
   if (impl_->bank) impl_->bank->rebase(belief_);
 }
 
@@ -229,10 +206,6 @@ void SeqLocFilter::recentre(int du, int dv) {
   cached_min_.reset();
   decisions_.recentre(du, dv);
   if (impl_->bank) impl_->bank->recentre(du, dv);
-  if (last_estimate_) {
-    last_estimate_->u -= du;
-    last_estimate_->v -= dv;
-  }
 }
 
 void SeqLocFilter::predict(const Odometry& odometry) {
@@ -304,114 +277,18 @@ void SeqLocFilter::predict(const Odometry& odometry) {
   }
 }
 
-FrameResult SeqLocFilter::step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
-                               std::span<const float> road_distance_m, const std::optional<GpsFix>& gps) {
-  if (!first_) {
-    predict(odometry);
-    decisions_.track(odometry, last_estimate_);
-  }
-  FrameResult result = update(frame, crop, road_distance_m, gps);
-  if (last_estimate_ && !first_) result.relocalized = decisions_.relocalized(*last_estimate_, odometry, result.argmax);
-  last_estimate_ = result.pose;
-  first_ = false;
-  return result;
-}
-
-FrameResult SeqLocFilter::update(const PreparedFrame& given, const CropPose& crop,
-                                 std::span<const float> road_distance_m, const std::optional<GpsFix>& gps,
-                                 const std::optional<FrameWeighting>& weighting) {
-  // Checked before anything changes: a refused step leaves the belief as it was.
-  if (config_.mgr && road_distance_m.empty())
-    throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
-  if (config_.mgr && road_distance_m.size() != belief_.slice_cells()) {
-    throw FilterError("the road-distance window holds " + std::to_string(road_distance_m.size()) + " values, not " +
-                          std::to_string(config_.width) + " x " + std::to_string(config_.height),
-                      ErrorCategory::usage);
-  }
-  // Self-calibration estimates from this frame unless a weighting repeats an earlier pass.
-  const bool calibrating = config_.self_calibrate && !weighting;
-  // The one-step criterion's evidence is collected while the frame is multiplied in; the bank
-  // judges the frame on its own coarse windows after the step.
-  const bool estimating = calibrating && !impl_->bank;
-  // Where ETU's weight does not read the powered frame's entropy, the pass over the frame that
-  // finds it is left to temper(), which may hand it the powered frame it computes anyway.
-  const bool shape_in_temper = calibrating && !decisions_.etu_reads_powered_frame();
-  if (calibrating) decisions_.observe(given, crop);
-  FrameResult result = weigh(given, weighting, calibrating, shape_in_temper);
-  if (calibrating) retemper();
-  const float outside = temper(given, result, shape_in_temper);
-  const double total = multiply_in(given, crop, outside, gps, estimating);
-  const Peak peak = normalize(total, road_distance_m);
-  if (calibrating && impl_->bank) impl_->bank->update(given, crop, result.etu_weight);
-  result.peak_log_belief = std::log(peak.value);
-  result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), belief_.bin_heading_deg(peak.k)};
-  result.pose = refine(peak);
-  return result;
-}
-
-FrameResult SeqLocFilter::weigh(const PreparedFrame& given, const std::optional<FrameWeighting>& weighting,
-                                bool calibrating, bool shape_in_temper) {
-  // Self-calibration: the frame raised to the power kappa the frames before it favour,
-  // q = p^kappa / Z(kappa). q is never written out: its peak and entropy come from one pass over
-  // the given frame, which also bins the frame's cells by depth for the estimator.
-  FrameResult result;
-  result.volume_power =
-      decisions_.frame_power(weighting, calibrating, impl_->bank ? impl_->bank->power() : impl_->estimator.power());
-  if (calibrating && !impl_->bank) {
+void SeqLocFilter::load(const PreparedFrame& /*frame*/, bool estimating) {
+  // The frame stays where the caller holds it; scan_frame() bins its cells for the estimator.
+  if (estimating) {
     for (auto& worker : impl_->workers) worker.frame_cells.clear();
   }
-  const FrameShape used = calibrating && !shape_in_temper
-                              ? impl_->scan_frame(given, result.volume_power, config_.threads)
-                          : weighting.has_value() ? FrameShape{weighting->peak_log_prob, given.entropy}
-                                                  : FrameShape{given.max_log_prob, given.entropy};
-  result.frame_entropy = used.entropy;
-  result.etu_weight = weighting ? weighting->etu_weight : decisions_.etu_weight_of(given.entropy, used.entropy);
-  result.weighting = {result.volume_power, result.etu_weight, used.max_log_prob};
-  return result;
 }
 
-float SeqLocFilter::temper(const PreparedFrame& frame, FrameResult& result, bool with_shape) {
-  // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
-  // normalization): exp(w kappa (log p - log p_max)); log(1/M) - outside_crop_nats outside the crop.
-  const auto w = static_cast<float>(result.etu_weight);
-  impl_->tempered.resize(frame.log_prob.size());
-  const auto exponent_f = static_cast<float>(w * result.volume_power);
-  core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
-    const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
-    for (int j = j0; j < j1; ++j) {  // bin by bin: the same cuts for any number of threads
-      const std::size_t begin = static_cast<std::size_t>(j) * slice;
-      detail::exp_or_zero(frame.log_prob.data() + begin, slice, exponent_f, frame.max_log_prob,
-                          impl_->tempered.data() + begin);
-    }
-  });
-  if (with_shape) {
-    // Self-calibration's pass over the frame (weigh()): with w = 1 the tempered frame is q's
-    // numerator e^{kappa r} itself.
-    const FrameShape shape =
-        impl_->scan_frame(frame, result.volume_power, config_.threads, w == 1.0f ? impl_->tempered.data() : nullptr);
-    result.frame_entropy = shape.entropy;
-    result.weighting.peak_log_prob = shape.max_log_prob;
-  }
-  // The value of a window cell outside the crop.
-  const float log_p_max = result.weighting.peak_log_prob;
-  return static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - log_p_max)));
+FrameShape SeqLocFilter::powered_shape(const PreparedFrame& frame, double power) {
+  return impl_->scan_frame(frame, power, config_.threads);
 }
 
-void SeqLocFilter::retemper() {
-  // The belief is raised to the ratio of the new power to the one the frames before went in at,
-  // as if they had gone in at the new one (exact for a belief that is their product; motion and
-  // MGR between them make it an approximation): an early lock at a power the route has since
-  // voted against is undone. The bank: whenever its power has moved half an octave or more from
-  // the one the belief was last raised to (frames between go in at the power of their step). The
-  // one-step criterion: once, when the hold is released (it is not taken again), from the power
-  // held until then (1, or an estimate followed far under 1). StepDecisions decides when.
-  const double ratio = impl_->bank ? decisions_.bank_belief_ratio(impl_->bank->power())
-                                   : decisions_.belief_ratio(impl_->estimator.power(), impl_->estimator.held());
-  retemper_by(static_cast<float>(ratio));
-}
-
-void SeqLocFilter::retemper_by(float ratio) {
-  if (first_ || ratio == 1.0f) return;
+void SeqLocFilter::raise(float ratio) {
   std::vector<double> sums(static_cast<std::size_t>(config_.headings));
   const auto n = static_cast<Eigen::Index>(belief_.slice_cells());
   core::parallel_chunks(config_.headings, config_.threads, [&](int k0, int k1, int) {
@@ -431,68 +308,56 @@ void SeqLocFilter::retemper_by(float ratio) {
   cached_min_.reset();
 }
 
-std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps) {
-  std::vector<float> factor;
-  if (!config.gps_prior || !gps) return factor;
-  const int W = config.width, H = config.height;
-  factor.resize(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
-  const double sigma_cells = gps->sigma_m / kCellM;
-  for (int v = 0; v < H; ++v)
-    for (int u = 0; u < W; ++u) {
-      const double du = u - gps->u, dv = v - gps->v;
-      factor[static_cast<std::size_t>(v) * W + u] =
-          static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
+std::optional<FrameShape> SeqLocFilter::temper(const PreparedFrame& frame, float exponent,
+                                               std::optional<double> shape_power) {
+  impl_->tempered.resize(frame.log_prob.size());
+  core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
+    const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
+    for (int j = j0; j < j1; ++j) {  // bin by bin: the same cuts for any number of threads
+      const std::size_t begin = static_cast<std::size_t>(j) * slice;
+      detail::exp_or_zero(frame.log_prob.data() + begin, slice, exponent, frame.max_log_prob,
+                          impl_->tempered.data() + begin);
     }
-  return factor;
+  });
+  if (!shape_power) return std::nullopt;
+  // Where ETU's weight is 1 the tempered frame is the powered frame's numerator e^{kappa r} itself.
+  const bool powered = exponent == static_cast<float>(*shape_power);
+  return impl_->scan_frame(frame, *shape_power, config_.threads, powered ? impl_->tempered.data() : nullptr);
 }
 
 double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside,
-                                 const std::optional<GpsFix>& gps, bool calibrating) {
+                                 std::span<const float> gps_term, bool with_prior, bool pool) {
   const int W = config_.width, H = config_.height, R = config_.headings;
-  const std::size_t n = belief_.slice_cells();
-  const auto N = static_cast<Eigen::Index>(n);
-  const std::vector<float> gps_factor = gps_prior_factor(config_, gps);
-  // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum. The first
-  // pass also pools the predicted belief for self-calibration, each slice while it is at hand.
+  const auto N = static_cast<Eigen::Index>(belief_.slice_cells());
+  // Update: b_hat + w log p, i.e. prob *= p^w, slice by slice with each slice's sum; the predicted
+  // belief pooled for self-calibration, each slice while it is at hand.
   std::vector<double> slice_sum(static_cast<std::size_t>(R));
-  auto update_slices = [&](bool with_prior) {
-    const bool collect = calibrating && with_prior;
-    core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
-      auto& worker = impl_->workers[static_cast<std::size_t>(t)];
-      for (int k = k0; k < k1; ++k) {
-        detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
-                             belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
-        if (collect && detail::pooled_bin(k, impl_->pooling)) {
-          pool_slice(belief_.slice(k), W, H, worker.blend_rows,
-                     impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->coarse->slice_cells());
-        }
-        ArrayMap b(belief_.slice(k), N);
-        ConstArrayMap sample(worker.sample.data(), N);
-        if (with_prior) {
-          b *= sample;
-        } else {
-          b = sample;
-        }
-        if (!gps_factor.empty()) b *= ConstArrayMap(gps_factor.data(), N);
-        slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(b.sum());
+  core::parallel_chunks(R, config_.threads, [&](int k0, int k1, int t) {
+    auto& worker = impl_->workers[static_cast<std::size_t>(t)];
+    for (int k = k0; k < k1; ++k) {
+      detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
+                           belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
+      if (pool && detail::pooled_bin(k, impl_->pooling)) {
+        pool_slice(belief_.slice(k), W, H, worker.blend_rows,
+                   impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->coarse->slice_cells());
       }
-    });
-  };
-  update_slices(true);
-  if (calibrating) feed_estimator(frame, crop);
+      ArrayMap b(belief_.slice(k), N);
+      ConstArrayMap sample(worker.sample.data(), N);
+      if (with_prior) {
+        b *= sample;
+      } else {
+        b = sample;
+      }
+      if (!gps_term.empty()) b *= ConstArrayMap(gps_term.data(), N);
+      slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(b.sum());
+    }
+  });
   double total = 0;
   for (double x : slice_sum) total += x;
-  if (!(total > 0) || !std::isfinite(total)) {
-    // Belief and frame share no support that float can represent: the frame alone decides.
-    update_slices(false);
-    total = 0;
-    for (double x : slice_sum) total += x;
-    if (!(total > 0)) throw FilterError("the frame volume has no mass inside the window");
-  }
   return total;
 }
 
-void SeqLocFilter::feed_estimator(const PreparedFrame& frame, const CropPose& crop) {
+CalibrationEvidence SeqLocFilter::evidence(const PreparedFrame& frame, const CropPose& crop) {
   // The predicted belief on the coarse grid (1 m cells, a few heading bins in each), judged by
   // the frame at each power: a sixteenth of the cells, and the same estimate to within the
   // frame-to-frame noise of the estimate itself (docs/filter.md, "Self-calibration").
@@ -500,11 +365,10 @@ void SeqLocFilter::feed_estimator(const PreparedFrame& frame, const CropPose& cr
   detail::pool_headings(impl_->pooled.data(), config_.headings, coarse, config_.threads);
   DepthHistogram frame_cells{DepthHistogram::kCount};
   for (const auto& worker : impl_->workers) frame_cells.merge(worker.frame_cells);
-  const CalibrationEvidence evidence = coarse_evidence(coarse, frame, crop, config_, frame_cells);
-  impl_->estimator.add(evidence);
+  return coarse_evidence(coarse, frame, crop, config_, frame_cells);
 }
 
-SeqLocFilter::Peak SeqLocFilter::normalize(double total, std::span<const float> road_distance_m) {
+BeliefPeak SeqLocFilter::normalize(double total, std::span<const float> road_distance_m) {
   const int W = config_.width, H = config_.height, R = config_.headings;
   const std::size_t n = belief_.slice_cells();
   const auto N = static_cast<Eigen::Index>(n);
@@ -542,9 +406,18 @@ SeqLocFilter::Peak SeqLocFilter::normalize(double total, std::span<const float> 
   return {cell % W, cell / W, k_star, best_value[static_cast<std::size_t>(k_star)]};
 }
 
-Pose SeqLocFilter::refine(const Peak& peak) const {
-  return decisions_.refine(peak.u, peak.v, peak.k, belief_.width(), belief_.height(), position_masses(belief_),
-                           [this](int u, int v, int k) { return static_cast<double>(belief_.prob(u, v, k)); });
+PositionMasses SeqLocFilter::position_masses() { return masses_of(belief_); }
+
+CellValue SeqLocFilter::cell_value() {
+  return [this](int u, int v, int k) { return static_cast<double>(belief_.prob(u, v, k)); };
+}
+
+std::optional<double> SeqLocFilter::bank_power() const {
+  return impl_->bank ? std::optional<double>(impl_->bank->power()) : std::nullopt;
+}
+
+void SeqLocFilter::bank_judge(const PreparedFrame& frame, const CropPose& crop, double etu_weight) {
+  impl_->bank->update(frame, crop, etu_weight);
 }
 
 Pose volume_cell_pose(const PreparedFrame& frame, const CropPose& crop, int v, int u, double bin) {

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <string>
 
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
@@ -34,7 +35,126 @@ double route_reference_entropy(std::span<const double> entropies) {
   return last[n / 2];
 }
 
+StepDecisions::StepDecisions(const FilterConfig& config)
+    : config_(config),
+      estimator_(config.self_calibration_prior_octaves, config.self_calibration_outlier_share,
+                 {config.self_calibration_hold_below_octaves, config.self_calibration_hold_above_octaves,
+                  config.self_calibration_hold_share, config.self_calibration_hold_follow_octaves}),
+      shared_(config.self_calibration_shared_lag > 0 ? config.self_calibration_shared_lag : 2) {}
+
+std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps) {
+  std::vector<float> factor;
+  if (!config.gps_prior || !gps) return factor;
+  const int W = config.width, H = config.height;
+  factor.resize(static_cast<std::size_t>(W) * static_cast<std::size_t>(H));
+  const double sigma_cells = gps->sigma_m / core::kCellM;
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) {
+      const double du = u - gps->u, dv = v - gps->v;
+      factor[static_cast<std::size_t>(v) * W + u] =
+          static_cast<float>(std::exp(-(du * du + dv * dv) / (2 * sigma_cells * sigma_cells)));
+    }
+  return factor;
+}
+
+FrameResult StepDecisions::step(CellWork& work, const StepInput& input, const Odometry& odometry) {
+  if (started_) {
+    work.predict(odometry);
+    track(odometry, last_estimate_);
+  }
+  FrameResult result = update(work, input, std::nullopt);
+  if (last_estimate_ && started_) result.relocalized = relocalized(*last_estimate_, odometry, result.argmax);
+  last_estimate_ = result.pose;
+  started_ = true;
+  return result;
+}
+
+FrameResult StepDecisions::update(CellWork& work, const StepInput& input,
+                                  const std::optional<FrameWeighting>& weighting) {
+  // Checked before anything changes: a refused step leaves the belief as it was.
+  const std::size_t slice = static_cast<std::size_t>(config_.width) * static_cast<std::size_t>(config_.height);
+  if (config_.mgr && input.road_distance_m.empty())
+    throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
+  if (config_.mgr && input.road_distance_m.size() != slice) {
+    throw FilterError("the road-distance window holds " + std::to_string(input.road_distance_m.size()) +
+                          " values, not " + std::to_string(config_.width) + " x " + std::to_string(config_.height),
+                      ErrorCategory::usage);
+  }
+  // Self-calibration estimates from this frame unless a weighting repeats an earlier pass: the
+  // one-step criterion from the evidence gathered while the frame is multiplied in, a bank on its
+  // own coarse windows after the step.
+  const std::optional<double> bank = work.bank_power();
+  const bool calibrating = config_.self_calibrate && !weighting;
+  const bool estimating = calibrating && !bank;
+  // Where ETU's weight does not read the powered frame's entropy, the pass that finds it is left
+  // to temper(), which may find it in the tempered frame.
+  const bool shape_later = calibrating && !etu_reads_powered_frame();
+  work.load(input.frame, estimating);
+  if (calibrating) observe(input.frame, input.crop);
+  FrameResult result = weigh(work, input, weighting, bank, shape_later);
+
+  // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
+  // normalization): exp(w kappa (log p - log p_max)); log(1/M) - outside_crop_nats outside it.
+  const auto w = static_cast<float>(result.etu_weight);
+  const std::optional<FrameShape> shape =
+      work.temper(input.frame, static_cast<float>(w * result.volume_power),
+                  shape_later ? std::optional<double>(result.volume_power) : std::nullopt);
+  if (shape) {
+    result.frame_entropy = shape->entropy;
+    result.weighting.peak_log_prob = shape->max_log_prob;
+  }
+  const float outside = static_cast<float>(
+      std::exp(w * (-input.frame.log_cells - config_.outside_crop_nats - result.weighting.peak_log_prob)));
+
+  const std::vector<float> gps_term = gps_prior_factor(config_, input.gps);
+  double total = work.multiply_in(input.frame, input.crop, outside, gps_term, true, estimating);
+  if (estimating) estimator_.add(work.evidence(input.frame, input.crop));
+  if (!(total > 0) || !std::isfinite(total)) {
+    // Belief and frame share no support that float can represent: the frame alone decides.
+    total = work.multiply_in(input.frame, input.crop, outside, gps_term, false, false);
+    if (!(total > 0)) throw FilterError("the frame volume has no mass inside the window");
+  }
+  const BeliefPeak peak = work.normalize(total, input.road_distance_m);
+  if (calibrating && bank) work.bank_judge(input.frame, input.crop, result.etu_weight);
+  result.peak_log_belief = std::log(peak.value);
+  result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), bin_heading_deg(peak.k, config_.headings)};
+  result.pose =
+      refine(peak.u, peak.v, peak.k, config_.width, config_.height, work.position_masses(), work.cell_value());
+  return result;
+}
+
+FrameResult StepDecisions::weigh(CellWork& work, const StepInput& input, const std::optional<FrameWeighting>& weighting,
+                                 std::optional<double> bank, bool shape_later) {
+  // Self-calibration: the frame raised to the power kappa the frames before it favour,
+  // q = p^kappa / Z(kappa); q's peak and entropy come from one pass over the given frame.
+  const PreparedFrame& frame = input.frame;
+  const bool calibrating = config_.self_calibrate && !weighting;
+  FrameResult result;
+  result.volume_power = frame_power(weighting, calibrating, bank.value_or(estimator_.power()));
+  const FrameShape used = calibrating && !shape_later ? work.powered_shape(frame, result.volume_power)
+                          : weighting.has_value()     ? FrameShape{weighting->peak_log_prob, frame.entropy}
+                                                      : FrameShape{frame.max_log_prob, frame.entropy};
+  result.frame_entropy = used.entropy;
+  result.etu_weight = weighting ? weighting->etu_weight : etu_weight_of(frame.entropy, used.entropy);
+  result.weighting = {result.volume_power, result.etu_weight, used.max_log_prob};
+  if (calibrating) {
+    // The belief raised to the ratio of the new power to the one the frames before went in at, as
+    // if they had gone in at the new one (exact for a belief that is their product; motion and MGR
+    // between them make it an approximation): an early lock at a power the route has since voted
+    // against is undone. The bank: whenever its power has moved half an octave or more from the one
+    // the belief was last raised to. The one-step criterion: once, when the hold is released, from
+    // the power held until then; and whenever the shared errors' factor moves half an octave.
+    const auto ratio =
+        static_cast<float>(bank ? bank_belief_ratio(*bank) : belief_ratio(estimator_.power(), estimator_.held()));
+    if (started_ && ratio != 1.0f) work.raise(ratio);
+  }
+  return result;
+}
+
 void StepDecisions::reset() {
+  started_ = false;
+  last_estimate_.reset();
+  estimator_.reset();
   entropies_.clear();
   was_held_ = true;
   last_power_ = 1;
@@ -55,6 +175,10 @@ void StepDecisions::track(const Odometry& odometry, const std::optional<Pose>& e
 }
 
 void StepDecisions::recentre(int du, int dv) {
+  if (last_estimate_) {
+    last_estimate_->u -= du;
+    last_estimate_->v -= dv;
+  }
   dead_u_ -= du;
   dead_v_ -= dv;
   if (previous_) {

@@ -1,7 +1,6 @@
-// DeviceFilter: SeqLocFilter's step (seqloc_filter.cpp) with the belief in an engine's memory.
-// The order of the stages, and every scalar decided between them (the power, ETU's weight, the
-// value outside the crop, the hold's release, the relocalization flag), is the CPU filter's; the
-// engine runs the passes over the belief and the frame.
+// DeviceFilter: a SeqLoc step with the belief in an engine's memory. The step's sequence and every
+// decision in it are StepDecisions' (filter/step_decisions.hpp), as for the CPU filter; this is the
+// cell work behind filter::CellWork, run by the engine's passes over the belief and the frame.
 
 #include "seqloc/gpu/device_filter.hpp"
 
@@ -71,13 +70,7 @@ filter::FilterConfig checked(const filter::FilterConfig& config) {
 const char* backend_name(Backend backend) { return backend == Backend::cuda ? "cuda" : "host"; }
 
 DeviceFilter::DeviceFilter(const filter::FilterConfig& config, Backend backend)
-    : config_(checked(config)),
-      backend_(backend),
-      engine_(make_engine(config_, backend)),
-      estimator_(config_.self_calibration_prior_octaves, config_.self_calibration_outlier_share,
-                 {config_.self_calibration_hold_below_octaves, config_.self_calibration_hold_above_octaves,
-                  config_.self_calibration_hold_share, config_.self_calibration_hold_follow_octaves}),
-      decisions_(config_) {
+    : config_(checked(config)), backend_(backend), engine_(make_engine(config_, backend)), decisions_(config_) {
   reset_uniform();
 }
 
@@ -98,9 +91,6 @@ void DeviceFilter::reset_gaussian(double u, double v, double sigma_m) {
 
 void DeviceFilter::start_sequence() {
   cached_min_.reset();
-  first_ = true;
-  last_estimate_.reset();
-  estimator_.reset();
   decisions_.reset();
 }
 
@@ -124,17 +114,13 @@ void DeviceFilter::set_belief(const filter::BeliefVolume& belief) {
 
 void DeviceFilter::rebase(const filter::BeliefVolume& belief, const std::optional<Pose>& last_estimate) {
   set_belief(belief);
-  last_estimate_ = last_estimate;
+  decisions_.rebase(last_estimate);
 }
 
 void DeviceFilter::recentre(int du, int dv) {
   engine_->recentre(du, dv);
   cached_min_.reset();
   decisions_.recentre(du, dv);
-  if (last_estimate_) {
-    last_estimate_->u -= du;
-    last_estimate_->v -= dv;
-  }
 }
 
 void DeviceFilter::predict(const filter::Odometry& odometry) {
@@ -156,84 +142,36 @@ void DeviceFilter::predict(const filter::Odometry& odometry) {
   cached_min_.reset();
 }
 
-FrameResult DeviceFilter::step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
-                               const filter::Odometry& odometry, std::span<const float> road_distance_m,
-                               const std::optional<filter::GpsFix>& gps) {
-  if (!first_) {
-    predict(odometry);
-    decisions_.track(odometry, last_estimate_);
-  }
-  FrameResult result = update(frame, crop, road_distance_m, gps);
-  if (last_estimate_ && !first_) result.relocalized = decisions_.relocalized(*last_estimate_, odometry, result.argmax);
-  last_estimate_ = result.pose;
-  first_ = false;
-  return result;
+void DeviceFilter::load(const filter::PreparedFrame& frame, bool /*estimating*/) { engine_->load_frame(frame); }
+
+filter::FrameShape DeviceFilter::powered_shape(const filter::PreparedFrame& frame, double power) {
+  // -log Z and log Z - k sum(e^{k r} r) / Z (SeqLocFilter's scan_frame); the frame's own at 1.
+  if (power == 1.0) return {frame.max_log_prob, frame.entropy};
+  const FrameSums sums = engine_->frame_sums(static_cast<float>(power), frame.max_log_prob);
+  const double log_z = std::log(sums.z);
+  return {static_cast<float>(-log_z), std::clamp((log_z - power * sums.zr / sums.z) / frame.log_cells, 0.0, 1.0)};
 }
 
-FrameResult DeviceFilter::weigh(const filter::PreparedFrame& frame,
-                                const std::optional<filter::FrameWeighting>& weighting, bool calibrating) {
-  FrameResult result;
-  result.volume_power = decisions_.frame_power(weighting, calibrating, estimator_.power());
-  // The powered frame's peak and entropy (SeqLocFilter's scan_frame): -log Z and
-  // log Z - k sum(e^{k r} r) / Z.
-  float peak = weighting.has_value() ? weighting->peak_log_prob : frame.max_log_prob;
-  double entropy = frame.entropy;
-  if (calibrating && result.volume_power != 1.0) {
-    const FrameSums sums = engine_->frame_sums(static_cast<float>(result.volume_power), frame.max_log_prob);
-    const double log_z = std::log(sums.z);
-    peak = static_cast<float>(-log_z);
-    entropy = std::clamp((log_z - result.volume_power * sums.zr / sums.z) / frame.log_cells, 0.0, 1.0);
-  }
-  result.frame_entropy = entropy;
-  result.etu_weight = weighting ? weighting->etu_weight : decisions_.etu_weight_of(frame.entropy, entropy);
-  result.weighting = {result.volume_power, result.etu_weight, peak};
-  return result;
-}
-
-void DeviceFilter::retemper() {
-  // SeqLocFilter::retemper: once the hold releases, the belief is raised to the ratio of the new
-  // power to the one its frames went in at (StepDecisions::hold_ratio).
-  const auto ratio = static_cast<float>(decisions_.belief_ratio(estimator_.power(), estimator_.held()));
-  if (first_ || ratio == 1.0f) return;
+void DeviceFilter::raise(float ratio) {
   if (engine_->raise(ratio)) cached_min_.reset();
 }
 
-FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filter::CropPose& crop,
-                                 std::span<const float> road_distance_m, const std::optional<filter::GpsFix>& gps,
-                                 const std::optional<filter::FrameWeighting>& weighting) {
-  const std::size_t slice = static_cast<std::size_t>(config_.width) * config_.height;
-  if (config_.mgr && road_distance_m.empty())
-    throw FilterError("MGR is on but no road-distance window was given", ErrorCategory::usage);
-  if (config_.mgr && road_distance_m.size() != slice) {
-    throw FilterError("the road-distance window holds " + std::to_string(road_distance_m.size()) + " values, not " +
-                          std::to_string(config_.width) + " x " + std::to_string(config_.height),
-                      ErrorCategory::usage);
-  }
-  const bool calibrating = config_.self_calibrate && !weighting;
-  engine_->load_frame(frame);
-  if (calibrating) decisions_.observe(frame, crop);
-  FrameResult result = weigh(frame, weighting, calibrating);
-  if (calibrating) retemper();
+std::optional<filter::FrameShape> DeviceFilter::temper(const filter::PreparedFrame& frame, float exponent,
+                                                       std::optional<double> shape_power) {
+  engine_->temper(exponent, frame.max_log_prob);
+  if (!shape_power) return std::nullopt;
+  return powered_shape(frame, *shape_power);
+}
 
-  // The tempered likelihood q^w, scaled by its peak, and the value of a cell outside the crop.
-  const auto w = static_cast<float>(result.etu_weight);
-  engine_->temper(static_cast<float>(w * result.volume_power), frame.max_log_prob);
-  const float outside =
-      static_cast<float>(std::exp(w * (-frame.log_cells - config_.outside_crop_nats - result.weighting.peak_log_prob)));
-
-  if (calibrating) engine_->pool_coarse();  // the predicted belief, before the frame goes in
+double DeviceFilter::multiply_in(const filter::PreparedFrame& frame, const filter::CropPose& crop, float outside,
+                                 std::span<const float> gps_term, bool with_prior, bool pool) {
+  if (pool) engine_->pool_coarse();  // the predicted belief, before the frame goes in
   const std::vector<HeadingBlend> blends = heading_blends(config_.headings, frame.bins, crop.rotation_deg);
   const CropGeometry geometry = crop_geometry(frame, frame.cell_m, crop, config_.width, config_.height);
-  const std::vector<float> gps_term = filter::gps_prior_factor(config_, gps);
-  double total = engine_->multiply(blends, geometry, outside, gps_term, true);
-  if (calibrating) estimator_.add(judge(frame, crop));
-  if (!(total > 0) || !std::isfinite(total)) {
-    // Belief and frame share no support that float can represent: the frame alone decides.
-    total = engine_->multiply(blends, geometry, outside, gps_term, false);
-    if (!(total > 0)) throw FilterError("the frame volume has no mass inside the window");
-  }
+  return engine_->multiply(blends, geometry, outside, gps_term, with_prior);
+}
 
-  // Normalization and MGR's blend with the road prior (SeqLocFilter::normalize).
+filter::BeliefPeak DeviceFilter::normalize(double total, std::span<const float> road_distance_m) {
   if (config_.mgr && (road_.size() != road_distance_m.size() ||
                       !std::equal(road_distance_m.begin(), road_distance_m.end(), road_.begin()))) {
     // A window that has not moved keeps its road prior on the device.
@@ -243,16 +181,19 @@ FrameResult DeviceFilter::update(const filter::PreparedFrame& frame, const filte
   const auto keep = static_cast<float>((config_.mgr ? 1.0 - config_.mgr_epsilon : 1.0) / total);
   const PeakCell peak = engine_->normalize(keep, config_.mgr);
   cached_min_ = peak.least;
-  result.peak_log_belief = std::log(peak.value);
-  result.argmax = {static_cast<double>(peak.u), static_cast<double>(peak.v), bin_heading_deg(peak.k, config_.headings)};
-  result.pose = decisions_.refine(
-      peak.u, peak.v, peak.k, config_.width, config_.height,
-      [this](int u0, int v0, int u1, int v1, std::span<double> out) { engine_->position_masses(u0, v0, u1, v1, out); },
-      [this](int u, int v, int k) { return static_cast<double>(engine_->value(u, v, k)); });
-  return result;
+  return {peak.u, peak.v, peak.k, peak.value};
 }
 
-filter::CalibrationEvidence DeviceFilter::judge(const filter::PreparedFrame& frame, const filter::CropPose& crop) {
+filter::PositionMasses DeviceFilter::position_masses() {
+  return
+      [this](int u0, int v0, int u1, int v1, std::span<double> out) { engine_->position_masses(u0, v0, u1, v1, out); };
+}
+
+filter::CellValue DeviceFilter::cell_value() {
+  return [this](int u, int v, int k) { return static_cast<double>(engine_->value(u, v, k)); };
+}
+
+filter::CalibrationEvidence DeviceFilter::evidence(const filter::PreparedFrame& frame, const filter::CropPose& crop) {
   // filter::coarse_evidence with its sums made by the engine: the coarse grid's cells are 2 x 2
   // window cells, so the frame's cells are half as large in them and the crop's centre moves.
   const int coarse_r = config_.headings / filter::math::calibration_bins(config_.headings);

@@ -24,6 +24,7 @@
 
 #include "seqloc/core/road_prior.hpp"
 #include "seqloc/filter/belief.hpp"
+#include "seqloc/filter/cell_work.hpp"
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/device_math.hpp"
 #include "seqloc/filter/self_calibration.hpp"
@@ -57,34 +58,12 @@ using core::road_prior_g;
 [[nodiscard]] std::vector<float> road_prior_log_q(std::span<const float> road_distance_m, int width, int height,
                                                   int headings, double sigma_m);
 
-/// A GPS fix in window cells, for the optional GPS prior term.
-struct GpsFix {
-  double u = 0, v = 0;
-  double sigma_m = 10;
-};
-
-/// The GPS term over the window (W x H, row-major): exp(-d^2 / (2 sigma^2)) at each cell, d its
-/// distance from the fix; empty when the config has no GPS prior or there is no fix. What the
-/// update multiplies into every heading slice (the CPU filter's and the CUDA backend's).
-[[nodiscard]] std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps);
-
-struct FrameResult {
-  Pose pose;    ///< the estimate: PAS's x_hat with th* (or the argmax when PAS is off)
-  Pose argmax;  ///< (x*, th*)
-  float peak_log_belief = 0;
-  double frame_entropy = 0;  ///< H_hat of the frame's own volume, after self-calibration's power
-  double etu_weight = 1;     ///< the weight used (1 with ETU off)
-  /// The power self-calibration raised the frame to before ETU (1 with it off): the estimate from
-  /// the frames before this one. For volumes sharpened as p^k it tends to 1 / k.
-  double volume_power = 1;
-  bool relocalized = false;  ///< the argmax jumped farther than the configured threshold
-  FrameWeighting weighting;  ///< what the step multiplied in (volume_power and etu_weight again, and the scale)
-};
-
-class SeqLocFilter {
+class SeqLocFilter : private CellWork {
  public:
   explicit SeqLocFilter(const FilterConfig& config);
-  ~SeqLocFilter();
+  ~SeqLocFilter() override;
+  SeqLocFilter(const SeqLocFilter&) = delete;
+  SeqLocFilter& operator=(const SeqLocFilter&) = delete;
 
   [[nodiscard]] const FilterConfig& config() const { return config_; }
   [[nodiscard]] const BeliefVolume& belief() const { return belief_; }
@@ -104,61 +83,56 @@ class SeqLocFilter {
   /// empty when MGR is off; FilterError for another size), PAS. `gps` is used when the config
   /// enables the GPS term.
   FrameResult step(const PreparedFrame& frame, const CropPose& crop, const Odometry& odometry,
-                   std::span<const float> road_distance_m, const std::optional<GpsFix>& gps = std::nullopt);
+                   std::span<const float> road_distance_m, const std::optional<GpsFix>& gps = std::nullopt) {
+    return decisions_.step(*this, {frame, crop, road_distance_m, gps}, odometry);
+  }
 
   /// The stages, exposed for tests and for callers that move the window between frames.
-  void predict(const Odometry& odometry);
+  void predict(const Odometry& odometry) override;
   void recentre(int du, int dv);
   /// The window moved to another grid (a route crossing into the next region): `belief` is the
   /// belief resampled onto the new window (same size), `last_estimate` the last pose in its cells.
   /// Self-calibration and ETU keep what they learnt of the route.
   void rebase(BeliefVolume belief, const std::optional<Pose>& last_estimate);
   /// The last step's pose (window cells), if any since the last reset.
-  [[nodiscard]] const std::optional<Pose>& last_estimate() const { return last_estimate_; }
+  [[nodiscard]] const std::optional<Pose>& last_estimate() const { return decisions_.last_estimate(); }
   /// step() without the prediction and the relocalization flag: the frame's likelihood multiplied
   /// in, MGR, the argmax and PAS. With `weighting` the frame is weighed as given (a pass repeating
   /// an earlier one: nothing is estimated, self-calibration and ETU's route history are left as
   /// they are); without it, as the configuration says.
   FrameResult update(const PreparedFrame& given, const CropPose& crop, std::span<const float> road_distance_m,
                      const std::optional<GpsFix>& gps = std::nullopt,
-                     const std::optional<FrameWeighting>& weighting = std::nullopt);
+                     const std::optional<FrameWeighting>& weighting = std::nullopt) {
+    return decisions_.update(*this, {given, crop, road_distance_m, gps}, weighting);
+  }
 
   /// Self-calibration's one-step estimator (its power is what the next step uses when the bank is
   /// off; unused otherwise).
-  [[nodiscard]] const PowerEstimator& calibration() const;
+  [[nodiscard]] const PowerEstimator& calibration() const { return decisions_.estimator(); }
   /// Self-calibration's bank (power_bank.hpp; its power is what the next step uses), or nullptr
   /// when self-calibration or the bank is off.
   [[nodiscard]] const PowerBank* power_bank() const;
 
  private:
   struct Impl;
-  /// The belief's largest cell after an update.
-  struct Peak {
-    int u = 0, v = 0, k = 0;
-    float value = 0;
-  };
-  // update()'s stages, in order: the frame's power, ETU weight and peak (weigh); q^w over the
-  // frame, scaled by its peak, and the value of a cell outside the crop (temper); the belief times
-  // the frame resampled into the window, and the GPS term, returning the belief's total, with
-  // self-calibration's evidence collected on the way (multiply_in, feed_estimator); the
-  // normalization and MGR's blend with the road prior, and the largest cell (normalize); PAS and
-  // the sub-bin heading around it (refine).
-  FrameResult weigh(const PreparedFrame& given, const std::optional<FrameWeighting>& weighting, bool calibrating,
-                    bool shape_in_temper);
-  void retemper();
-  void retemper_by(float ratio);
-  float temper(const PreparedFrame& frame, FrameResult& result, bool with_shape);
-  double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, const std::optional<GpsFix>& gps,
-                     bool calibrating);
-  void feed_estimator(const PreparedFrame& frame, const CropPose& crop);
-  Peak normalize(double total, std::span<const float> road_distance_m);
-  [[nodiscard]] Pose refine(const Peak& peak) const;
+  // The cell work of a step on the CPU (cell_work.hpp), in the order StepDecisions calls it.
+  void load(const PreparedFrame& frame, bool estimating) override;
+  FrameShape powered_shape(const PreparedFrame& frame, double power) override;
+  void raise(float ratio) override;
+  std::optional<FrameShape> temper(const PreparedFrame& frame, float exponent,
+                                   std::optional<double> shape_power) override;
+  double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, std::span<const float> gps_term,
+                     bool with_prior, bool pool) override;
+  CalibrationEvidence evidence(const PreparedFrame& frame, const CropPose& crop) override;
+  BeliefPeak normalize(double total, std::span<const float> road_distance_m) override;
+  [[nodiscard]] PositionMasses position_masses() override;
+  [[nodiscard]] CellValue cell_value() override;
+  [[nodiscard]] std::optional<double> bank_power() const override;
+  void bank_judge(const PreparedFrame& frame, const CropPose& crop, double etu_weight) override;
 
   FilterConfig config_;
   BeliefVolume belief_;
   std::unique_ptr<Impl> impl_;
-  bool first_ = true;
-  std::optional<Pose> last_estimate_;
   std::optional<float> cached_min_;  ///< the belief's minimum, known at the end of a step
   StepDecisions decisions_;          ///< the step's decisions (step_decisions.hpp)
 };

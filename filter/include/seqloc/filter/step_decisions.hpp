@@ -1,37 +1,27 @@
 #pragma once
 // The decisions of a SeqLoc step (conventions.md section 6), made in this one place for every
-// backend: the power a frame goes in at, ETU's weight and the route's reference entropy, when the
-// one-step criterion's hold releases and the belief is raised again, PAS and the sub-bin heading
-// around the argmax, and the relocalization flag. The CPU filter (SeqLocFilter), the CUDA backend
-// (gpu::DeviceFilter) and the smoother call them; each provides only the cell work (a frame's
-// shape at a power, the belief's masses around a peak), so a change to one rule is made once and
-// a test of one backend's decisions is a test of all.
+// backend, and the step's sequence that makes them: the power a frame goes in at (self-calibration's
+// one-step estimator, its hold and the shared errors' factor), ETU's weight and the route's
+// reference entropy, when the belief is raised again, the GPS term, MGR's share, PAS and the sub-bin
+// heading around the argmax, and the relocalization flag. The CPU filter (SeqLocFilter), the CUDA
+// backend (gpu::DeviceFilter) and the smoother's backward filter run their steps through step() and
+// update(); each provides only the cell work behind CellWork (cell_work.hpp), so a change to one
+// rule is made once and a test of one backend's decisions is a test of all.
 
 #include <algorithm>
 #include <cstddef>
-#include <functional>
 #include <optional>
 #include <span>
 #include <vector>
 
+#include "seqloc/filter/cell_work.hpp"
 #include "seqloc/filter/config.hpp"
+#include "seqloc/filter/self_calibration.hpp"
 #include "seqloc/filter/types.hpp"
 #include "seqloc/intake/frame.hpp"
 #include "seqloc/selfcal/shared_errors.hpp"
 
 namespace seqloc::filter {
-
-using intake::PreparedFrame;
-
-/// How a step weighed its frame: the power self-calibration raised it to, ETU's weight, and the
-/// peak log-probability of the frame so raised (the scale of its likelihood). A second pass over
-/// the route (the smoother's, smoother.hpp) gives it to SeqLocFilter::update to multiply in the
-/// very likelihood the first pass did, without estimating anything again.
-struct FrameWeighting {
-  double volume_power = 1;
-  double etu_weight = 1;
-  float peak_log_prob = 0;
-};
 
 /// The median of the last `kEtuRouteFrames` entropies in `entropies` (which must not be empty):
 /// ETU's route reference (FilterConfig::etu_route_reference).
@@ -49,19 +39,37 @@ inline constexpr std::size_t kEtuRouteFrames = 256;
   return std::clamp(w, 1e-3, 1.0);
 }
 
-/// Fills `out` with the position masses m(x) = sum over th of the belief at x, for the cells
-/// u0..u1 x v0..v1 (inclusive, row by row): each backend reads them where its belief lives.
-using PositionMasses = std::function<void(int u0, int v0, int u1, int v1, std::span<double> out)>;
-/// One cell of the belief (or of the smoother's product of two).
-using CellValue = std::function<double(int u, int v, int k)>;
+/// The GPS term over the window (W x H, row-major): exp(-d^2 / (2 sigma^2)) at each cell, d its
+/// distance from the fix; empty when the config has no GPS prior or there is no fix. What the
+/// update multiplies into every heading slice.
+[[nodiscard]] std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps);
 
 class StepDecisions {
  public:
-  explicit StepDecisions(const FilterConfig& config)
-      : config_(config), shared_(config.self_calibration_shared_lag > 0 ? config.self_calibration_shared_lag : 2) {}
+  explicit StepDecisions(const FilterConfig& config);
 
-  /// A new route: ETU's route reference and the hold's memory start again.
+  /// One step on `work`'s belief: predict through `odometry` (not at a route's first frame), update
+  /// with the frame (below), and the relocalization flag against the last estimate.
+  FrameResult step(CellWork& work, const StepInput& input, const Odometry& odometry);
+  /// The update: the road window checked (FilterError, usage, before anything changes), the frame's
+  /// power and ETU weight, the belief raised when self-calibration asks, the frame tempered and
+  /// multiplied in with the GPS term (the frame alone where belief and frame share no support),
+  /// self-calibration's evidence, the normalization with MGR, the argmax and PAS. With `weighting`
+  /// the frame is weighed as given (a pass repeating an earlier one: nothing is estimated and ETU's
+  /// route history is left as it is).
+  FrameResult update(CellWork& work, const StepInput& input, const std::optional<FrameWeighting>& weighting);
+
+  /// A new route: the next step does not predict; ETU's route reference, the estimator and the
+  /// hold's memory start again.
   void reset();
+  /// Whether a step has run since the last reset (the next one predicts).
+  [[nodiscard]] bool started() const { return started_; }
+  /// The last step's pose (window cells), if any since the last reset; `rebase` replaces it (the
+  /// window moved to another grid).
+  [[nodiscard]] const std::optional<Pose>& last_estimate() const { return last_estimate_; }
+  void rebase(const std::optional<Pose>& last_estimate) { last_estimate_ = last_estimate; }
+  /// Self-calibration's one-step estimator (its power is what the next step uses without the bank).
+  [[nodiscard]] const PowerEstimator& estimator() const { return estimator_; }
 
   /// The power a frame goes in at: a repeated pass's, self-calibration's `estimate` while it is
   /// calibrating, else 1.
@@ -94,6 +102,7 @@ class StepDecisions {
   /// that point; a peak farther than relocalization_jump_m from the last estimate moved by the
   /// odometry is left out as another place).
   void track(const Odometry& odometry, const std::optional<Pose>& estimate);
+  /// The window moved by (du, dv) cells: the points the decisions keep move with it.
   void recentre(int du, int dv);
   void observe(const PreparedFrame& frame, const CropPose& crop);
   /// c = (1 - rho) / (1 + rho), the power the frames' correlation asks for on top of the
@@ -137,11 +146,18 @@ class StepDecisions {
   [[nodiscard]] const std::vector<double>& route_entropies() const { return entropies_; }
 
  private:
+  /// The frame's power and ETU weight (the powered frame's shape now, or from temper() where ETU
+  /// does not read it), and the belief raised as self-calibration asks.
+  FrameResult weigh(CellWork& work, const StepInput& input, const std::optional<FrameWeighting>& weighting,
+                    std::optional<double> bank, bool shape_later);
   /// shared_factor()'s ratio to the one the belief's frames went in at, when it has moved half an
   /// octave or more since (1 otherwise).
   [[nodiscard]] double shared_ratio();
 
   FilterConfig config_;
+  PowerEstimator estimator_;
+  bool started_ = false;
+  std::optional<Pose> last_estimate_;
   std::vector<double> entropies_;
   bool was_held_ = true;   ///< the estimator's hold at the last frame
   double last_power_ = 1;  ///< the power the belief's frames went in at

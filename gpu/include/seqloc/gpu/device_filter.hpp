@@ -58,13 +58,13 @@ enum class Backend {
 /// device on the GPU): the peer that benchmarks measure a step against. Throws as DeviceFilter.
 [[nodiscard]] double copy_ms(Backend backend, std::size_t bytes, int repeats);
 
-class DeviceFilter {
+class DeviceFilter : private filter::CellWork {
  public:
   /// Allocates the belief and its buffers on the backend. Throws filter::FilterError: io when the
   /// backend cannot run (naming cuda_status().reason) or device memory runs out, usage for a
   /// configuration it does not support (motion noise).
   DeviceFilter(const filter::FilterConfig& config, Backend backend);
-  ~DeviceFilter();
+  ~DeviceFilter() override;
   DeviceFilter(const DeviceFilter&) = delete;
   DeviceFilter& operator=(const DeviceFilter&) = delete;
 
@@ -76,16 +76,20 @@ class DeviceFilter {
   void reset_gaussian(double u, double v, double sigma_m);
   filter::FrameResult step(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                            const filter::Odometry& odometry, std::span<const float> road_distance_m,
-                           const std::optional<filter::GpsFix>& gps = std::nullopt);
-  void predict(const filter::Odometry& odometry);
+                           const std::optional<filter::GpsFix>& gps = std::nullopt) {
+    return decisions_.step(*this, {frame, crop, road_distance_m, gps}, odometry);
+  }
+  void predict(const filter::Odometry& odometry) override;
   filter::FrameResult update(const filter::PreparedFrame& frame, const filter::CropPose& crop,
                              std::span<const float> road_distance_m,
                              const std::optional<filter::GpsFix>& gps = std::nullopt,
-                             const std::optional<filter::FrameWeighting>& weighting = std::nullopt);
+                             const std::optional<filter::FrameWeighting>& weighting = std::nullopt) {
+    return decisions_.update(*this, {frame, crop, road_distance_m, gps}, weighting);
+  }
   void recentre(int du, int dv);
   void rebase(const filter::BeliefVolume& belief, const std::optional<filter::Pose>& last_estimate);
-  [[nodiscard]] const std::optional<filter::Pose>& last_estimate() const { return last_estimate_; }
-  [[nodiscard]] const filter::PowerEstimator& calibration() const { return estimator_; }
+  [[nodiscard]] const std::optional<filter::Pose>& last_estimate() const { return decisions_.last_estimate(); }
+  [[nodiscard]] const filter::PowerEstimator& calibration() const { return decisions_.estimator(); }
 
   /// The belief, copied to the host (a whole window: for tests, pictures and the smoother, not
   /// for every frame).
@@ -99,19 +103,24 @@ class DeviceFilter {
   /// A new sequence over the belief just set: no prediction before the next step, and
   /// self-calibration and ETU's route history start again.
   void start_sequence();
-  filter::FrameResult weigh(const filter::PreparedFrame& frame, const std::optional<filter::FrameWeighting>& weighting,
-                            bool calibrating);
-  void retemper();
+  // The cell work of a step in the engine (filter/cell_work.hpp), in the order StepDecisions calls it.
+  void load(const filter::PreparedFrame& frame, bool estimating) override;
+  filter::FrameShape powered_shape(const filter::PreparedFrame& frame, double power) override;
+  void raise(float ratio) override;
+  std::optional<filter::FrameShape> temper(const filter::PreparedFrame& frame, float exponent,
+                                           std::optional<double> shape_power) override;
+  double multiply_in(const filter::PreparedFrame& frame, const filter::CropPose& crop, float outside,
+                     std::span<const float> gps_term, bool with_prior, bool pool) override;
   /// Self-calibration's evidence of the loaded frame against the pooled predicted belief.
-  [[nodiscard]] filter::CalibrationEvidence judge(const filter::PreparedFrame& frame, const filter::CropPose& crop);
+  filter::CalibrationEvidence evidence(const filter::PreparedFrame& frame, const filter::CropPose& crop) override;
+  filter::BeliefPeak normalize(double total, std::span<const float> road_distance_m) override;
+  [[nodiscard]] filter::PositionMasses position_masses() override;
+  [[nodiscard]] filter::CellValue cell_value() override;
 
   filter::FilterConfig config_;
   Backend backend_;
   std::unique_ptr<Engine> engine_;
-  filter::PowerEstimator estimator_;
   filter::StepDecisions decisions_;  ///< every decision of the step (filter/step_decisions.hpp)
-  bool first_ = true;
-  std::optional<filter::Pose> last_estimate_;
   std::optional<float> cached_min_;
   std::vector<float> road_;  ///< the road distances whose prior the engine holds
 };
