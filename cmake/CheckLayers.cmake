@@ -7,8 +7,8 @@ cmake_minimum_required(VERSION 3.20)
 #   volume and odometry, the road prior) under all;
 #   osm <- raster <- io <- ingest (the preprocess report); intake (the frame in) and selfcal
 #   (self-calibration's estimator), each on Eigen and core only, <- filter <- gpu (its CUDA backend),
-#   uncertainty (a pose's, from its belief);
-#   osm + raster <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + filter + gpu + ros <- pipeline
+#   offline (the offline baseline), uncertainty (a pose's, from its belief);
+#   osm + raster <- io <- matcher; io + raster <- sim; io <- ros (ROS 2 bags); io + matcher + filter + offline + gpu + ros <- pipeline
 #   (the driver); io + raster <- render (it draws what localize wrote); raster <- serve; pipeline <- python;
 #   everything <- apps.
 if(NOT ROOT)
@@ -21,18 +21,19 @@ set(allowed_intake core intake)
 set(allowed_selfcal core selfcal)
 set(allowed_filter core intake selfcal filter)
 set(allowed_gpu core intake selfcal filter gpu)
+set(allowed_offline core intake selfcal filter offline)
 set(allowed_uncertainty core intake selfcal filter uncertainty)
 set(allowed_ingest core osm raster io ingest)
 set(allowed_io core osm raster io)
 set(allowed_matcher core osm raster io matcher)
 set(allowed_sim core osm raster io sim)
 set(allowed_ros core osm raster io ros)
-set(allowed_pipeline core osm raster intake selfcal filter uncertainty gpu io matcher ros pipeline)
+set(allowed_pipeline core osm raster intake selfcal filter offline uncertainty gpu io matcher ros pipeline)
 set(allowed_render core osm raster io render)
 set(allowed_serve core osm raster serve)
-set(allowed_python core osm raster intake selfcal filter uncertainty gpu io matcher ros pipeline)
+set(allowed_python core osm raster intake selfcal filter offline uncertainty gpu io matcher ros pipeline)
 set(violations 0)
-set(modules core osm raster intake selfcal filter uncertainty gpu ingest io matcher sim ros pipeline render serve python)
+set(modules core osm raster intake selfcal filter offline uncertainty gpu ingest io matcher sim ros pipeline render serve python)
 foreach(module IN LISTS modules)
   file(GLOB_RECURSE files "${ROOT}/${module}/*.cpp" "${ROOT}/${module}/*.hpp" "${ROOT}/${module}/*.cu")
   foreach(file IN LISTS files)

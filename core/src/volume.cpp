@@ -4,6 +4,7 @@
 #include <cstring>
 #include <string>
 
+#include "seqloc/core/angles.hpp"
 #include "seqloc/core/error.hpp"
 
 #if defined(__x86_64__)
@@ -138,6 +139,23 @@ std::uint16_t detail::float_to_half_portable(float f) {
   const auto exponent = static_cast<int>(magnitude >> 23);  // 102 ... 112
   const std::uint32_t significand = (magnitude & 0x7FFFFFu) | 0x800000u;
   return static_cast<std::uint16_t>(sign | round_off(significand, 126 - exponent));  // 2^-14 rounds up to 0x0400
+}
+
+Odometry compose(const std::vector<Odometry>& increments) {
+  double x = 0, y = 0, yaw = 0;
+  for (const auto& o : increments) {
+    const double c = std::cos(yaw * kDegToRad), s = std::sin(yaw * kDegToRad);
+    x += c * o.forward_m - s * o.left_m;
+    y += s * o.forward_m + c * o.left_m;
+    yaw += o.yaw_deg;
+  }
+  return {x, y, yaw};
+}
+
+Odometry invert(const Odometry& m) {
+  // Minus the displacement, rotated into the end's frame.
+  const double c = std::cos(m.yaw_deg * kDegToRad), s = std::sin(m.yaw_deg * kDegToRad);
+  return {-(c * m.forward_m + s * m.left_m), -(-s * m.forward_m + c * m.left_m), -m.yaw_deg};
 }
 
 }  // namespace seqloc::core

@@ -45,15 +45,11 @@ std::pair<int, int> inside_columns(const math::CropMap& m, int v, int width) {
 
 }  // namespace
 
-namespace detail {
-
 void displacement_cells(const Odometry& o, double heading_deg, double& du, double& dv) {
   math::displacement_cells(o.forward_m, o.left_m, heading_deg, kCellM, du, dv);
 }
 
-}  // namespace detail
-
-void detail::translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill) {
+void translate(const float* src, int sw, int sh, float* dst, int dw, int dh, double ou, double ov, float fill) {
   const math::Translation t = math::make_translation(sw, sh, dw, dh, ou, ov);
   const int iu = t.iu, u_lo = t.u_lo, u_hi = t.u_hi;
   const float w00 = (1 - t.au) * (1 - t.av), w01 = t.au * (1 - t.av), w10 = (1 - t.au) * t.av, w11 = t.au * t.av;
@@ -77,9 +73,8 @@ void detail::translate(const float* src, int sw, int sh, float* dst, int dw, int
   }
 }
 
-void detail::sample_slice(const float* values, int bins, int vh, int vw, double cell_m, const CropPose& crop,
-                          double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer,
-                          float* out) {
+void sample_slice(const float* values, int bins, int vh, int vw, double cell_m, const CropPose& crop,
+                  double heading_deg, int width, int height, float fill, std::vector<float>& blend_buffer, float* out) {
   // Heading: the crop's own heading of window heading h is h - rotation.
   const auto [j0, j1, a] = math::heading_blend(heading_deg, crop.rotation_deg, bins);
   const std::size_t slice = static_cast<std::size_t>(vw) * vh;
@@ -111,7 +106,7 @@ void detail::sample_slice(const float* values, int bins, int vh, int vw, double 
   }
 }
 
-void detail::warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odometry& odometry, float fill, int threads) {
+void warp_volume(const BeliefVolume& in, BeliefVolume& out, const Odometry& odometry, float fill, int threads) {
   const int W = in.width(), H = in.height(), R = in.headings();
   // New bin k takes source bins k + s and k + s + 1 (heading k * 360 / R + yaw), weights 1 - a, a.
   const double p = odometry.yaw_deg * R / 360.0;

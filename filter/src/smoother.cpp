@@ -9,7 +9,6 @@
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
-#include "seqloc/filter/offline.hpp"
 
 namespace seqloc::filter {
 namespace {

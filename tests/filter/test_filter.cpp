@@ -16,7 +16,6 @@
 #include <gtest/gtest.h>
 
 #include "filter/reference_filter.hpp"
-#include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "support/volumes.hpp"
 

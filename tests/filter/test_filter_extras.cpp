@@ -6,11 +6,15 @@
 
 #include <gtest/gtest.h>
 
-#include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
+#include "seqloc/offline/offline.hpp"
 
 namespace seqloc::filter {
 namespace {
+
+using offline::offline_poses;
+using offline::OfflineAggregator;
+using offline::OfflineFrame;
 
 FilterConfig config(int w, int h, int r) {
   FilterConfig c;

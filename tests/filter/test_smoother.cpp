@@ -11,11 +11,15 @@
 
 #include <gtest/gtest.h>
 
-#include "seqloc/filter/offline.hpp"
 #include "seqloc/filter/smoother.hpp"
+#include "seqloc/offline/offline.hpp"
 
 namespace seqloc::filter {
 namespace {
+
+using offline::offline_poses;
+using offline::OfflineAggregator;
+using offline::OfflineFrame;
 
 constexpr int kW = 36, kH = 32, kR = 4, kSide = 11;  // 4 headings: quarter turns are whole bins
 

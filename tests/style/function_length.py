@@ -12,7 +12,7 @@ import pathlib
 import re
 import sys
 
-FOLDERS = ["core", "osm", "raster", "filter", "gpu", "ingest", "io", "matcher", "sim", "ros", "pipeline", "render", "serve",
+FOLDERS = ["core", "osm", "raster", "intake", "selfcal", "filter", "offline", "uncertainty", "gpu", "ingest", "io", "matcher", "sim", "ros", "pipeline", "render", "serve",
            "apps", "python"]
 SUFFIXES = {".cpp", ".hpp", ".cu", ".cuh", ".h"}
 CONTROL = re.compile(r"\b(if|for|while|switch|catch|do|else|try)\s*(\(.*\))?\s*$", re.S)

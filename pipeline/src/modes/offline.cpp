@@ -1,13 +1,13 @@
 // offline: frame t's pose from the frames within offline_half_window of it, each placed by its
 // own crop and aligned to t by the relative motion, their log-likelihoods summed
-// (filter::OfflineAggregator, which keeps each frame's placement while it stays in range). On a
+// (offline::OfflineAggregator, which keeps each frame's placement while it stays in range). On a
 // route that crosses regions, frame t's window is in t's region and the others' crops are carried
 // into it.
 #include <algorithm>
 #include <optional>
 
 #include "factories.hpp"
-#include "seqloc/filter/offline.hpp"
+#include "seqloc/offline/offline.hpp"
 #include "seqloc/pipeline/region_window.hpp"
 
 namespace seqloc::pipeline::modes {
@@ -29,7 +29,7 @@ class OfflineMode final : public LocalizationMode {
     // A window centred on frame t's crop, in t's region.
     RegionWindow& window = window_in(cache_of(i));
     window.centre_on(crop.x, crop.y);
-    std::vector<filter::OfflineFrame> range;
+    std::vector<offline::OfflineFrame> range;
     for (std::size_t s = s0; s <= s1; ++s) {
       const GridCrop c = crop_in_region_of(s, i);
       range.push_back({&frames.get(s), window.crop_pose(c), route.frames[s].odometry, static_cast<std::int64_t>(s)});
@@ -55,7 +55,7 @@ class OfflineMode final : public LocalizationMode {
   }
 
   std::optional<RegionWindow> window_;  ///< in the current frame's region
-  filter::OfflineAggregator aggregator_;
+  offline::OfflineAggregator aggregator_;
 };
 
 }  // namespace

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "seqloc/core/units.hpp"
 
@@ -19,6 +20,12 @@ struct Odometry {
   double left_m = 0;
   double yaw_deg = 0;
 };
+
+/// The relative motion from a pose to a later one, composed from the increments in between
+/// (each in the body frame of its start), expressed in the body frame of the first pose.
+[[nodiscard]] Odometry compose(const std::vector<Odometry>& increments);
+/// The motion that undoes `motion` (expressed in the body frame of its end).
+[[nodiscard]] Odometry invert(const Odometry& motion);
 
 enum class VolumeType { float32, float16 };
 enum class VolumeValues { log_prob, prob };

@@ -23,11 +23,13 @@ class FilterError : public Error {
 };
 
 // The frame's volume, the motion and the half floats are the base layer's (core/volume.hpp).
+using core::compose;
 using core::float_to_half;
 using core::floats_to_halves;
 using core::FrameVolume;
 using core::half_to_float;
 using core::halves_to_floats;
+using core::invert;
 using core::Odometry;
 using core::VolumeType;
 using core::VolumeValues;

@@ -1,4 +1,4 @@
-#include "seqloc/filter/offline.hpp"
+#include "seqloc/offline/offline.hpp"
 
 #include <algorithm>
 #include <array>
@@ -10,35 +10,21 @@
 
 #include <Eigen/Core>
 
-#include "internal.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
 #include "seqloc/core/units.hpp"
+#include "seqloc/filter/aligned.hpp"
+#include "seqloc/filter/resample.hpp"
 
-namespace seqloc::filter {
-
-Odometry compose(const std::vector<Odometry>& increments) {
-  // Pose in the start's body frame: x forward, y left, heading counter-clockwise.
-  double x = 0, y = 0, yaw = 0;
-  for (const auto& o : increments) {
-    const double c = std::cos(yaw * core::kDegToRad), s = std::sin(yaw * core::kDegToRad);
-    x += c * o.forward_m - s * o.left_m;
-    y += s * o.forward_m + c * o.left_m;
-    yaw += o.yaw_deg;
-  }
-  return {x, y, yaw};
-}
-
-Odometry invert(const Odometry& m) {
-  // The start as seen from the end: minus the displacement, rotated into the end's frame.
-  const double c = std::cos(m.yaw_deg * core::kDegToRad), s = std::sin(m.yaw_deg * core::kDegToRad);
-  return {-(c * m.forward_m + s * m.left_m), -(-s * m.forward_m + c * m.left_m), -m.yaw_deg};
-}
+namespace seqloc::offline {
 
 namespace {
 
-using detail::ArrayMap;
-using detail::ConstArrayMap;
+using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
+using ConstArrayMap = Eigen::Map<const Eigen::ArrayXf>;
+using filter::AlignedVector;
+using filter::BeliefVolume;
+using filter::bin_heading_deg;
 
 using core::kCellM;
 
@@ -104,7 +90,7 @@ OfflineAggregator::Canvas OfflineAggregator::place(const OfflineFrame& f) {
   const CropPose local{f.crop.centre_u - u0, f.crop.centre_v - v0, f.crop.rotation_deg};
   auto& values = canvas.values;
   for (int k = 0; k < values.headings(); ++k) {
-    detail::sample_slice(relative.data(), p.bins, p.height, p.width, p.cell_m, local, values.bin_heading_deg(k),
+    filter::sample_slice(relative.data(), p.bins, p.height, p.width, p.cell_m, local, values.bin_heading_deg(k),
                          values.width(), values.height(), std::numeric_limits<float>::quiet_NaN(), impl_->blend,
                          values.slice(k));
   }
@@ -170,7 +156,7 @@ void add_own_frame(SumBox& box, const BeliefVolume& values, const std::array<int
   core::parallel_chunks(values.headings(), config.threads, [&](int k0, int k1, int) {
     for (int k = k0; k < k1; ++k) {
       float* dst = box.own.data() + static_cast<std::size_t>(k) * box.cells;
-      detail::translate(values.slice(k), values.width(), values.height(), dst, box.width, box.height, ou, ov, nan);
+      filter::translate(values.slice(k), values.width(), values.height(), dst, box.width, box.height, ou, ov, nan);
       term.add(dst, k);
     }
   });
@@ -194,8 +180,8 @@ void add_warped_frame(SumBox& box, const BeliefVolume& values, const std::array<
   // the poses worse: 38.6 % R@5m with all frames against 45.3 % with +-10 on a development set.)
   auto translated = [&](int j, float* dst) {
     double du = 0, dv = 0;
-    detail::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
-    detail::translate(values.slice(j), values.width(), values.height(), dst, box.width, box.height, ou - du, ov - dv,
+    filter::displacement_cells(motion, values.bin_heading_deg(j), du, dv);
+    filter::translate(values.slice(j), values.width(), values.height(), dst, box.width, box.height, ou - du, ov - dv,
                       nan);
   };
   core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
@@ -307,4 +293,4 @@ std::vector<Pose> offline_poses(std::vector<OfflineFrame> frames, const FilterCo
   return poses;
 }
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::offline

@@ -15,7 +15,13 @@
 #include "seqloc/filter/config.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 
-namespace seqloc::filter {
+namespace seqloc::offline {
+
+using filter::CropPose;
+using filter::FilterConfig;
+using filter::Odometry;
+using filter::Pose;
+using filter::PreparedFrame;
 
 struct OfflineFrame {
   const PreparedFrame* frame = nullptr;
@@ -25,12 +31,6 @@ struct OfflineFrame {
   /// route) from one pose to the next; < 0: placed for one pose only.
   std::int64_t key = -1;
 };
-
-/// The relative motion from a pose to a later one, composed from the increments in between
-/// (each in the body frame of its start), expressed in the body frame of the first pose.
-[[nodiscard]] Odometry compose(const std::vector<Odometry>& increments);
-/// The motion that undoes `motion` (expressed in the body frame of its end).
-[[nodiscard]] Odometry invert(const Odometry& motion);
 
 /// The offline poses of a route frame after frame, with each frame placed once (its probabilities
 /// resampled at every window heading on a canvas over its crop) rather than once per frame and
@@ -71,4 +71,4 @@ class OfflineAggregator {
 [[nodiscard]] std::vector<Pose> offline_poses(std::vector<OfflineFrame> frames, const FilterConfig& config,
                                               int half_window = -1);
 
-}  // namespace seqloc::filter
+}  // namespace seqloc::offline
