@@ -81,61 +81,83 @@ struct SeqLocFilter::Impl {
     }
   }
 
-  // One pass over the given frame for self-calibration: its cells binned by depth below the peak
-  // (each worker's share in its frame_cells; the bins the coarse belief is judged at, each
-  // counting for the bins around it) and, for power k != 1, the peak and entropy of
-  // q = p^k / Z: with r = log p - log p_max, log q_max = -log Z, Z = sum e^{k r} and
-  // H = log Z - k sum(e^{k r} r) / Z. The sums are kept per heading bin and added in bin order,
-  // so that they do not depend on the number of threads. `raised`, when given, already holds
-  // e^{k r} for every cell (the update's tempered frame where ETU's weight is 1): no exp then.
-  FrameShape scan_frame(const PreparedFrame& f, double power, int threads, const float* raised_given = nullptr) {
-    const bool estimating = !bank.has_value();
+  // Self-calibration's reading of the given frame: its cells binned by depth below the peak (each
+  // worker's share in its frame_cells; the bins the coarse belief is judged at, each counting for
+  // the bins around it) and, for power k != 1, the peak and entropy of q = p^k / Z: with
+  // r = log p - log p_max, log q_max = -log Z, Z = sum e^{k r} and H = log Z - k sum(e^{k r} r) / Z.
+  // The sums are kept per heading bin and added in bin order, so that they do not depend on the
+  // number of threads. scan_frame() reads the frame for it alone; the update's temper() reads each
+  // bin right after tempering it, while it is in cache.
+  struct Scan {
+    static constexpr std::size_t kBlock = 4096;
+    explicit Scan(const PreparedFrame& frame, double power)
+        : f(frame),
+          k(static_cast<float>(power)),
+          raised(power != 1.0),
+          stride(detail::calibration_bins(frame.bins)),
+          bin_z(static_cast<std::size_t>(frame.bins)),
+          bin_zr(static_cast<std::size_t>(frame.bins)) {}
+    const PreparedFrame& f;
+    float k;
+    bool raised;
+    int stride;
+    std::vector<double> bin_z, bin_zr;
+  };
+
+  // Bin j of a Scan. `raised_given`, when given, already holds e^{k r} for every cell of the frame
+  // (the update's tempered frame where ETU's weight is 1): no exp then.
+  void scan_bin(Scan& scan, int j, int worker, const float* raised_given) {
+    const PreparedFrame& f = scan.f;
+    const bool binned = !bank.has_value() && j % scan.stride == 0;
+    if (!binned && !scan.raised) return;  // nothing to read in this bin (z, zr stay 0, unused)
     const std::size_t slice = static_cast<std::size_t>(f.width) * f.height;
-    std::vector<double> bin_z(static_cast<std::size_t>(f.bins)), bin_zr(static_cast<std::size_t>(f.bins));
-    const bool raised = power != 1.0;
-    const auto k = static_cast<float>(power);
-    const int stride = detail::calibration_bins(f.bins);
-    const auto count = static_cast<float>(stride);
-    core::parallel_chunks(f.bins, threads, [&](int j0, int j1, int t) {
-      constexpr std::size_t kBlock = 4096;
-      Eigen::ArrayXf r(kBlock), one(kBlock), e(kBlock);  // aligned: sums that do not depend on the heap
-      auto& cells = workers[static_cast<std::size_t>(t)].frame_cells;
-      for (int j = j0; j < j1; ++j) {
-        double z = 0, zr = 0;
-        const bool binned = estimating && j % stride == 0;
-        if (!binned && !raised) continue;  // nothing to read in this bin (z, zr stay 0, unused)
-        for (std::size_t start = 0; start < slice; start += kBlock) {
-          const std::size_t len = std::min(kBlock, slice - start);
-          const float* x = f.log_prob.data() + static_cast<std::size_t>(j) * slice + start;
-          for (Eigen::Index i = 0; i < static_cast<Eigen::Index>(len); ++i) {  // vectorizes
-            r[i] = std::max(x[i], kLogZero) - f.max_log_prob;
-            one[i] = x[i] > kLogZero ? count : 0.0f;
-          }
-          if (binned) cells.add_each({r.data(), len}, {one.data(), len});
-          if (raised) {
-            const float* eb_data = e.data();
-            if (raised_given != nullptr) {
-              eb_data = raised_given + static_cast<std::size_t>(j) * slice + start;
-            } else {
-              detail::exp_or_zero(x, len, k, f.max_log_prob, e.data());
-            }
-            ConstArrayMap eb(eb_data, static_cast<Eigen::Index>(len));
-            z += eb.sum();
-            zr += (eb * ConstArrayMap(r.data(), static_cast<Eigen::Index>(len))).sum();  // 0 * kLogZero at a zero cell
-          }
-        }
-        bin_z[static_cast<std::size_t>(j)] = z;
-        bin_zr[static_cast<std::size_t>(j)] = zr;
+    const auto count = static_cast<float>(scan.stride);
+    // Aligned blocks: sums that do not depend on the heap.
+    Eigen::ArrayXf r(Scan::kBlock), one(Scan::kBlock), e(Scan::kBlock);
+    auto& cells = workers[static_cast<std::size_t>(worker)].frame_cells;
+    double z = 0, zr = 0;
+    for (std::size_t start = 0; start < slice; start += Scan::kBlock) {
+      const std::size_t len = std::min(Scan::kBlock, slice - start);
+      const float* x = f.log_prob.data() + static_cast<std::size_t>(j) * slice + start;
+      for (Eigen::Index i = 0; i < static_cast<Eigen::Index>(len); ++i) {  // vectorizes
+        r[i] = std::max(x[i], kLogZero) - f.max_log_prob;
+        one[i] = x[i] > kLogZero ? count : 0.0f;
       }
-    });
-    if (!raised) return {f.max_log_prob, f.entropy};
+      if (binned) cells.add_each({r.data(), len}, {one.data(), len});
+      if (scan.raised) {
+        const float* eb_data = e.data();
+        if (raised_given != nullptr) {
+          eb_data = raised_given + static_cast<std::size_t>(j) * slice + start;
+        } else {
+          detail::exp_or_zero(x, len, scan.k, f.max_log_prob, e.data());
+        }
+        ConstArrayMap eb(eb_data, static_cast<Eigen::Index>(len));
+        z += eb.sum();
+        zr += (eb * ConstArrayMap(r.data(), static_cast<Eigen::Index>(len))).sum();  // 0 * kLogZero at a zero cell
+      }
+    }
+    scan.bin_z[static_cast<std::size_t>(j)] = z;
+    scan.bin_zr[static_cast<std::size_t>(j)] = zr;
+  }
+
+  static FrameShape scanned_shape(const Scan& scan, double power) {
+    const PreparedFrame& f = scan.f;
+    if (!scan.raised) return {f.max_log_prob, f.entropy};
     double z = 0, zr = 0;
     for (int j = 0; j < f.bins; ++j) {
-      z += bin_z[static_cast<std::size_t>(j)];
-      zr += bin_zr[static_cast<std::size_t>(j)];
+      z += scan.bin_z[static_cast<std::size_t>(j)];
+      zr += scan.bin_zr[static_cast<std::size_t>(j)];
     }
     const double log_z = std::log(z);  // z >= 1: the peak's own cell counts e^0
     return {static_cast<float>(-log_z), std::clamp((log_z - power * zr / z) / f.log_cells, 0.0, 1.0)};
+  }
+
+  FrameShape scan_frame(const PreparedFrame& f, double power, int threads) {
+    Scan scan(f, power);
+    core::parallel_chunks(f.bins, threads, [&](int j0, int j1, int t) {
+      for (int j = j0; j < j1; ++j) scan_bin(scan, j, t, nullptr);
+    });
+    return scanned_shape(scan, power);
   }
 };
 
@@ -311,18 +333,22 @@ void SeqLocFilter::raise(float ratio) {
 std::optional<FrameShape> SeqLocFilter::temper(const PreparedFrame& frame, float exponent,
                                                std::optional<double> shape_power) {
   impl_->tempered.resize(frame.log_prob.size());
-  core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int) {
+  // With `shape_power`, self-calibration's scan reads each bin right after it is tempered; where
+  // ETU's weight is 1 the tempered frame is the powered frame's numerator e^{kappa r} itself.
+  std::optional<Impl::Scan> scan;
+  if (shape_power) scan.emplace(frame, *shape_power);
+  const float* powered = shape_power && exponent == static_cast<float>(*shape_power) ? impl_->tempered.data() : nullptr;
+  core::parallel_chunks(frame.bins, config_.threads, [&](int j0, int j1, int t) {
     const std::size_t slice = static_cast<std::size_t>(frame.width) * frame.height;
     for (int j = j0; j < j1; ++j) {  // bin by bin: the same cuts for any number of threads
       const std::size_t begin = static_cast<std::size_t>(j) * slice;
       detail::exp_or_zero(frame.log_prob.data() + begin, slice, exponent, frame.max_log_prob,
                           impl_->tempered.data() + begin);
+      if (scan) impl_->scan_bin(*scan, j, t, powered);
     }
   });
-  if (!shape_power) return std::nullopt;
-  // Where ETU's weight is 1 the tempered frame is the powered frame's numerator e^{kappa r} itself.
-  const bool powered = exponent == static_cast<float>(*shape_power);
-  return impl_->scan_frame(frame, *shape_power, config_.threads, powered ? impl_->tempered.data() : nullptr);
+  if (!scan) return std::nullopt;
+  return Impl::scanned_shape(*scan, *shape_power);
 }
 
 double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside,
