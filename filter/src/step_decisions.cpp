@@ -84,7 +84,7 @@ FrameResult StepDecisions::update(CellWork& work, const StepInput& input,
   // one-step criterion from the evidence gathered while the frame is multiplied in, a bank on its
   // own coarse windows after the step.
   const std::optional<double> bank = work.bank_power();
-  const bool calibrating = config_.self_calibrate && !weighting;
+  const bool calibrating = calibrates(weighting);
   const bool estimating = calibrating && !bank;
   // Where ETU's weight does not read the powered frame's entropy, the pass that finds it is left
   // to temper(), which may find it in the tempered frame.
@@ -126,9 +126,10 @@ FrameResult StepDecisions::update(CellWork& work, const StepInput& input,
 FrameResult StepDecisions::weigh(CellWork& work, const StepInput& input, const std::optional<FrameWeighting>& weighting,
                                  std::optional<double> bank, bool shape_later) {
   // Self-calibration: the frame raised to the power kappa the frames before it favour,
-  // q = p^kappa / Z(kappa); q's peak and entropy come from one pass over the given frame.
+  // q = p^kappa / Z(kappa); q's peak and entropy come from powered_shape() here, or from temper()
+  // where ETU's weight does not read them.
   const PreparedFrame& frame = input.frame;
-  const bool calibrating = config_.self_calibrate && !weighting;
+  const bool calibrating = calibrates(weighting);
   FrameResult result;
   result.volume_power = frame_power(weighting, calibrating, bank.value_or(estimator_.power()));
   const FrameShape used = calibrating && !shape_later ? work.powered_shape(frame, result.volume_power)

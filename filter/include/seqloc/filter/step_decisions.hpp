@@ -146,6 +146,11 @@ class StepDecisions {
   [[nodiscard]] const std::vector<double>& route_entropies() const { return entropies_; }
 
  private:
+  /// Whether a step estimates from its frame: self-calibration is on and no weighting repeats an
+  /// earlier pass.
+  [[nodiscard]] bool calibrates(const std::optional<FrameWeighting>& weighting) const {
+    return config_.self_calibrate && !weighting;
+  }
   /// The frame's power and ETU weight (the powered frame's shape now, or from temper() where ETU
   /// does not read it), and the belief raised as self-calibration asks.
   FrameResult weigh(CellWork& work, const StepInput& input, const std::optional<FrameWeighting>& weighting,
