@@ -62,8 +62,6 @@ class StepDecisions {
   /// A new route: the next step does not predict; ETU's route reference, the estimator and the
   /// hold's memory start again.
   void reset();
-  /// Whether a step has run since the last reset (the next one predicts).
-  [[nodiscard]] bool started() const { return started_; }
   /// The last step's pose (window cells), if any since the last reset; `rebase` replaces it (the
   /// window moved to another grid).
   [[nodiscard]] const std::optional<Pose>& last_estimate() const { return last_estimate_; }
@@ -161,7 +159,7 @@ class StepDecisions {
 
   FilterConfig config_;
   PowerEstimator estimator_;
-  bool started_ = false;
+  bool started_ = false;  ///< a step has run since the last reset: the next one predicts
   std::optional<Pose> last_estimate_;
   std::vector<double> entropies_;
   bool was_held_ = true;   ///< the estimator's hold at the last frame
