@@ -10,45 +10,40 @@
 
 namespace seqloc::filter::detail {
 
-void pool_headings(const float* pooled, int headings, BeliefVolume& coarse, int threads) {
-  const int b = headings / coarse.headings(), half = b / 2;
-  const std::size_t n = coarse.slice_cells();
-  core::parallel_chunks(coarse.headings(), threads, [&](int j0, int j1, int) {
-    for (int j = j0; j < j1; ++j) {
-      float* out = coarse.slice(j);
-      std::fill(out, out + n, 0.0f);
-      for (int d = -half; d <= half; ++d) {
-        const int k = ((b * j + d) % headings + headings) % headings;
-        if (!pooled_bin(k, b)) continue;
-        const float weight = math::pooled_weight(d, b);
-        const float* in = pooled + static_cast<std::size_t>(k) * n;
-        for (std::size_t i = 0; i < n; ++i) out[i] += weight * in[i];
-      }
-    }
-  });
+void pool_heading(const PooledBelief& pooled, int j, float* out) {
+  const int b = calibration_bins(pooled.headings), half = b / 2;
+  const std::size_t n = static_cast<std::size_t>(pooled.width) * pooled.height;
+  std::fill(out, out + n, 0.0f);
+  for (int d = -half; d <= half; ++d) {
+    const int k = ((b * j + d) % pooled.headings + pooled.headings) % pooled.headings;
+    if (!pooled_bin(k, b)) continue;
+    const float weight = math::pooled_weight(d, b);
+    const float* in = pooled.slices + static_cast<std::size_t>(k) * n;
+    for (std::size_t i = 0; i < n; ++i) out[i] += weight * in[i];
+  }
 }
 
-void judge_frame(const BeliefVolume& belief, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
-                 double cells_per_cell, int threads, CalibrationEvidence& evidence) {
-  const int w = belief.width(), h = belief.height(), r = belief.headings();
-  const std::size_t n = belief.slice_cells();
+void judge_frame(const PooledBelief& pooled, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
+                 double cells_per_cell, int threads, JudgeScratch& scratch, CalibrationEvidence& evidence) {
+  const int w = pooled.width, h = pooled.height, r = pooled.headings / calibration_bins(pooled.headings);
+  const std::size_t n = static_cast<std::size_t>(w) * h;
   constexpr float kOutside = 1.0f;  // no log-probability is positive
-  struct Share {
-    DepthHistogram in_crop;
-    std::vector<float> blend, sample, depth;
-  };
-  std::vector<Share> shares(static_cast<std::size_t>(std::max(1, threads)));
+  auto& shares = scratch.shares;
+  shares.resize(static_cast<std::size_t>(std::max(1, threads)));
+  for (auto& s : shares) s.in_crop.clear();
   // Per bin, added in bin order: the same sums for any number of threads.
   std::vector<double> outside(static_cast<std::size_t>(r));
   std::vector<std::size_t> outside_cells(static_cast<std::size_t>(r));
   core::parallel_chunks(r, threads, [&](int k0, int k1, int t) {
-    Share& s = shares[static_cast<std::size_t>(t)];
+    JudgeScratch::Share& s = shares[static_cast<std::size_t>(t)];
     s.sample.resize(n);
     s.depth.resize(n);
+    s.mass.resize(n);
     for (int k = k0; k < k1; ++k) {
       sample_slice(frame.log_prob.data(), frame.bins, frame.height, frame.width, frame_cell_m, crop,
-                   belief.bin_heading_deg(k), w, h, kOutside, s.blend, s.sample.data());
-      const float* mass = belief.slice(k);
+                   bin_heading_deg(k, r), w, h, kOutside, s.blend, s.sample.data());
+      const float* mass = s.mass.data();
+      pool_heading(pooled, k, s.mass.data());
       double out = 0;
       std::size_t out_cells = 0;
       for (std::size_t i = 0; i < n; ++i) {
@@ -66,12 +61,12 @@ void judge_frame(const BeliefVolume& belief, const PreparedFrame& frame, double 
       outside_cells[static_cast<std::size_t>(k)] = out_cells;
     }
   });
-  for (const Share& s : shares) evidence.belief_in_crop.merge(s.in_crop);
+  for (const JudgeScratch::Share& s : shares) evidence.belief_in_crop.merge(s.in_crop);
   for (int k = 0; k < r; ++k) {
     evidence.belief_outside += outside[static_cast<std::size_t>(k)];
     evidence.outside_cells += static_cast<double>(outside_cells[static_cast<std::size_t>(k)]) * cells_per_cell;
   }
-  evidence.window_cells = static_cast<double>(belief.size()) * cells_per_cell;
+  evidence.window_cells = static_cast<double>(n) * r * cells_per_cell;
 }
 
 }  // namespace seqloc::filter::detail
@@ -97,15 +92,15 @@ void add_frame_cells(const PreparedFrame& frame, DepthHistogram& cells) {
   }
 }
 
-CalibrationEvidence coarse_evidence(const BeliefVolume& coarse, const PreparedFrame& frame, const CropPose& crop,
-                                    const FilterConfig& config, const DepthHistogram& frame_cells) {
-  CalibrationEvidence evidence;
+void coarse_evidence(const PooledBelief& pooled, const PreparedFrame& frame, const CropPose& crop,
+                     const FilterConfig& config, const DepthHistogram& frame_cells, JudgeScratch& scratch,
+                     CalibrationEvidence& evidence) {
+  evidence.clear();
   evidence.log_outside = -frame.log_cells - config.outside_crop_nats;
   evidence.frame_cells.merge(frame_cells);
   const CropPose at{(crop.centre_u - 0.5) / 2, (crop.centre_v - 0.5) / 2, crop.rotation_deg};
-  const double cells_per_cell = 4.0 * config.headings / coarse.headings();
-  detail::judge_frame(coarse, frame, frame.cell_m / 2, at, cells_per_cell, config.threads, evidence);
-  return evidence;
+  const double cells_per_cell = 4.0 * detail::calibration_bins(config.headings);
+  detail::judge_frame(pooled, frame, frame.cell_m / 2, at, cells_per_cell, config.threads, scratch, evidence);
 }
 
 }  // namespace seqloc::filter

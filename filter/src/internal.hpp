@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 
 #include "seqloc/filter/belief.hpp"
+#include "seqloc/filter/calibration_evidence.hpp"
 #include "seqloc/filter/device_math.hpp"
 #include "seqloc/filter/resample.hpp"
 #include "seqloc/filter/self_calibration.hpp"
@@ -32,19 +33,19 @@ using filter::warp_volume;
 using math::calibration_bins;
 using math::pooled_bin;
 
-/// The coarse belief from `pooled` ([bin][v][u] at the coarse grid's cells, one slice per window
-/// bin, filled for the bins pooled_bin() names): coarse bin j is centred on window bin j b and
-/// sums the named bins among j b - b/2 .. j b + b/2 (circular), each standing for itself and its
-/// neighbours, those at the ends for half as many: weights 1, 2, 1 for b = 4, 1, 1 for b = 2.
-void pool_headings(const float* pooled, int headings, BeliefVolume& coarse, int threads);
+/// Coarse bin j of the belief `pooled` makes, into `out` (one coarse slice): coarse bin j is centred
+/// on window bin j b and sums the named bins among j b - b/2 .. j b + b/2 (circular), each standing
+/// for itself and its neighbours, those at the ends for half as many: weights 1, 2, 1 for b = 4,
+/// 1, 1 for b = 2.
+void pool_heading(const PooledBelief& pooled, int j, float* out);
 
-/// Self-calibration's evidence of a frame against a belief on another grid: the belief's mass
-/// binned by the frame's depth below its peak at each cell (the frame's log-probabilities sampled
-/// at the cell's centre, `frame_cell_m` being the frame's cell size in the belief's cells times
-/// 0.5 m, `crop` the crop in the belief's cells), its mass outside the crop, and its cells in all
-/// and outside the crop, each counted as `cells_per_cell` window cells. The same sums for any
-/// number of threads.
-void judge_frame(const BeliefVolume& belief, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
-                 double cells_per_cell, int threads, CalibrationEvidence& evidence);
+/// Self-calibration's evidence of a frame against the coarse belief `pooled` makes (each of its
+/// slices made by pool_heading() as it is judged): the belief's mass binned by the frame's depth
+/// below its peak at each cell (the frame's log-probabilities sampled at the cell's centre,
+/// `frame_cell_m` being the frame's cell size in coarse cells times 0.5 m, `crop` the crop in
+/// coarse cells), its mass outside the crop, and its cells in all and outside the crop, each
+/// counted as `cells_per_cell` window cells. The same sums for any number of threads.
+void judge_frame(const PooledBelief& pooled, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
+                 double cells_per_cell, int threads, JudgeScratch& scratch, CalibrationEvidence& evidence);
 
 }  // namespace seqloc::filter::detail

@@ -43,6 +43,54 @@ std::pair<int, int> inside_columns(const math::CropMap& m, int v, int width) {
   return {static_cast<int>(std::floor(lo)) - 1, std::min(static_cast<int>(std::ceil(hi)) + 1, width - 1)};
 }
 
+bool is_power_of_two(double x) {
+  int exponent = 0;
+  return x > 0 && std::frexp(x, &exponent) == 0.5;
+}
+
+// math::crop_sample_at for every cell of a window slice where the crop is not turned and its scale
+// is a power of two (self-calibration's coarse grid, at twice the frame's cells): x depends on u
+// alone and y on v alone, each exactly as crop_sample_at computes it (scale * du is exact), so the
+// columns' cells and weights are found once per slice and the rows are plain loops, with the same
+// arithmetic per cell and the same values.
+void sample_axis_aligned(const float* values, const math::CropMap& m, int width, int height, float fill, float* out) {
+  struct Axis {
+    int lo = 0, hi = 0;
+    float a = 0;
+    bool inside = false;
+  };
+  const auto axis = [](double at, int extent) {
+    Axis c;
+    c.inside = at >= 0 && at <= extent - 1;
+    if (!c.inside) return c;
+    c.lo = static_cast<int>(at);
+    c.hi = c.lo + 1 < extent ? c.lo + 1 : extent - 1;
+    c.a = static_cast<float>(at - c.lo);
+    return c;
+  };
+  std::vector<Axis> columns(static_cast<std::size_t>(width));
+  for (int u = 0; u < width; ++u) {
+    columns[static_cast<std::size_t>(u)] = axis((m.vw - 1) / 2.0 + m.scale * (u - m.centre_u), m.vw);
+  }
+  for (int v = 0; v < height; ++v) {
+    float* row = out + static_cast<std::size_t>(v) * width;
+    const Axis y = axis((m.vh - 1) / 2.0 + m.scale * (v - m.centre_v), m.vh);
+    if (!y.inside) {
+      std::fill(row, row + width, fill);
+      continue;
+    }
+    const float* r0 = values + static_cast<std::size_t>(y.lo) * m.vw;
+    const float* r1 = values + static_cast<std::size_t>(y.hi) * m.vw;
+    const float ay = y.a;
+    for (int u = 0; u < width; ++u) {
+      const Axis& x = columns[static_cast<std::size_t>(u)];
+      const float ax = x.a;
+      row[u] = x.inside ? (1 - ay) * ((1 - ax) * r0[x.lo] + ax * r0[x.hi]) + ay * ((1 - ax) * r1[x.lo] + ax * r1[x.hi])
+                        : fill;
+    }
+  }
+}
+
 }  // namespace
 
 void displacement_cells(const Odometry& o, double heading_deg, double& du, double& dv) {
@@ -96,6 +144,10 @@ void sample_slice(const float* values, int bins, int vh, int vw, double cell_m, 
   // General affine map from window cells to volume cells.
   const double r = crop.rotation_deg * kDegToRad;
   const math::CropMap map{crop.centre_u, crop.centre_v, std::cos(r), std::sin(r), scale, vw, vh};
+  if (crop.rotation_deg == 0.0 && is_power_of_two(scale)) {
+    sample_axis_aligned(blended, map, width, height, fill, out);
+    return;
+  }
   const auto read = [blended](std::size_t i) { return blended[i]; };
   for (int v = 0; v < height; ++v) {
     float* row = out + static_cast<std::size_t>(v) * width;

@@ -7,6 +7,10 @@
 
 #include <Eigen/Core>
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 #include "internal.hpp"
 #include "seqloc/core/angles.hpp"
 #include "seqloc/core/thread_pool.hpp"
@@ -60,10 +64,16 @@ struct SeqLocFilter::Impl {
   AlignedVector<float> tempered;  // the frame's q^w / max, heading-major
   std::optional<PowerBank> bank;  // self-calibration's judge when FilterConfig::self_calibration_bank
   // Self-calibration's view of the predicted belief: each slice summed over 2 x 2 cells as the
-  // update reads it, then `pooling` slices into one coarse bin (detail::pool_headings).
-  std::optional<BeliefVolume> coarse;
+  // update reads it, then `pooling` slices into one coarse bin (detail::pool_heading, as the bin
+  // is judged).
   int pooling = 1;              // window bins per coarse bin
+  std::size_t pooled_cells = 0;  // of one pooled slice
   AlignedVector<float> pooled;  // [bin][v / 2][u / 2], the bins pooled_bin() names
+  // evidence()'s: the workers' frame cells merged, the judge's scratch and the evidence, their bins
+  // reused from frame to frame.
+  DepthHistogram frame_cells{DepthHistogram::kCount};
+  JudgeScratch judge;
+  CalibrationEvidence evidence;
   struct Worker {
     std::vector<float> sample, blend, blend_rows;
     DepthHistogram frame_cells{DepthHistogram::kCount};  // self-calibration's evidence, this worker's share
@@ -76,8 +86,8 @@ struct SeqLocFilter::Impl {
     if (c.self_calibrate && c.self_calibration_bank) bank.emplace(c);
     if (c.self_calibrate && !c.self_calibration_bank) {
       pooling = detail::calibration_bins(c.headings);
-      coarse.emplace(coarse_belief_for(c));
-      pooled.resize(coarse->slice_cells() * static_cast<std::size_t>(c.headings));
+      pooled_cells = static_cast<std::size_t>((c.width + 1) / 2) * static_cast<std::size_t>((c.height + 1) / 2);
+      pooled.resize(pooled_cells * static_cast<std::size_t>(c.headings));
     }
   }
 
@@ -163,23 +173,53 @@ struct SeqLocFilter::Impl {
 
 namespace {
 
-// One slice of the predicted belief summed over 2 x 2 cells into `out` ((width + 1) / 2 wide): the
-// rows in pairs, then their columns in pairs (loops that vectorize).
-void pool_slice(const float* slice, int width, int height, std::vector<float>& row_pair, float* out) {
+// o[i] = r[2 i] + r[2 i + 1] for i < pairs.
+void add_pairs(const float* __restrict r, int pairs, float* __restrict o) {
+  int i = 0;
+#if defined(__AVX2__)
+  for (; i + 8 <= pairs; i += 8) {
+    // hadd pairs within 128-bit lanes: (r0+r1, r2+r3, r8+r9, r10+r11 | r4+r5, r6+r7, r12+r13, r14+r15);
+    // the 64-bit permute puts them in order.
+    const __m256 sums = _mm256_hadd_ps(_mm256_loadu_ps(r + 2 * i), _mm256_loadu_ps(r + 2 * i + 8));
+    _mm256_storeu_ps(o + i, _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(sums), 0xD8)));
+  }
+#endif
+  for (; i < pairs; ++i) o[i] = r[2 * i] + r[2 * i + 1];
+}
+
+// The update of one slice of the belief (b <- b * sample, or sample alone without the prior; then
+// times the GPS term where given) and, for self-calibration, the predicted slice summed over 2 x 2
+// cells into `pooled` ((width + 1) / 2 wide; the last row or column alone where the size is odd)
+// as math::pool_2x2 adds them: row pair by row pair, so that the belief is read from memory once.
+void update_pooling(float* slice, const float* sample, const float* gps, bool with_prior, int width, int height,
+                    std::vector<float>& row_pair, float* pooled) {
   const int cw = (width + 1) / 2, pairs = width / 2;
   row_pair.resize(static_cast<std::size_t>(width));
+  float* __restrict r = row_pair.data();
   for (int cv = 0; cv < (height + 1) / 2; ++cv) {
-    const float* __restrict a = slice + static_cast<std::size_t>(2 * cv) * width;
-    float* __restrict r = row_pair.data();
-    if (2 * cv + 1 < height) {
+    const int rows = 2 * cv + 1 < height ? 2 : 1;
+    const std::size_t at = static_cast<std::size_t>(2 * cv) * width;
+    float* __restrict a = slice + at;
+    if (rows == 2) {
       const float* __restrict b = a + width;
       for (int u = 0; u < width; ++u) r[u] = a[u] + b[u];
     } else {
       std::copy(a, a + width, r);
     }
-    float* __restrict o = out + static_cast<std::size_t>(cv) * cw;
-    for (int i = 0; i < pairs; ++i) o[i] = r[2 * i] + r[2 * i + 1];
+    float* o = pooled + static_cast<std::size_t>(cv) * cw;
+    add_pairs(r, pairs, o);
     if (cw > pairs) o[pairs] = r[width - 1];
+    const std::size_t n = static_cast<std::size_t>(rows) * width;
+    const float* __restrict s = sample + at;
+    if (with_prior) {
+      for (std::size_t i = 0; i < n; ++i) a[i] *= s[i];
+    } else {
+      std::copy(s, s + n, a);
+    }
+    if (gps != nullptr) {
+      const float* __restrict g = gps + at;
+      for (std::size_t i = 0; i < n; ++i) a[i] *= g[i];
+    }
   }
 }
 
@@ -363,18 +403,20 @@ double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& cro
     for (int k = k0; k < k1; ++k) {
       detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
                            belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
-      if (pool && detail::pooled_bin(k, impl_->pooling)) {
-        pool_slice(belief_.slice(k), W, H, worker.blend_rows,
-                   impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->coarse->slice_cells());
-      }
       ArrayMap b(belief_.slice(k), N);
-      ConstArrayMap sample(worker.sample.data(), N);
-      if (with_prior) {
-        b *= sample;
+      if (pool && detail::pooled_bin(k, impl_->pooling)) {
+        update_pooling(belief_.slice(k), worker.sample.data(), gps_term.empty() ? nullptr : gps_term.data(), with_prior,
+                       W, H, worker.blend_rows,
+                       impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->pooled_cells);
       } else {
-        b = sample;
+        ConstArrayMap sample(worker.sample.data(), N);
+        if (with_prior) {
+          b *= sample;
+        } else {
+          b = sample;
+        }
+        if (!gps_term.empty()) b *= ConstArrayMap(gps_term.data(), N);
       }
-      if (!gps_term.empty()) b *= ConstArrayMap(gps_term.data(), N);
       slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(b.sum());
     }
   });
@@ -383,15 +425,16 @@ double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& cro
   return total;
 }
 
-CalibrationEvidence SeqLocFilter::evidence(const PreparedFrame& frame, const CropPose& crop) {
+const CalibrationEvidence& SeqLocFilter::evidence(const PreparedFrame& frame, const CropPose& crop) {
   // The predicted belief on the coarse grid (1 m cells, a few heading bins in each), judged by
   // the frame at each power: a sixteenth of the cells, and the same estimate to within the
   // frame-to-frame noise of the estimate itself (docs/filter.md, "Self-calibration").
-  BeliefVolume& coarse = *impl_->coarse;
-  detail::pool_headings(impl_->pooled.data(), config_.headings, coarse, config_.threads);
-  DepthHistogram frame_cells{DepthHistogram::kCount};
+  const PooledBelief pooled{impl_->pooled.data(), (config_.width + 1) / 2, (config_.height + 1) / 2, config_.headings};
+  DepthHistogram& frame_cells = impl_->frame_cells;
+  frame_cells.clear();
   for (const auto& worker : impl_->workers) frame_cells.merge(worker.frame_cells);
-  return coarse_evidence(coarse, frame, crop, config_, frame_cells);
+  coarse_evidence(pooled, frame, crop, config_, frame_cells, impl_->judge, impl_->evidence);
+  return impl_->evidence;
 }
 
 BeliefPeak SeqLocFilter::normalize(double total, std::span<const float> road_distance_m) {

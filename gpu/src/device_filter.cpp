@@ -193,7 +193,8 @@ filter::CellValue DeviceFilter::cell_value() {
   return [this](int u, int v, int k) { return static_cast<double>(engine_->value(u, v, k)); };
 }
 
-filter::CalibrationEvidence DeviceFilter::evidence(const filter::PreparedFrame& frame, const filter::CropPose& crop) {
+const filter::CalibrationEvidence& DeviceFilter::evidence(const filter::PreparedFrame& frame,
+                                                          const filter::CropPose& crop) {
   // filter::coarse_evidence with its sums made by the engine: the coarse grid's cells are 2 x 2
   // window cells, so the frame's cells are half as large in them and the crop's centre moves.
   const int coarse_r = config_.headings / filter::math::calibration_bins(config_.headings);
@@ -210,7 +211,8 @@ filter::CalibrationEvidence DeviceFilter::evidence(const filter::PreparedFrame& 
   setup.count_scale = filter::DepthHistogram::kCount;
   setup.mass_scale = filter::DepthHistogram::kMass;
   const JudgeSums sums = engine_->judge(setup);
-  filter::CalibrationEvidence evidence;
+  filter::CalibrationEvidence& evidence = evidence_;
+  evidence.clear();
   evidence.frame_cells.add_bins(sums.frame_weight, sums.frame_depth);
   evidence.belief_in_crop.add_bins(sums.mass_weight, sums.mass_depth);
   evidence.belief_outside = sums.outside_mass;

@@ -29,8 +29,14 @@ DepthHistogram::DepthHistogram(Scale scale) : scale_(scale) {
 }
 
 void DepthHistogram::clear() {
-  std::fill(weight_.begin(), weight_.end(), 0);
-  std::fill(depth_sum_.begin(), depth_sum_.end(), 0);
+  if (used_lo_ < used_hi_) {
+    const auto first = static_cast<std::ptrdiff_t>(used_lo_ * kLanes),
+               last = static_cast<std::ptrdiff_t>(used_hi_ * kLanes);
+    std::fill(weight_.begin() + first, weight_.begin() + last, 0);
+    std::fill(depth_sum_.begin() + first, depth_sum_.begin() + last, 0);
+  }
+  used_lo_ = bins();
+  used_hi_ = 0;
 }
 
 void DepthHistogram::add_each(std::span<const float> r, std::span<const float> w) {
@@ -46,6 +52,8 @@ void DepthHistogram::add_each(std::span<const float> r, std::span<const float> w
     auto d = depth.head(len);
     d = (-Eigen::Map<const Eigen::ArrayXf>(r.data() + start, len)).max(0.0f).min(max_depth);
     bin.head(len) = (d * per_nat).cast<std::int32_t>().max(0).min(last);
+    used_lo_ = std::min(used_lo_, static_cast<std::size_t>(bin.head(len).minCoeff()));
+    used_hi_ = std::max(used_hi_, static_cast<std::size_t>(bin.head(len).maxCoeff()) + 1);
     const float* ws = w.data() + start;
     // Neighbouring cells often share a bin: each of kLanes copies takes every kLanes-th cell, so
     // that one add need not wait for the one before it.
@@ -72,18 +80,22 @@ void DepthHistogram::add_bins(std::span<const std::int64_t> weight, std::span<co
     weight_[i * kLanes] += weight[i];
     depth_sum_[i * kLanes] += depth_sum[i];
   }
+  used_lo_ = 0;
+  used_hi_ = bins();
 }
 
 void DepthHistogram::merge(const DepthHistogram& other) {
-  for (std::size_t i = 0; i < weight_.size(); ++i) {
+  for (std::size_t i = other.used_lo_ * kLanes; i < other.used_hi_ * kLanes; ++i) {
     weight_[i] += other.weight_[i];
     depth_sum_[i] += other.depth_sum_[i];
   }
+  used_lo_ = std::min(used_lo_, other.used_lo_);
+  used_hi_ = std::max(used_hi_, other.used_hi_);
 }
 
 double DepthHistogram::total() const {
   std::int64_t s = 0;
-  for (const std::int64_t w : weight_) s += w;
+  for (std::size_t i = used_lo_ * kLanes; i < used_hi_ * kLanes; ++i) s += weight_[i];
   return static_cast<double>(s) / scale_.weight;
 }
 
@@ -91,7 +103,7 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
   // The non-empty bins as (log weight, mean depth), summed stably (shifted by the largest term),
   // each kappa's terms in SIMD.
   std::vector<double> log_w, depth;
-  for (std::size_t i = 0; i < weight_.size(); i += kLanes) {
+  for (std::size_t i = used_lo_ * kLanes; i < used_hi_ * kLanes; i += kLanes) {
     std::int64_t weight = 0, depth_sum = 0;
     for (std::size_t lane = 0; lane < kLanes; ++lane) {
       weight += weight_[i + lane];

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "seqloc/filter/device_math.hpp"
+#include "seqloc/filter/resample.hpp"
 #include "seqloc/filter/seqloc_filter.hpp"
 #include "seqloc/offline/offline.hpp"
 
@@ -346,6 +348,41 @@ TEST(RoadPrior, TheDeviceCopyIsTheBaseLayersG) {
       EXPECT_EQ(math::road_prior_g(d, sigma), core::road_prior_g(d, sigma)) << d << " m, sigma " << sigma;
     }
   }
+}
+
+// A crop that is not turned, with another cell size (self-calibration's coarse grid reads the frame
+// at twice its cells): sample_slice's separable loop gives every cell the value the per-cell
+// sampler math::crop_sample_at gives it, bit for bit, inside, at the edges and outside; a turned
+// crop (the per-cell path) for contrast. Fails if the separable loop finds a position or rounds a
+// weight otherwise.
+TEST(Resample, AnUnturnedCropAtAnotherScaleIsSampledAsCellByCell) {
+  const int vh = 37, vw = 29, width = 40, height = 35;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> value(-30.0f, 0.0f);
+  std::vector<float> frame(static_cast<std::size_t>(vh) * vw);
+  for (float& x : frame) x = value(rng);
+  const auto read = [&frame](std::size_t i) { return frame[i]; };
+  int outside = 0;
+  for (const double cell_m : {0.25, 1.0, 0.125}) {
+    for (const CropPose crop : {CropPose{20.3, 17.8, 0.0}, CropPose{3.0, 30.25, 0.0}, CropPose{20.3, 17.8, 30.0}}) {
+      std::vector<float> out(static_cast<std::size_t>(width) * height), blend;
+      sample_slice(frame.data(), 1, vh, vw, cell_m, crop, crop.rotation_deg, width, height, 1.0f, blend, out.data());
+      const double r = crop.rotation_deg * core::kDegToRad;
+      const math::CropMap map{crop.centre_u, crop.centre_v, std::cos(r), std::sin(r), core::kCellM / cell_m, vw, vh};
+      int inside = 0;
+      for (int v = 0; v < height; ++v) {
+        for (int u = 0; u < width; ++u) {
+          const float expected = math::crop_sample_at(map, u, v, 1.0f, read);
+          inside += expected != 1.0f;
+          ASSERT_EQ(out[static_cast<std::size_t>(v) * width + u], expected)
+              << "cell (" << u << ", " << v << "), " << cell_m << " m cells, crop turned " << crop.rotation_deg;
+        }
+      }
+      EXPECT_GT(inside, 0) << cell_m;
+      outside += width * height - inside;
+    }
+  }
+  EXPECT_GT(outside, 0);
 }
 
 }  // namespace

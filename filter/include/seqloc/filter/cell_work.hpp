@@ -96,8 +96,9 @@ class CellWork {
   /// Returns the belief's total. `pool`: the predicted belief is pooled for evidence() on the way.
   virtual double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside,
                              std::span<const float> gps_term, bool with_prior, bool pool) = 0;
-  /// Self-calibration's evidence of the frame against the predicted belief pooled by multiply_in.
-  virtual CalibrationEvidence evidence(const PreparedFrame& frame, const CropPose& crop) = 0;
+  /// Self-calibration's evidence of the frame against the predicted belief pooled by multiply_in,
+  /// kept by the backend until the next call (its bins are reused from frame to frame).
+  virtual const CalibrationEvidence& evidence(const PreparedFrame& frame, const CropPose& crop) = 0;
   /// The belief divided by `total`, MGR's blend with the road prior of `road_distance_m` as the
   /// config asks, and its largest cell.
   virtual BeliefPeak normalize(double total, std::span<const float> road_distance_m) = 0;

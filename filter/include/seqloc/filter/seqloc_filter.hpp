@@ -123,7 +123,7 @@ class SeqLocFilter : private CellWork {
                                    std::optional<double> shape_power) override;
   double multiply_in(const PreparedFrame& frame, const CropPose& crop, float outside, std::span<const float> gps_term,
                      bool with_prior, bool pool) override;
-  CalibrationEvidence evidence(const PreparedFrame& frame, const CropPose& crop) override;
+  const CalibrationEvidence& evidence(const PreparedFrame& frame, const CropPose& crop) override;
   BeliefPeak normalize(double total, std::span<const float> road_distance_m) override;
   [[nodiscard]] PositionMasses position_masses() override;
   [[nodiscard]] CellValue cell_value() override;

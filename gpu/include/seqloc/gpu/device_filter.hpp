@@ -112,13 +112,15 @@ class DeviceFilter : private filter::CellWork {
   double multiply_in(const filter::PreparedFrame& frame, const filter::CropPose& crop, float outside,
                      std::span<const float> gps_term, bool with_prior, bool pool) override;
   /// Self-calibration's evidence of the loaded frame against the pooled predicted belief.
-  filter::CalibrationEvidence evidence(const filter::PreparedFrame& frame, const filter::CropPose& crop) override;
+  const filter::CalibrationEvidence& evidence(const filter::PreparedFrame& frame,
+                                              const filter::CropPose& crop) override;
   filter::BeliefPeak normalize(double total, std::span<const float> road_distance_m) override;
   [[nodiscard]] filter::PositionMasses position_masses() override;
   [[nodiscard]] filter::CellValue cell_value() override;
 
   filter::FilterConfig config_;
   Backend backend_;
+  filter::CalibrationEvidence evidence_;  // evidence()'s, its bins reused from frame to frame
   std::unique_ptr<Engine> engine_;
   filter::StepDecisions decisions_;  ///< every decision of the step (filter/step_decisions.hpp)
   std::optional<float> cached_min_;

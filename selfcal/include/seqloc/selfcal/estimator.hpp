@@ -61,7 +61,10 @@ class DepthHistogram {
   /// Adds weight w >= 0 at depth r (r > 0 is taken as 0, r < -kMaxDepthNats as -kMaxDepthNats).
   void add(double r, double w) {
     const double d = r < 0 ? std::min(-r, kMaxDepthNats) : 0.0;
-    const auto i = std::min(static_cast<std::size_t>(d * (1 / kBinNats)), weight_.size() / kLanes - 1) * kLanes;
+    const auto bin = std::min(static_cast<std::size_t>(d * (1 / kBinNats)), weight_.size() / kLanes - 1);
+    const auto i = bin * kLanes;
+    used_lo_ = std::min(used_lo_, bin);
+    used_hi_ = std::max(used_hi_, bin + 1);
     // w, d >= 0: the cast of x + 0.5 rounds half up, as add_each does per cell, where llround
     // would cost a call.
     weight_[i] += static_cast<std::int64_t>(w * scale_.weight + 0.5);        // NOLINT(bugprone-incorrect-roundings)
@@ -85,6 +88,9 @@ class DepthHistogram {
   static constexpr std::size_t kLanes = 4;  ///< copies of each bin (see add_each), side by side
   Scale scale_;
   std::vector<std::int64_t> weight_, depth_sum_;  ///< [bin][lane]
+  // Every non-zero bin is in [used_lo_, used_hi_): clear, merge and the sums read those alone (a
+  // frame's depths span a few hundred of the 4,001 bins).
+  std::size_t used_lo_ = bins(), used_hi_ = 0;
 };
 
 /// One frame's evidence about the power: its own cells by depth (for Z), the predicted belief's
@@ -97,6 +103,12 @@ struct CalibrationEvidence {
   double log_outside = 0;
   double window_cells = 0;   ///< cells of the window (all headings)
   double outside_cells = 0;  ///< of those, the cells outside the crop
+  /// Empty, as constructed (the bins' storage kept).
+  void clear() {
+    frame_cells.clear();
+    belief_in_crop.clear();
+    belief_outside = log_outside = window_cells = outside_cells = 0;
+  }
 };
 
 /// The running estimate of kappa from frames' evidence, on a grid log2 kappa = -6 .. 4 in steps
