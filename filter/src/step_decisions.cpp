@@ -14,6 +14,8 @@ namespace seqloc::filter {
 namespace {
 
 const double kHalfOctaveDown = std::exp2(-0.5);
+// The most the estimator may sharpen frames: two octaves (see shared_cap).
+constexpr double kMaxSharpening = 4;
 
 bool half_an_octave_apart(double a, double b) { return std::abs(std::log2(a / b)) >= 0.5; }
 
@@ -205,7 +207,7 @@ double StepDecisions::shared_factor() const {
 double StepDecisions::shared_cap(double estimate) const {
   const int lag = config_.self_calibration_shared_lag;
   const bool independent = lag == 0 || (shared_.pairs() >= lag && shared_factor() >= kHalfOctaveDown);
-  return independent ? estimate : std::min(estimate, 1.0);
+  return std::min(estimate, independent ? kMaxSharpening : 1.0);
 }
 
 double StepDecisions::frame_power(const std::optional<FrameWeighting>& weighting, bool calibrating,

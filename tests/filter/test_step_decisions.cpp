@@ -187,6 +187,9 @@ TEST(StepDecisions, TheEstimatorSharpensOnlyAfterLagPairsHaveShownIndependentFra
   }
   EXPECT_EQ(d.shared_errors().pairs(), c.self_calibration_shared_lag);
   EXPECT_EQ(d.shared_cap(4.0), 4.0);
+  EXPECT_EQ(d.shared_cap(2.5), 2.5);
+  EXPECT_EQ(d.shared_cap(13.0), 4.0) << "two octaves at most";
+  EXPECT_EQ(d.shared_cap(0.1), 0.1);
 }
 
 TEST(StepDecisions, APeakFartherThanARelocalizationsJumpIsLeftOut) {

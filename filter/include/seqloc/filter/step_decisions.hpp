@@ -109,7 +109,9 @@ class StepDecisions {
   /// The estimator's power as the frames' correlation lets it stand: at most 1 until the frames
   /// have shown that they do not share their errors (a factor within half an octave of 1 from at
   /// least `lag` pairs), because what the estimator reads as sharpness is what shared errors
-  /// inflate.
+  /// inflate; at most 4 (two octaves) after that, because a factor read from a few pairs is shrunk
+  /// towards independence and the one-step estimate of frames that do share their errors runs to
+  /// 12 or 16.
   [[nodiscard]] double shared_cap(double estimate) const;
   [[nodiscard]] const selfcal::SharedErrors& shared_errors() const { return shared_; }
 
