@@ -4,7 +4,12 @@
 // are reproduced by construction.
 //
 // The vehicle drives north along a straight road (the window's column kRoadU) at 1 m a frame, with
-// exact odometry; the window follows it in jumps (SeqLocFilter::recentre). Each frame's volume is
+// exact odometry; the window follows it in jumps (SeqLocFilter::recentre). The truth lies off the
+// window's cell centres (kTruthOffset cells across and along): on them, an estimator whose poses
+// are cell centres (the argmax: the naive recursion) would land at exactly 5.00 m from it far more
+// often than a continuous one, and be credited with a hit at the recall's radius (on the first
+// sets measured, 0.5 to 2.9 points of the naive recursion's R@5m were such ties). Each frame's
+// volume is
 //
 //   log p(x, h) = k log( ridge(x) heading(h) + floor ),
 //   ridge(x) = exp(-across^2 / (2 sa^2) - (along - e_t)^2 / (2 sl^2)),
@@ -56,6 +61,7 @@ class RidgeRoute {
  public:
   static constexpr int kWindow = 128, kBins = 16, kCrop = 96, kRoadU = 64;
   static constexpr double kStepM = 1.0;
+  static constexpr double kTruthOffset = 0.3;  ///< cells, across and along the road
 
   RidgeRoute(RidgeKind kind, unsigned seed) : kind_(kind), rng_(seed) {}
 
@@ -76,7 +82,7 @@ class RidgeRoute {
       truth_v_ += 48;
     }
     f.odometry = {first ? 0.0 : kStepM, 0, 0};
-    f.truth_u = kRoadU;
+    f.truth_u = kRoadU + kTruthOffset;
     f.truth_v = truth_v_;
     std::normal_distribution<double> normal(0, 1);
     std::uniform_real_distribution<double> unit(0, 1);
@@ -143,7 +149,7 @@ class RidgeRoute {
   RidgeKind kind_;
   std::mt19937 rng_;
   int t_ = 0;
-  double truth_v_ = 88;
+  double truth_v_ = 88 + kTruthOffset;
   double along_error_ = 0, heading_error_ = 0;
 };
 
