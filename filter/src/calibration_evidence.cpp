@@ -42,8 +42,8 @@ void judge_frame(const PooledBelief& pooled, const PreparedFrame& frame, double 
     for (int k = k0; k < k1; ++k) {
       sample_slice(frame.log_prob.data(), frame.bins, frame.height, frame.width, frame_cell_m, crop,
                    bin_heading_deg(k, r), w, h, kOutside, s.blend, s.sample.data());
-      const float* mass = s.mass.data();
       pool_heading(pooled, k, s.mass.data());
+      const float* mass = s.mass.data();
       double out = 0;
       std::size_t out_cells = 0;
       for (std::size_t i = 0; i < n; ++i) {
