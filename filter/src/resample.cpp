@@ -51,42 +51,25 @@ bool is_power_of_two(double x) {
 // math::crop_sample_at for every cell of a window slice where the crop is not turned and its scale
 // is a power of two (self-calibration's coarse grid, at twice the frame's cells): x depends on u
 // alone and y on v alone, each exactly as crop_sample_at computes it (scale * du is exact), so the
-// columns' cells and weights are found once per slice and the rows are plain loops, with the same
-// arithmetic per cell and the same values.
+// columns' math::crop_axis is found once per slice, and each cell is crop_sample_at's
+// math::crop_bilinear: the same values.
 void sample_axis_aligned(const float* values, const math::CropMap& m, int width, int height, float fill, float* out) {
-  struct Axis {
-    int lo = 0, hi = 0;
-    float a = 0;
-    bool inside = false;
-  };
-  const auto axis = [](double at, int extent) {
-    Axis c;
-    c.inside = at >= 0 && at <= extent - 1;
-    if (!c.inside) return c;
-    c.lo = static_cast<int>(at);
-    c.hi = c.lo + 1 < extent ? c.lo + 1 : extent - 1;
-    c.a = static_cast<float>(at - c.lo);
-    return c;
-  };
-  std::vector<Axis> columns(static_cast<std::size_t>(width));
+  std::vector<math::CropAxis> columns(static_cast<std::size_t>(width));
   for (int u = 0; u < width; ++u) {
-    columns[static_cast<std::size_t>(u)] = axis((m.vw - 1) / 2.0 + m.scale * (u - m.centre_u), m.vw);
+    columns[static_cast<std::size_t>(u)] = math::crop_axis((m.vw - 1) / 2.0 + m.scale * (u - m.centre_u), m.vw);
   }
+  const auto read = [values](std::size_t i) { return values[i]; };
   for (int v = 0; v < height; ++v) {
     float* row = out + static_cast<std::size_t>(v) * width;
-    const Axis y = axis((m.vh - 1) / 2.0 + m.scale * (v - m.centre_v), m.vh);
+    const math::CropAxis y = math::crop_axis((m.vh - 1) / 2.0 + m.scale * (v - m.centre_v), m.vh);
     if (!y.inside) {
       std::fill(row, row + width, fill);
       continue;
     }
-    const float* r0 = values + static_cast<std::size_t>(y.lo) * m.vw;
-    const float* r1 = values + static_cast<std::size_t>(y.hi) * m.vw;
-    const float ay = y.a;
+    const std::size_t r0 = static_cast<std::size_t>(y.lo) * m.vw, r1 = static_cast<std::size_t>(y.hi) * m.vw;
     for (int u = 0; u < width; ++u) {
-      const Axis& x = columns[static_cast<std::size_t>(u)];
-      const float ax = x.a;
-      row[u] = x.inside ? (1 - ay) * ((1 - ax) * r0[x.lo] + ax * r0[x.hi]) + ay * ((1 - ax) * r1[x.lo] + ax * r1[x.hi])
-                        : fill;
+      const math::CropAxis& x = columns[static_cast<std::size_t>(u)];
+      row[u] = x.inside ? math::crop_bilinear(read, r0, r1, x, y.a) : fill;
     }
   }
 }

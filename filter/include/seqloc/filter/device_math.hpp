@@ -112,20 +112,41 @@ struct CropMap {
   int vw = 0, vh = 0;                 ///< the frame's size
 };
 
+/// Where a frame coordinate `at` falls along an axis of `extent` cells: inside [0, extent - 1] or
+/// not (NaN is not), and if inside the cells below and above it (the last cell read twice at the
+/// end) with the weight `a` of the one above.
+struct CropAxis {
+  int lo = 0, hi = 0;
+  float a = 0;
+  bool inside = false;
+};
+SEQLOC_HD inline CropAxis crop_axis(double at, int extent) {
+  CropAxis c;
+  c.inside = at >= 0 && at <= extent - 1;
+  if (!c.inside) return c;
+  c.lo = static_cast<int>(at);
+  c.hi = c.lo + 1 < extent ? c.lo + 1 : extent - 1;
+  c.a = static_cast<float>(at - c.lo);
+  return c;
+}
+
+/// Bilinear in the frame's cells between two rows (starting at r0 and r1, read through `read(i)`)
+/// at the columns and weights of `x`, with weight `ay` on the second row.
+template <class Read>
+SEQLOC_HD inline float crop_bilinear(const Read& read, std::size_t r0, std::size_t r1, const CropAxis& x, float ay) {
+  return (1 - ay) * ((1 - x.a) * read(r0 + x.lo) + x.a * read(r0 + x.hi)) +
+         ay * ((1 - x.a) * read(r1 + x.lo) + x.a * read(r1 + x.hi));
+}
+
 /// The frame value at window cell (u, v): bilinear in the frame's cells, read through `read(i)`
 /// (i = row * vw + column); `fill` where the cell's centre lies outside the frame.
 template <class Read>
 SEQLOC_HD inline float crop_sample_at(const CropMap& m, int u, int v, float fill, const Read& read) {
   const double du = u - m.centre_u, dv = v - m.centre_v;
-  const double x = (m.vw - 1) / 2.0 + m.scale * (du * m.cos_r + dv * m.sin_r);
-  const double y = (m.vh - 1) / 2.0 + m.scale * (-du * m.sin_r + dv * m.cos_r);
-  if (!(x >= 0 && y >= 0 && x <= m.vw - 1 && y <= m.vh - 1)) return fill;
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const int x1 = x0 + 1 < m.vw ? x0 + 1 : m.vw - 1, y1 = y0 + 1 < m.vh ? y0 + 1 : m.vh - 1;
-  const auto ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
-  const std::size_t r0 = static_cast<std::size_t>(y0) * m.vw, r1 = static_cast<std::size_t>(y1) * m.vw;
-  return (1 - ay) * ((1 - ax) * read(r0 + x0) + ax * read(r0 + x1)) +
-         ay * ((1 - ax) * read(r1 + x0) + ax * read(r1 + x1));
+  const CropAxis x = crop_axis((m.vw - 1) / 2.0 + m.scale * (du * m.cos_r + dv * m.sin_r), m.vw);
+  const CropAxis y = crop_axis((m.vh - 1) / 2.0 + m.scale * (-du * m.sin_r + dv * m.cos_r), m.vh);
+  if (!(x.inside && y.inside)) return fill;
+  return crop_bilinear(read, static_cast<std::size_t>(y.lo) * m.vw, static_cast<std::size_t>(y.hi) * m.vw, x, y.a);
 }
 
 /// Which two of a frame's heading bins a window heading reads: bins j0 and j1 = j0 + 1 (circular),
