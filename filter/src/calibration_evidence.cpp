@@ -12,7 +12,7 @@ namespace seqloc::filter::detail {
 
 void pool_heading(const PooledBelief& pooled, int j, float* out) {
   const int b = calibration_bins(pooled.headings), half = b / 2;
-  const std::size_t n = static_cast<std::size_t>(pooled.width) * pooled.height;
+  const std::size_t n = pooled.slice_cells();
   std::fill(out, out + n, 0.0f);
   for (int d = -half; d <= half; ++d) {
     const int k = ((b * j + d) % pooled.headings + pooled.headings) % pooled.headings;
@@ -26,7 +26,7 @@ void pool_heading(const PooledBelief& pooled, int j, float* out) {
 void judge_frame(const PooledBelief& pooled, const PreparedFrame& frame, double frame_cell_m, const CropPose& crop,
                  double cells_per_cell, int threads, JudgeScratch& scratch, CalibrationEvidence& evidence) {
   const int w = pooled.width, h = pooled.height, r = pooled.headings / calibration_bins(pooled.headings);
-  const std::size_t n = static_cast<std::size_t>(w) * h;
+  const std::size_t n = pooled.slice_cells();
   constexpr float kOutside = 1.0f;  // no log-probability is positive
   auto& shares = scratch.shares;
   shares.resize(static_cast<std::size_t>(std::max(1, threads)));
@@ -73,8 +73,13 @@ void judge_frame(const PooledBelief& pooled, const PreparedFrame& frame, double 
 
 namespace seqloc::filter {
 
+PooledBelief pooled_belief_for(const FilterConfig& config, const float* slices) {
+  return {slices, (config.width + 1) / 2, (config.height + 1) / 2, config.headings};
+}
+
 BeliefVolume coarse_belief_for(const FilterConfig& config) {
-  return {(config.width + 1) / 2, (config.height + 1) / 2, config.headings / detail::calibration_bins(config.headings)};
+  const PooledBelief pooled = pooled_belief_for(config, nullptr);
+  return {pooled.width, pooled.height, config.headings / detail::calibration_bins(config.headings)};
 }
 
 void add_frame_cells(const PreparedFrame& frame, DepthHistogram& cells) {

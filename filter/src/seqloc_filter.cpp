@@ -67,8 +67,8 @@ struct SeqLocFilter::Impl {
   // update reads it, then `pooling` slices into one coarse bin (detail::pool_heading, as the bin
   // is judged).
   int pooling = 1;              // window bins per coarse bin
-  std::size_t pooled_cells = 0;  // of one pooled slice
   AlignedVector<float> pooled;  // [bin][v / 2][u / 2], the bins pooled_bin() names
+  PooledBelief pooled_view;     // of `pooled`
   // evidence()'s: the workers' frame cells merged, the judge's scratch and the evidence, their bins
   // reused from frame to frame.
   DepthHistogram frame_cells{DepthHistogram::kCount};
@@ -86,8 +86,8 @@ struct SeqLocFilter::Impl {
     if (c.self_calibrate && c.self_calibration_bank) bank.emplace(c);
     if (c.self_calibrate && !c.self_calibration_bank) {
       pooling = detail::calibration_bins(c.headings);
-      pooled_cells = static_cast<std::size_t>((c.width + 1) / 2) * static_cast<std::size_t>((c.height + 1) / 2);
-      pooled.resize(pooled_cells * static_cast<std::size_t>(c.headings));
+      pooled.resize(pooled_belief_for(c, nullptr).slice_cells() * static_cast<std::size_t>(c.headings));
+      pooled_view = pooled_belief_for(c, pooled.data());
     }
   }
 
@@ -187,8 +187,21 @@ void add_pairs(const float* __restrict r, int pairs, float* __restrict o) {
   for (; i < pairs; ++i) o[i] = r[2 * i] + r[2 * i + 1];
 }
 
-// The update of one slice of the belief (b <- b * sample, or sample alone without the prior; then
-// times the GPS term where given) and, for self-calibration, the predicted slice summed over 2 x 2
+// The update of n cells of the belief: b <- b * sample (or sample alone without the prior), then
+// times the GPS term where given.
+void update_cells(float* __restrict b, const float* __restrict sample, const float* __restrict gps, bool with_prior,
+                  std::size_t n) {
+  if (with_prior) {
+    for (std::size_t i = 0; i < n; ++i) b[i] *= sample[i];
+  } else {
+    std::copy(sample, sample + n, b);
+  }
+  if (gps != nullptr) {
+    for (std::size_t i = 0; i < n; ++i) b[i] *= gps[i];
+  }
+}
+
+// update_cells over one slice and, for self-calibration, the predicted slice summed over 2 x 2
 // cells into `pooled` ((width + 1) / 2 wide; the last row or column alone where the size is odd)
 // as math::pool_2x2 adds them: row pair by row pair, so that the belief is read from memory once.
 void update_pooling(float* slice, const float* sample, const float* gps, bool with_prior, int width, int height,
@@ -209,17 +222,8 @@ void update_pooling(float* slice, const float* sample, const float* gps, bool wi
     float* o = pooled + static_cast<std::size_t>(cv) * cw;
     add_pairs(r, pairs, o);
     if (cw > pairs) o[pairs] = r[width - 1];
-    const std::size_t n = static_cast<std::size_t>(rows) * width;
-    const float* __restrict s = sample + at;
-    if (with_prior) {
-      for (std::size_t i = 0; i < n; ++i) a[i] *= s[i];
-    } else {
-      std::copy(s, s + n, a);
-    }
-    if (gps != nullptr) {
-      const float* __restrict g = gps + at;
-      for (std::size_t i = 0; i < n; ++i) a[i] *= g[i];
-    }
+    update_cells(a, sample + at, gps != nullptr ? gps + at : nullptr, with_prior,
+                 static_cast<std::size_t>(rows) * width);
   }
 }
 
@@ -403,21 +407,14 @@ double SeqLocFilter::multiply_in(const PreparedFrame& frame, const CropPose& cro
     for (int k = k0; k < k1; ++k) {
       detail::sample_slice(impl_->tempered.data(), frame.bins, frame.height, frame.width, frame.cell_m, crop,
                            belief_.bin_heading_deg(k), W, H, outside, worker.blend, worker.sample.data());
-      ArrayMap b(belief_.slice(k), N);
+      const float* gps = gps_term.empty() ? nullptr : gps_term.data();
       if (pool && detail::pooled_bin(k, impl_->pooling)) {
-        update_pooling(belief_.slice(k), worker.sample.data(), gps_term.empty() ? nullptr : gps_term.data(), with_prior,
-                       W, H, worker.blend_rows,
-                       impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->pooled_cells);
+        update_pooling(belief_.slice(k), worker.sample.data(), gps, with_prior, W, H, worker.blend_rows,
+                       impl_->pooled.data() + static_cast<std::size_t>(k) * impl_->pooled_view.slice_cells());
       } else {
-        ConstArrayMap sample(worker.sample.data(), N);
-        if (with_prior) {
-          b *= sample;
-        } else {
-          b = sample;
-        }
-        if (!gps_term.empty()) b *= ConstArrayMap(gps_term.data(), N);
+        update_cells(belief_.slice(k), worker.sample.data(), gps, with_prior, static_cast<std::size_t>(N));
       }
-      slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(b.sum());
+      slice_sum[static_cast<std::size_t>(k)] = static_cast<double>(ArrayMap(belief_.slice(k), N).sum());
     }
   });
   double total = 0;
@@ -429,11 +426,10 @@ const CalibrationEvidence& SeqLocFilter::evidence(const PreparedFrame& frame, co
   // The predicted belief on the coarse grid (1 m cells, a few heading bins in each), judged by
   // the frame at each power: a sixteenth of the cells, and the same estimate to within the
   // frame-to-frame noise of the estimate itself (docs/filter.md, "Self-calibration").
-  const PooledBelief pooled{impl_->pooled.data(), (config_.width + 1) / 2, (config_.height + 1) / 2, config_.headings};
   DepthHistogram& frame_cells = impl_->frame_cells;
   frame_cells.clear();
   for (const auto& worker : impl_->workers) frame_cells.merge(worker.frame_cells);
-  coarse_evidence(pooled, frame, crop, config_, frame_cells, impl_->judge, impl_->evidence);
+  coarse_evidence(impl_->pooled_view, frame, crop, config_, frame_cells, impl_->judge, impl_->evidence);
   return impl_->evidence;
 }
 

@@ -3,6 +3,7 @@
 // what SeqLocFilter feeds its PowerEstimator after each update, for backends that pool the belief
 // themselves and judge it here (the CUDA backend, gpu/). docs/filter.md, "Self-calibration".
 
+#include <cstddef>
 #include <vector>
 
 #include "seqloc/filter/belief.hpp"
@@ -26,7 +27,12 @@ void add_frame_cells(const PreparedFrame& frame, DepthHistogram& cells);
 struct PooledBelief {
   const float* slices = nullptr;
   int width = 0, height = 0, headings = 0;
+  [[nodiscard]] std::size_t slice_cells() const { return static_cast<std::size_t>(width) * height; }
 };
+
+/// The pooled belief of a window of `config`'s size, its slices at `slices` (coarse_belief_for's
+/// cells).
+[[nodiscard]] PooledBelief pooled_belief_for(const FilterConfig& config, const float* slices);
 
 /// What coarse_evidence works in, per thread: kept from one frame to the next, so that a step
 /// allocates none of its bins (each histogram is 256 kB).
