@@ -17,6 +17,11 @@ const double kHalfOctaveDown = std::exp2(-0.5);
 // The most the estimator may sharpen frames: two octaves (see shared_cap).
 constexpr double kMaxSharpening = 4;
 
+// The most the shared errors' factor that frames go in at rises in a frame, in octaves (it falls
+// at once): a factor read from a few pairs swings, and a frame let in sharp at the top of a swing
+// moves the belief at once, where one let in too flat costs little.
+constexpr double kFactorRiseOctaves = 0.25;
+
 bool half_an_octave_apart(double a, double b) { return std::abs(std::log2(a / b)) >= 0.5; }
 
 /// now / last once `now` has moved half an octave or more from `last` (which then becomes `now`),
@@ -165,6 +170,7 @@ void StepDecisions::reset() {
   dead_u_ = dead_v_ = 0;
   previous_.reset();
   last_factor_ = 1;
+  factor_ = 1;
 }
 
 void StepDecisions::track(const Odometry& odometry, const std::optional<Pose>& estimate) {
@@ -195,14 +201,13 @@ void StepDecisions::observe(const PreparedFrame& frame, const CropPose& crop) {
   const Pose peak = single_frame_pose(frame, crop);
   if (previous_ && relocalized(*previous_, step_, peak)) {
     shared_.add(std::numeric_limits<double>::quiet_NaN(), 0);
-    return;
+  } else {
+    shared_.add((peak.u - dead_u_) * core::kCellM, -(peak.v - dead_v_) * core::kCellM);
   }
-  shared_.add((peak.u - dead_u_) * core::kCellM, -(peak.v - dead_v_) * core::kCellM);
+  factor_ = std::min(shared_.factor(), factor_ * std::exp2(kFactorRiseOctaves));
 }
 
-double StepDecisions::shared_factor() const {
-  return config_.self_calibration_shared_lag == 0 ? 1.0 : shared_.factor();
-}
+double StepDecisions::shared_factor() const { return config_.self_calibration_shared_lag == 0 ? 1.0 : factor_; }
 
 double StepDecisions::shared_cap(double estimate) const {
   const int lag = config_.self_calibration_shared_lag;

@@ -238,5 +238,30 @@ TEST(StepDecisions, TheBeliefIsRaisedWhenTheSharedFactorMovesHalfAnOctave) {
   EXPECT_LT(product, 0.75);
 }
 
+TEST(StepDecisions, TheSharedFactorFallsAtOnceAndRisesAQuarterOctaveAFrameAtMost) {
+  // Peaks held three frames at each of five cells (shared errors) for 20 frames, then jumping
+  // among them (7 t mod 5: nothing shared). The estimate's factor falls to 1/16 at the fourth
+  // frame and climbs back to 1 within a few frames once the jumps come; the frames go in at a
+  // factor that follows it down at once and up by a quarter octave a frame.
+  FilterConfig c = small();
+  c.relocalization_jump_m = 100;
+  StepDecisions d(c);
+  const CropPose crop{10, 10, 0};
+  double used = 1;
+  int falls = 0, held_back = 0;
+  for (int t = 0; t < 60; ++t) {
+    d.track({}, Pose{10, 10, 0});
+    d.observe(peak_at(4, t < 20 ? (t / 3) % 5 : (t * 7) % 5), crop);
+    const double estimate = d.shared_errors().factor(), rise = used * std::exp2(0.25);
+    falls += estimate < used / std::exp2(0.25);
+    held_back += estimate > rise;
+    EXPECT_DOUBLE_EQ(d.shared_factor(), std::min(estimate, rise)) << "frame " << t;
+    used = d.shared_factor();
+  }
+  EXPECT_GE(falls, 1);
+  EXPECT_GE(held_back, 5) << "the estimate rose faster than a quarter octave a frame on several frames";
+  EXPECT_EQ(d.shared_factor(), 1.0) << "independent frames go in as given again";
+}
+
 }  // namespace
 }  // namespace seqloc::filter
