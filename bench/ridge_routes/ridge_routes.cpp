@@ -1,8 +1,10 @@
 // bench/ridge_routes: self-calibration on the ridge routes of the tests (tests/filter/ridge_routes.hpp),
 // against the naive recursion, SeqLoc without self-calibration and the best fixed power per route:
 // the defaults (the one-step criterion with the frames' shared errors), the one-step criterion
-// alone (self_calibration_shared_lag 0) and the bank. Prints a table per kind of route and ends
-// with one line of JSON.
+// alone (self_calibration_shared_lag 0) and the bank; and how honest the defaults' reported mass
+// within 5 m is (pose_uncertainty's, binned by tenths against the share of frames truly within
+// 5 m: io::uncertainty_calibration). Prints a table per kind of route and ends with one line of
+// JSON.
 
 #include <cmath>
 #include <cstdio>
@@ -11,6 +13,8 @@
 #include <vector>
 
 #include "filter/ridge_routes.hpp"
+#include "seqloc/io/results.hpp"
+#include "seqloc/uncertainty/pose_uncertainty.hpp"
 
 namespace {
 
@@ -23,7 +27,29 @@ struct Row {
   double naive = 0, off = 0, defaults = 0, one_step = 0, bank = 0, best_fixed = 0;
 };
 
-Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed) {
+// Each step's pose with its uncertainty and the truth, in window metres (east, north), as
+// io::uncertainty_calibration takes them.
+seqloc::filter::test::RidgeStepReader keep_poses(std::vector<seqloc::io::FramePose>& poses) {
+  return [&poses](const seqloc::filter::SeqLocFilter& filter, const seqloc::filter::FrameResult& r,
+                  const RidgeRoute::Frame& f) {
+    const auto u = seqloc::uncertainty::pose_uncertainty(filter.belief(), r.pose);
+    seqloc::io::FramePose p;
+    p.x_m = r.pose.u * 0.5;
+    p.y_m = -r.pose.v * 0.5;
+    p.truth.emplace();
+    p.truth->x_m = f.truth_u * 0.5;
+    p.truth->y_m = -f.truth_v * 0.5;
+    p.uncertainty.emplace();
+    p.uncertainty->cov_xx_m2 = u.cov_ee_m2;
+    p.uncertainty->cov_xy_m2 = u.cov_en_m2;
+    p.uncertainty->cov_yy_m2 = u.cov_nn_m2;
+    p.uncertainty->mass_within_5m = u.mass_within_5m;
+    poses.push_back(p);
+  };
+}
+
+Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed,
+            std::vector<seqloc::io::FramePose>& poses) {
   FilterConfig naive = RidgeRoute::config();
   naive.etu = naive.mgr = naive.pas = naive.self_calibrate = false;
   FilterConfig off = RidgeRoute::config();
@@ -36,9 +62,12 @@ Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed) 
   Row mean;
   for (int r = 0; r < routes; ++r) {
     const auto seed = first_seed + static_cast<unsigned>(r);
-    Row row{ridge_recall(kind, seed, naive, frames),    ridge_recall(kind, seed, off, frames),
-            ridge_recall(kind, seed, defaults, frames), ridge_recall(kind, seed, one_step, frames),
-            ridge_recall(kind, seed, bank, frames),     0};
+    Row row{ridge_recall(kind, seed, naive, frames),
+            ridge_recall(kind, seed, off, frames),
+            ridge_recall(kind, seed, defaults, frames, 1, 5, keep_poses(poses)),
+            ridge_recall(kind, seed, one_step, frames),
+            ridge_recall(kind, seed, bank, frames),
+            0};
     double best_power = 1;
     for (int i = -8; i <= 4; ++i) {  // fixed powers 2^-4 .. 2^2 in half octaves, as given otherwise
       const double power = std::exp2(i / 2.0), recall = ridge_recall(kind, seed, off, frames, power);
@@ -60,6 +89,27 @@ Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed) 
     mean.best_fixed += row.best_fixed / routes;
   }
   return mean;
+}
+
+// Prints the defaults' reliability table (bins of the reported mass within 5 m) and returns its
+// JSON fields: the ECE and the largest |reported - actual| over bins of at least 50 frames.
+std::string reliability(const seqloc::io::UncertaintyCalibration& c) {
+  std::printf("  the defaults' reported mass within 5 m (coverage of the 95 %% ellipse %.1f %%, ECE %.1f points):\n",
+              c.coverage_95_pct, c.mass_5m_ece_pts);
+  double worst = 0;
+  for (std::size_t b = 0; b < c.reliability.size(); ++b) {
+    const auto& bin = c.reliability[b];
+    if (bin.frames == 0) continue;
+    std::printf("    %3zu-%3zu %%: %4zu frames, reported %5.1f %%, truly within 5 m %5.1f %%\n", 10 * b, 10 * b + 10,
+                bin.frames, bin.reported_pct, bin.actual_pct);
+    if (bin.frames >= 50) worst = std::max(worst, std::abs(bin.reported_pct - bin.actual_pct));
+  }
+  char buffer[160];
+  std::snprintf(buffer, sizeof buffer,
+                ", \"defaults_coverage_95_pct\": %.1f, \"defaults_mass_5m_ece_pts\": %.1f, "
+                "\"defaults_worst_bin_of_50_pts\": %.1f}",
+                c.coverage_95_pct, c.mass_5m_ece_pts, worst);
+  return buffer;
 }
 
 }  // namespace
@@ -90,7 +140,8 @@ int main(int argc, char** argv) {
                      ", \"frames\": " + std::to_string(frames) + ", \"first_seed\": " + std::to_string(first_seed);
   for (const auto& [name, kind] : kinds) {
     std::printf("%s (R@5m, %d routes x %d frames, seeds from %u):\n", name.c_str(), routes, frames, first_seed);
-    const Row m = measure(kind, routes, frames, first_seed);
+    std::vector<seqloc::io::FramePose> poses;
+    const Row m = measure(kind, routes, frames, first_seed, poses);
     std::printf(
         "  mean:    naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  best fixed "
         "%5.1f\n",
@@ -98,9 +149,10 @@ int main(int argc, char** argv) {
     char buffer[256];
     std::snprintf(buffer, sizeof buffer,
                   ", \"%s\": {\"naive\": %.1f, \"no_self_calibration\": %.1f, \"defaults\": %.1f, "
-                  "\"one_step_alone\": %.1f, \"bank\": %.1f, \"best_fixed\": %.1f}",
+                  "\"one_step_alone\": %.1f, \"bank\": %.1f, \"best_fixed\": %.1f",
                   name.c_str(), m.naive, m.off, m.defaults, m.one_step, m.bank, m.best_fixed);
     json += buffer;
+    json += reliability(*seqloc::io::uncertainty_calibration(poses));
   }
   std::printf("%s}\n", json.c_str());
   return 0;

@@ -32,6 +32,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -153,10 +154,15 @@ class RidgeRoute {
   double along_error_ = 0, heading_error_ = 0;
 };
 
+/// What a caller may read at each step of ridge_recall: the filter after the step, its result and
+/// the frame (its truth).
+using RidgeStepReader = std::function<void(const SeqLocFilter&, const FrameResult&, const RidgeRoute::Frame&)>;
+
 /// Recall within 5 m of a route of `frames` frames run through a filter of `config`, the frames'
-/// log-probabilities multiplied by `power` (a fixed power; 1: as given).
+/// log-probabilities multiplied by `power` (a fixed power; 1: as given); `each` (if given) is
+/// called after every step.
 inline double ridge_recall(const RidgeKind& kind, unsigned seed, const FilterConfig& config, int frames,
-                           double power = 1, double radius_m = 5) {
+                           double power = 1, double radius_m = 5, const RidgeStepReader& each = {}) {
   RidgeKind k = kind;
   k.sharpen *= power;
   RidgeRoute route(k, seed);
@@ -169,6 +175,7 @@ inline double ridge_recall(const RidgeKind& kind, unsigned seed, const FilterCon
     if (f.recentre_dv != 0) filter.recentre(0, f.recentre_dv);
     const auto r = filter.step(prepare_frame(RidgeRoute::view(f), config.headings), f.crop, f.odometry, road);
     if (std::hypot(r.pose.u - f.truth_u, r.pose.v - f.truth_v) * 0.5 <= radius_m) ++hits;
+    if (each) each(filter, r, f);
   }
   return 100.0 * hits / frames;
 }
