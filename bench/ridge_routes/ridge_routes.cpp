@@ -62,25 +62,18 @@ Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed,
   Row mean;
   for (int r = 0; r < routes; ++r) {
     const auto seed = first_seed + static_cast<unsigned>(r);
-    Row row{ridge_recall(kind, seed, naive, frames),
-            ridge_recall(kind, seed, off, frames),
-            ridge_recall(kind, seed, defaults, frames, 1, 5, keep_poses(poses)),
-            ridge_recall(kind, seed, one_step, frames),
-            ridge_recall(kind, seed, bank, frames),
-            0};
-    double best_power = 1;
-    for (int i = -8; i <= 4; ++i) {  // fixed powers 2^-4 .. 2^2 in half octaves, as given otherwise
-      const double power = std::exp2(i / 2.0), recall = ridge_recall(kind, seed, off, frames, power);
-      if (recall > row.best_fixed) {
-        row.best_fixed = recall;
-        best_power = power;
-      }
-    }
+    const auto best = seqloc::filter::test::best_fixed_power(kind, seed, off, frames);
+    const Row row{ridge_recall(kind, seed, naive, frames),
+                  ridge_recall(kind, seed, off, frames),
+                  ridge_recall(kind, seed, defaults, frames, 1, 5, keep_poses(poses)),
+                  ridge_recall(kind, seed, one_step, frames),
+                  ridge_recall(kind, seed, bank, frames),
+                  best.recall};
     std::printf(
         "  route %d: naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  best fixed "
         "%5.1f "
         "(power %.3g)\n",
-        r, row.naive, row.off, row.defaults, row.one_step, row.bank, row.best_fixed, best_power);
+        r, row.naive, row.off, row.defaults, row.one_step, row.bank, row.best_fixed, best.power);
     mean.naive += row.naive / routes;
     mean.off += row.off / routes;
     mean.defaults += row.defaults / routes;

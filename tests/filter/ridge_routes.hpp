@@ -180,4 +180,18 @@ inline double ridge_recall(const RidgeKind& kind, unsigned seed, const FilterCon
   return 100.0 * hits / frames;
 }
 
+/// The best recall of a route at a fixed power, brute-forced over 2^-4 .. 2^2 in half octaves
+/// (the first of equal recalls), and that power: a reference that knows the route's truth.
+struct BestFixed {
+  double recall = 0, power = 1;
+};
+inline BestFixed best_fixed_power(const RidgeKind& kind, unsigned seed, const FilterConfig& config, int frames) {
+  BestFixed best;
+  for (int i = -8; i <= 4; ++i) {
+    const double power = std::exp2(i / 2.0), recall = ridge_recall(kind, seed, config, frames, power);
+    if (recall > best.recall) best = {recall, power};
+  }
+  return best;
+}
+
 }  // namespace seqloc::filter::test

@@ -400,16 +400,9 @@ TEST_P(Ridge, EachRouteComesWithinTwoPointsOfItsBestFixedPower) {
   FilterConfig fixed = test::RidgeRoute::config();
   fixed.self_calibrate = false;
   for (unsigned seed = 1; seed <= 6; ++seed) {
-    double best = 0, best_power = 1;
-    for (int i = -8; i <= 4; ++i) {
-      const double power = std::exp2(i / 2.0), recall = test::ridge_recall(kind, seed, fixed, 60, power);
-      if (recall > best) {
-        best = recall;
-        best_power = power;
-      }
-    }
-    EXPECT_GE(test::ridge_recall(kind, seed, test::RidgeRoute::config(), 60), best - 2)
-        << "route " << seed << ": the best fixed power " << best_power << " gives " << best;
+    const test::BestFixed best = test::best_fixed_power(kind, seed, fixed, 60);
+    EXPECT_GE(test::ridge_recall(kind, seed, test::RidgeRoute::config(), 60), best.recall - 2)
+        << "route " << seed << ": the best fixed power " << best.power << " gives " << best.recall;
   }
 }
 

@@ -139,22 +139,28 @@ PreparedFrame peak_at(int v, int u) {
   return prepare_frame({values.data(), VolumeType::float32, VolumeValues::log_prob, 9, 9, 8, 0.5}, 8);
 }
 
+// A vehicle standing still heading north, its estimate at the crop's centre (10, 10), no peak far
+// enough to count as another place: the config, and a frame whose peak is at crop row 4, column u.
+FilterConfig standing() {
+  FilterConfig c = small();
+  c.relocalization_jump_m = 100;
+  return c;
+}
+void observe_standing(StepDecisions& d, int u) {
+  d.track({}, Pose{10, 10, 0});
+  d.observe(peak_at(4, u), CropPose{10, 10, 0});
+}
+
 TEST(StepDecisions, FramesThatShareTheirErrorsAreFlattenedAndNotSharpened) {
   // The vehicle stands still heading north with its estimate at the crop's centre (10, 10). Route
   // A's peaks drift one cell a frame along u and back every 16 frames (consecutive peaks 0.5 m
   // apart, peaks 10 frames apart 1 to 4 m apart: shared errors); route B's alternate between two
   // cells 2 m apart (2 m at odd lags, none at even ones: nothing shared).
-  FilterConfig c = small();
-  c.relocalization_jump_m = 100;
-  const CropPose crop{10, 10, 0};
-  const Pose estimate{10, 10, 0};
+  FilterConfig c = standing();
   StepDecisions shared(c), independent(c);
   for (int t = 0; t < 40; ++t) {
-    shared.track({}, estimate);
-    independent.track({}, estimate);
-    const int drift = t % 16 < 8 ? t % 16 : 16 - t % 16;
-    shared.observe(peak_at(4, drift), crop);
-    independent.observe(peak_at(4, t % 2 == 0 ? 0 : 4), crop);
+    observe_standing(shared, t % 16 < 8 ? t % 16 : 16 - t % 16);
+    observe_standing(independent, t % 2 == 0 ? 0 : 4);
   }
   EXPECT_GT(shared.shared_errors().correlation(), 0.5);
   EXPECT_LT(shared.shared_factor(), 0.5);
@@ -170,20 +176,17 @@ TEST(StepDecisions, FramesThatShareTheirErrorsAreFlattenedAndNotSharpened) {
 
   c.self_calibration_shared_lag = 0;
   StepDecisions off(c);
-  off.observe(peak_at(4, 0), crop);
+  observe_standing(off, 0);
   EXPECT_EQ(off.shared_factor(), 1.0);
   EXPECT_EQ(off.shared_cap(4.0), 4.0);
 }
 
 TEST(StepDecisions, TheEstimatorSharpensOnlyAfterLagPairsHaveShownIndependentFrames) {
-  FilterConfig c = small();
-  c.relocalization_jump_m = 100;
+  const FilterConfig c = standing();
   StepDecisions d(c);
-  const CropPose crop{10, 10, 0};
   for (int t = 0; t < 2 * c.self_calibration_shared_lag; ++t) {
     EXPECT_EQ(d.shared_cap(4.0), 1.0) << "frame " << t << ": " << d.shared_errors().pairs() << " pairs";
-    d.track({}, Pose{10, 10, 0});
-    d.observe(peak_at(4, t % 2 == 0 ? 0 : 4), crop);
+    observe_standing(d, t % 2 == 0 ? 0 : 4);
   }
   EXPECT_EQ(d.shared_errors().pairs(), c.self_calibration_shared_lag);
   EXPECT_EQ(d.shared_cap(4.0), 4.0);
@@ -219,15 +222,10 @@ TEST(StepDecisions, APeakFartherThanARelocalizationsJumpIsLeftOut) {
 }
 
 TEST(StepDecisions, TheBeliefIsRaisedWhenTheSharedFactorMovesHalfAnOctave) {
-  FilterConfig c = small();
-  c.relocalization_jump_m = 100;
-  StepDecisions d(c);
-  const CropPose crop{10, 10, 0};
+  StepDecisions d(standing());
   double product = 1;
   for (int t = 0; t < 40; ++t) {
-    d.track({}, Pose{10, 10, 0});
-    const int drift = t % 16 < 8 ? t % 16 : 16 - t % 16;
-    d.observe(peak_at(4, drift), crop);
+    observe_standing(d, t % 16 < 8 ? t % 16 : 16 - t % 16);
     const double ratio = d.belief_ratio(1.0, true);
     EXPECT_TRUE(ratio == 1.0 || std::abs(std::log2(ratio)) >= 0.5) << t << ": " << ratio;
     product *= ratio;
@@ -243,15 +241,11 @@ TEST(StepDecisions, TheSharedFactorFallsAtOnceAndRisesAQuarterOctaveAFrameAtMost
   // among them (7 t mod 5: nothing shared). The estimate's factor falls to 1/16 at the fourth
   // frame and climbs back to 1 within a few frames once the jumps come; the frames go in at a
   // factor that follows it down at once and up by a quarter octave a frame.
-  FilterConfig c = small();
-  c.relocalization_jump_m = 100;
-  StepDecisions d(c);
-  const CropPose crop{10, 10, 0};
+  StepDecisions d(standing());
   double used = 1;
   int falls = 0, held_back = 0;
   for (int t = 0; t < 60; ++t) {
-    d.track({}, Pose{10, 10, 0});
-    d.observe(peak_at(4, t < 20 ? (t / 3) % 5 : (t * 7) % 5), crop);
+    observe_standing(d, t < 20 ? (t / 3) % 5 : (t * 7) % 5);
     const double estimate = d.shared_errors().factor(), rise = used * std::exp2(0.25);
     falls += estimate < used / std::exp2(0.25);
     held_back += estimate > rise;
