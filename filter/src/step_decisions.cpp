@@ -22,12 +22,6 @@ constexpr double kMaxSharpening = 4;
 // moves the belief at once, where one let in too flat costs little.
 constexpr double kFactorRiseOctaves = 0.25;
 
-// Where the route's peaks cannot judge whether its frames share their errors (unjudged()), the
-// estimator's power above 1 is taken at half (an octave less): on the matcher's calibrated volumes
-// the one-step estimate reads 1.2 to 1.5 where 1 is best (docs/filter.md, "Self-calibration"), and
-// nothing here measures how much shared errors add to that.
-constexpr double kUnjudgedDiscount = 2;
-
 bool half_an_octave_apart(double a, double b) { return std::abs(std::log2(a / b)) >= 0.5; }
 
 /// now / last once `now` has moved half an octave or more from `last` (which then becomes `now`),
@@ -177,7 +171,6 @@ void StepDecisions::reset() {
   previous_.reset();
   last_factor_ = 1;
   factor_ = 1;
-  peaks_seen_ = peaks_near_ = 0;
 }
 
 void StepDecisions::track(const Odometry& odometry, const std::optional<Pose>& estimate) {
@@ -206,12 +199,10 @@ void StepDecisions::recentre(int du, int dv) {
 void StepDecisions::observe(const PreparedFrame& frame, const CropPose& crop) {
   if (config_.self_calibration_shared_lag == 0) return;
   const Pose peak = single_frame_pose(frame, crop);
-  ++peaks_seen_;
   if (previous_ && relocalized(*previous_, step_, peak)) {
     shared_.add(std::numeric_limits<double>::quiet_NaN(), 0);
   } else {
     shared_.add((peak.u - dead_u_) * core::kCellM, -(peak.v - dead_v_) * core::kCellM);
-    ++peaks_near_;
   }
   factor_ = std::min(shared_.factor(), factor_ * std::exp2(kFactorRiseOctaves));
 }
@@ -221,14 +212,7 @@ double StepDecisions::shared_factor() const { return config_.self_calibration_sh
 double StepDecisions::shared_cap(double estimate) const {
   const int lag = config_.self_calibration_shared_lag;
   const bool independent = lag == 0 || (shared_.pairs() >= lag && shared_factor() >= kHalfOctaveDown);
-  if (independent) return std::min(estimate, kMaxSharpening);
-  if (unjudged() && estimate > 1) return std::clamp(estimate / kUnjudgedDiscount, 1.0, kMaxSharpening);
-  return std::min(estimate, 1.0);
-}
-
-bool StepDecisions::unjudged() const {
-  const int lag = config_.self_calibration_shared_lag;
-  return lag > 0 && peaks_seen_ >= 2 * lag && 2 * peaks_near_ < peaks_seen_;
+  return std::min(estimate, independent ? kMaxSharpening : 1.0);
 }
 
 double StepDecisions::frame_power(const std::optional<FrameWeighting>& weighting, bool calibrating,

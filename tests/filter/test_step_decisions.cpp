@@ -195,37 +195,6 @@ TEST(StepDecisions, TheEstimatorSharpensOnlyAfterLagPairsHaveShownIndependentFra
   EXPECT_EQ(d.shared_cap(0.1), 0.1);
 }
 
-TEST(StepDecisions, WhereMostPeaksShowAnotherPlaceTheEstimateAboveOneIsTakenAtHalf) {
-  // The vehicle stands still at the crop's centre (10, 10); a relocalization's jump is 2 m. Two
-  // frames in three peak at a crop corner, (6, 6), 2.8 m away (another place, no pair); every third
-  // at the centre. The route's peaks cannot tell whether its frames share their errors.
-  FilterConfig c = small();
-  c.relocalization_jump_m = 2;
-  const int lag = c.self_calibration_shared_lag;
-  StepDecisions d(c);
-  for (int t = 0; t < 2 * lag; ++t) {
-    EXPECT_FALSE(d.unjudged()) << "frame " << t << ": too few frames to say";
-    EXPECT_EQ(d.shared_cap(6.0), 1.0) << "frame " << t;
-    d.track({}, Pose{10, 10, 0});
-    d.observe(t % 3 == 0 ? peak_at(4, 4) : peak_at(0, 0), CropPose{10, 10, 0});
-  }
-  EXPECT_LT(d.shared_errors().pairs(), lag);
-  ASSERT_TRUE(d.unjudged());
-  EXPECT_EQ(d.shared_cap(6.0), 3.0) << "an octave under the estimate";
-  EXPECT_EQ(d.shared_cap(20.0), 4.0) << "two octaves at most";
-  EXPECT_EQ(d.shared_cap(1.5), 1.0) << "never under 1 for an estimate over it";
-  EXPECT_EQ(d.shared_cap(0.5), 0.5) << "flattening as asked";
-  EXPECT_DOUBLE_EQ(d.frame_power(std::nullopt, true, 6.0), 3.0 * d.shared_factor());
-
-  // Peaks near the prediction on every frame but drifting together: judged shared, not sharpened.
-  StepDecisions near(standing());
-  for (int t = 0; t < 4 * lag; ++t) observe_standing(near, t % 16 < 8 ? t % 16 : 16 - t % 16);
-  EXPECT_FALSE(near.unjudged());
-  EXPECT_EQ(near.shared_cap(6.0), 1.0);
-  d.reset();
-  EXPECT_FALSE(d.unjudged()) << "a new route starts unseen";
-}
-
 TEST(StepDecisions, APeakFartherThanARelocalizationsJumpIsLeftOut) {
   FilterConfig c = small();
   c.relocalization_jump_m = 2;

@@ -113,14 +113,8 @@ class StepDecisions {
   /// least `lag` pairs), because what the estimator reads as sharpness is what shared errors
   /// inflate; at most 4 (two octaves) after that, because a factor read from a few pairs is shrunk
   /// towards independence and the one-step estimate of frames that do share their errors runs to
-  /// 12 or 16. Where the route cannot judge (unjudged()), an estimate above 1 is halved and kept
-  /// within 1 .. 4: a backbone whose frames mostly show other places is sharpened by half what
-  /// the estimator asks.
+  /// 12 or 16.
   [[nodiscard]] double shared_cap(double estimate) const;
-  /// Whether the route's single-frame peaks cannot show whether its frames share their errors: at
-  /// least 2 x lag frames observed, fewer than half of their peaks within a relocalization's jump
-  /// of the prediction (the matcher's volumes: most single-frame peaks show another place).
-  [[nodiscard]] bool unjudged() const;
   [[nodiscard]] const selfcal::SharedErrors& shared_errors() const { return shared_; }
 
   /// The power a frame goes in at: a repeated pass's; while calibrating, the estimator's
@@ -178,7 +172,6 @@ class StepDecisions {
   double dead_u_ = 0, dead_v_ = 0;  ///< the dead-reckoned point, window cells
   double last_factor_ = 1;          ///< the shared factor the belief's frames went in at
   double factor_ = 1;               ///< shared_factor(): the estimate's factor, followed up slowly
-  int peaks_seen_ = 0, peaks_near_ = 0;  ///< frames observed; those whose peak was not another place
   std::optional<Pose> previous_;    ///< the estimate before this step and its odometry (track), by
   Odometry step_;                   ///< which observe() judges a peak with relocalized()
 };
