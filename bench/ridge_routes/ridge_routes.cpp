@@ -127,8 +127,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_ridge_routes: --routes and --frames must be at least 1\n");
     return 2;
   }
-  const std::vector<std::pair<std::string, RidgeKind>> kinds{{"sharp_shared", seqloc::filter::test::sharp_shared()},
-                                                             {"timid", seqloc::filter::test::timid()}};
+  const std::vector<std::pair<std::string, RidgeKind>> kinds{
+      {"sharp_shared", seqloc::filter::test::sharp_shared()},
+      {"timid", seqloc::filter::test::timid()},
+      {"distinctive_wrong", seqloc::filter::test::distinctive_wrong()}};
   std::string json = "{\"bench\": \"ridge_routes\", \"routes\": " + std::to_string(routes) +
                      ", \"frames\": " + std::to_string(frames) + ", \"first_seed\": " + std::to_string(first_seed);
   for (const auto& [name, kind] : kinds) {

@@ -22,7 +22,7 @@
 // backbone overconfident, k < 1 timid. With probability p_wrong a frame is distinctive and wrong:
 // its peak sharp (sl / 4) and 14 to 22 m along the road from the truth.
 //
-// Two kinds the issue tracker reported on a real region:
+// Two kinds the issue tracker reported on a real region (and a third, distinctive_wrong, below):
 // - sharp_shared (route C's): overconfident (k = 4) frames whose errors their neighbours share
 //   (rho = 0.95), with distinctive wrong frames: a one-step criterion reads the shared errors as
 //   sharpness and drives the power up, locking the belief onto wrong places.
@@ -56,6 +56,13 @@ inline RidgeKind sharp_shared() {
 }
 inline RidgeKind timid() {
   return {.sharpen = 0.5, .rho = 0.8, .along_m = 6, .across_m = 1.5, .backwards = 0.35, .heading_deg = 15};
+}
+/// Calibrated frames (k = 1) of which 40 % are distinctive and wrong (peaks four times as sharp,
+/// 14 to 22 m along the road), errors shared moderately (rho = 0.5): a backbone often confidently
+/// wrong. Measured by bench/ridge_routes, not held by a test (docs/filter.md, "The ridge routes").
+inline RidgeKind distinctive_wrong() {
+  return {
+      .sharpen = 1, .rho = 0.5, .along_m = 6, .across_m = 1.5, .backwards = 0.2, .heading_deg = 15, .wrong_share = 0.4};
 }
 
 class RidgeRoute {
