@@ -1,10 +1,10 @@
 // bench/ridge_routes: self-calibration on the ridge routes of the tests (tests/filter/ridge_routes.hpp),
 // against the naive recursion, SeqLoc without self-calibration and the best fixed power per route:
 // the defaults (the one-step criterion with the frames' shared errors), the one-step criterion
-// alone (self_calibration_shared_lag 0) and the bank; and how honest the defaults' reported mass
-// within 5 m is (pose_uncertainty's, binned by tenths against the share of frames truly within
-// 5 m: io::uncertainty_calibration). Prints a table per kind of route and ends with one line of
-// JSON.
+// alone (self_calibration_shared_lag 0), the bank and the sharpness slope
+// (self_calibration_sharpness); and how honest the defaults' reported mass within 5 m is
+// (pose_uncertainty's, binned by tenths against the share of frames truly within 5 m:
+// io::uncertainty_calibration). Prints a table per kind of route and ends with one line of JSON.
 
 #include <cmath>
 #include <cstdio>
@@ -24,7 +24,7 @@ using seqloc::filter::test::RidgeKind;
 using seqloc::filter::test::RidgeRoute;
 
 struct Row {
-  double naive = 0, off = 0, defaults = 0, one_step = 0, bank = 0, best_fixed = 0;
+  double naive = 0, off = 0, defaults = 0, one_step = 0, bank = 0, sharpness = 0, best_fixed = 0;
 };
 
 // Each step's pose with its uncertainty and the truth, in window metres (east, north), as
@@ -59,6 +59,8 @@ Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed,
   one_step.self_calibration_shared_lag = 0;
   FilterConfig bank = RidgeRoute::config();
   bank.self_calibration_bank = true;
+  FilterConfig sharpness = RidgeRoute::config();
+  sharpness.self_calibration_sharpness = true;
   Row mean;
   for (int r = 0; r < routes; ++r) {
     const auto seed = first_seed + static_cast<unsigned>(r);
@@ -68,17 +70,18 @@ Row measure(const RidgeKind& kind, int routes, int frames, unsigned first_seed,
                   ridge_recall(kind, seed, defaults, frames, 1, 5, keep_poses(poses)),
                   ridge_recall(kind, seed, one_step, frames),
                   ridge_recall(kind, seed, bank, frames),
+                  ridge_recall(kind, seed, sharpness, frames),
                   best.recall};
     std::printf(
-        "  route %d: naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  best fixed "
-        "%5.1f "
-        "(power %.3g)\n",
-        r, row.naive, row.off, row.defaults, row.one_step, row.bank, row.best_fixed, best.power);
+        "  route %d: naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  sharpness "
+        "%5.1f  best fixed %5.1f (power %.3g)\n",
+        r, row.naive, row.off, row.defaults, row.one_step, row.bank, row.sharpness, row.best_fixed, best.power);
     mean.naive += row.naive / routes;
     mean.off += row.off / routes;
     mean.defaults += row.defaults / routes;
     mean.one_step += row.one_step / routes;
     mean.bank += row.bank / routes;
+    mean.sharpness += row.sharpness / routes;
     mean.best_fixed += row.best_fixed / routes;
   }
   return mean;
@@ -138,14 +141,14 @@ int main(int argc, char** argv) {
     std::vector<seqloc::io::FramePose> poses;
     const Row m = measure(kind, routes, frames, first_seed, poses);
     std::printf(
-        "  mean:    naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  best fixed "
-        "%5.1f\n",
-        m.naive, m.off, m.defaults, m.one_step, m.bank, m.best_fixed);
-    char buffer[256];
+        "  mean:    naive %5.1f  no self-cal %5.1f  defaults %5.1f  one-step alone %5.1f  bank %5.1f  sharpness "
+        "%5.1f  best fixed %5.1f\n",
+        m.naive, m.off, m.defaults, m.one_step, m.bank, m.sharpness, m.best_fixed);
+    char buffer[320];
     std::snprintf(buffer, sizeof buffer,
                   ", \"%s\": {\"naive\": %.1f, \"no_self_calibration\": %.1f, \"defaults\": %.1f, "
-                  "\"one_step_alone\": %.1f, \"bank\": %.1f, \"best_fixed\": %.1f",
-                  name.c_str(), m.naive, m.off, m.defaults, m.one_step, m.bank, m.best_fixed);
+                  "\"one_step_alone\": %.1f, \"bank\": %.1f, \"sharpness\": %.1f, \"best_fixed\": %.1f",
+                  name.c_str(), m.naive, m.off, m.defaults, m.one_step, m.bank, m.sharpness, m.best_fixed);
     json += buffer;
     json += reliability(*seqloc::io::uncertainty_calibration(poses));
   }

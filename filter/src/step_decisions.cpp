@@ -46,7 +46,8 @@ StepDecisions::StepDecisions(const FilterConfig& config)
     : config_(config),
       estimator_(config.self_calibration_prior_octaves, config.self_calibration_outlier_share,
                  {config.self_calibration_hold_below_octaves, config.self_calibration_hold_above_octaves,
-                  config.self_calibration_hold_share, config.self_calibration_hold_follow_octaves}),
+                  config.self_calibration_hold_share, config.self_calibration_hold_follow_octaves},
+                 config.self_calibration_sharpness),
       shared_(config.self_calibration_shared_lag > 0 ? config.self_calibration_shared_lag : 2) {}
 
 std::vector<float> gps_prior_factor(const FilterConfig& config, const std::optional<GpsFix>& gps) {
@@ -98,6 +99,7 @@ FrameResult StepDecisions::update(CellWork& work, const StepInput& input,
   const bool shape_later = calibrating && !etu_reads_powered_frame();
   work.load(input.frame, estimating);
   if (calibrating) observe(input.frame, input.crop);
+  if (!weighting) join_route(input.frame);
   FrameResult result = weigh(work, input, weighting, bank, shape_later);
 
   // The tempered likelihood q^w on the crop, scaled by its maximum (the scale cancels in the
@@ -115,7 +117,7 @@ FrameResult StepDecisions::update(CellWork& work, const StepInput& input,
 
   const std::vector<float> gps_term = gps_prior_factor(config_, input.gps);
   double total = work.multiply_in(input.frame, input.crop, outside, gps_term, true, estimating);
-  if (estimating) estimator_.add(work.evidence(input.frame, input.crop));
+  if (estimating) estimator_.add(work.evidence(input.frame, input.crop), sharper_nats_);
   if (!(total > 0) || !std::isfinite(total)) {
     // Belief and frame share no support that float can represent: the frame alone decides.
     total = work.multiply_in(input.frame, input.crop, outside, gps_term, false, false);
@@ -143,7 +145,9 @@ FrameResult StepDecisions::weigh(CellWork& work, const StepInput& input, const s
                           : weighting.has_value()     ? FrameShape{weighting->peak_log_prob, frame.entropy}
                                                       : FrameShape{frame.max_log_prob, frame.entropy};
   result.frame_entropy = used.entropy;
-  result.etu_weight = weighting ? weighting->etu_weight : etu_weight_of(frame.entropy, used.entropy);
+  // ETU's weight, and self-calibration's for the frame's sharpness (selfcal/estimator.hpp).
+  result.etu_weight =
+      weighting ? weighting->etu_weight : etu_weight_of(used.entropy) * std::exp2(sharpness_octaves(calibrating));
   result.weighting = {result.volume_power, result.etu_weight, used.max_log_prob};
   if (calibrating) {
     // The belief raised to the ratio of the new power to the one the frames before went in at, as
@@ -164,6 +168,7 @@ void StepDecisions::reset() {
   last_estimate_.reset();
   estimator_.reset();
   entropies_.clear();
+  sharper_nats_ = 0;
   was_held_ = true;
   last_power_ = 1;
   shared_.reset();
@@ -233,12 +238,24 @@ double StepDecisions::power(const std::optional<FrameWeighting>& weighting, bool
   return calibrating ? estimate : 1.0;
 }
 
-double StepDecisions::etu_weight_of(double given_entropy, double powered_entropy) {
+void StepDecisions::join_route(const PreparedFrame& frame) {
+  // The frame's sharpness against the route's frames before it, then the frame among them.
+  sharper_nats_ = entropies_.empty() ? 0.0 : (route_reference_entropy(entropies_) - frame.entropy) * frame.log_cells;
+  entropies_.push_back(frame.entropy);
+  if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
+}
+
+double StepDecisions::etu_weight_of(double powered_entropy) const {
   if (!config_.etu) return 1.0;
   if (!config_.etu_route_reference) return etu_weight(powered_entropy, config_.etu_reference_entropy);
-  entropies_.push_back(given_entropy);
-  if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
-  return etu_weight(given_entropy, route_reference_entropy(entropies_));
+  return etu_weight(entropies_.back(), route_reference_entropy(entropies_));
+}
+
+double StepDecisions::sharpness_octaves(bool calibrating) const {
+  if (!calibrating || config_.self_calibration_bank) return 0.0;
+  // The route's typical frame is read from ten frames before any frame is judged sharper than it.
+  if (entropies_.size() < kSharpnessFrames) return 0.0;
+  return PowerEstimator::sharpness_octaves(estimator_.slope(), sharper_nats_);
 }
 
 double StepDecisions::hold_ratio(double power, bool held) {

@@ -46,6 +46,8 @@ std::span<const FilterConfigField> filter_config_fields() {
       {"self_calibration_shared_lag", &C::self_calibration_shared_lag,
        "Self-calibration: the longest lag (frames) at which the frames' peaks are compared to read how much "
        "consecutive frames share their errors (0: off)"},
+      {"self_calibration_sharpness", &C::self_calibration_sharpness,
+       "Self-calibration: temper frames sharper than the route's typical frame where its sharper frames predict worse"},
       {"relocalization_jump_m", &C::relocalization_jump_m, "An argmax jump beyond this (m) is flagged relocalized"},
       {"subbin_heading", &C::subbin_heading, "Refine the heading between bins (beyond the paper)"},
       {"subbin_half_width", &C::subbin_half_width, "Bins each side of the heading in that refinement"},

@@ -11,6 +11,17 @@ namespace {
 
 constexpr double kNegInf = -std::numeric_limits<double>::infinity();
 constexpr double kLog2MinPower = -6, kLog2MaxPower = 4, kLog2Step = 0.125;
+constexpr double kSlopeStep = 0.5;  // octaves per nat
+constexpr auto kSlopes = static_cast<std::size_t>(PowerEstimator::kMaxSlope / kSlopeStep) + 1;
+
+// f(x) for x in grid steps of `f` (linear between points, its ends beyond them).
+double interpolate(const std::vector<double>& f, double x) {
+  const double last = static_cast<double>(f.size() - 1);
+  const double at = std::clamp(x, 0.0, last);
+  const auto i = std::min(static_cast<std::size_t>(at), f.size() - 2);
+  const double w = at - static_cast<double>(i);
+  return (1 - w) * f[i] + w * f[i + 1];
+}
 
 // log(exp(a) + exp(b)), either may be -inf.
 double log_add(double a, double b) {
@@ -128,8 +139,8 @@ std::vector<double> DepthHistogram::log_sum_exp(std::span<const double> kappas) 
   return out;
 }
 
-PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Hold hold)
-    : outlier_share_(outlier_share), hold_(hold) {
+PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Hold hold, bool sharpness)
+    : outlier_share_(outlier_share), hold_(hold), slopes_(sharpness ? kSlopes : 1) {
   if (!(prior_sigma_log2 > 0) || !std::isfinite(prior_sigma_log2)) {
     throw EstimatorError(
         "self-calibration: the prior's sigma must be finite and > 0, not " + std::to_string(prior_sigma_log2),
@@ -158,7 +169,8 @@ PowerEstimator::PowerEstimator(double prior_sigma_log2, double outlier_share, Ho
 }
 
 void PowerEstimator::reset() {
-  score_ = log_prior_;
+  scores_.assign(slopes_, log_prior_);
+  slope_ = 0;
   power_ = mode_ = 1;
   held_ = hold_.share > 0;
   frames_ = 0;
@@ -184,17 +196,50 @@ std::vector<double> PowerEstimator::log_predictive(const CalibrationEvidence& e,
   return out;
 }
 
-void PowerEstimator::add(const CalibrationEvidence& evidence) {
+void PowerEstimator::add(const CalibrationEvidence& evidence, double sharper_nats) {
   const auto log_p = log_predictive(evidence, kappas_);
   // A frame with no finite predictive (no belief mass anywhere it can see) says nothing.
   if (std::any_of(log_p.begin(), log_p.end(), [](double x) { return !std::isfinite(x); })) return;
-  for (std::size_t k = 0; k < score_.size(); ++k) score_[k] += log_p[k];
+  // At slope b the frame went in at kappa 2^sharpness_octaves(b, s): its log P read that far down
+  // the grid.
+  for (std::size_t j = 0; j < slopes_; ++j) {
+    const double shift = sharpness_octaves(static_cast<double>(j) * kSlopeStep, sharper_nats) / kLog2Step;
+    std::vector<double>& score = scores_[j];
+    if (shift == 0) {
+      for (std::size_t k = 0; k < score.size(); ++k) score[k] += log_p[k];
+    } else {
+      for (std::size_t k = 0; k < score.size(); ++k) score[k] += interpolate(log_p, static_cast<double>(k) + shift);
+    }
+  }
   ++frames_;
-  const auto best = static_cast<std::size_t>(std::max_element(score_.begin(), score_.end()) - score_.begin());
+  // The best (slope, kappa); the first slope of equal scores, so 0 until a steeper one is better.
+  std::size_t best_j = 0, best = 0;
+  for (std::size_t j = 0; j < slopes_; ++j) {
+    const auto k =
+        static_cast<std::size_t>(std::max_element(scores_[j].begin(), scores_[j].end()) - scores_[j].begin());
+    if (scores_[j][k] > scores_[best_j][best]) {
+      best_j = j;
+      best = k;
+    }
+  }
+  settle(best_j, best);
+  if (power_ == 1.0 && held_) {
+    // Held at 1: the slope that does best with kappa at 1.
+    const auto one = static_cast<std::size_t>(std::lround(-kLog2MinPower / kLog2Step));
+    best_j = 0;
+    for (std::size_t j = 1; j < slopes_; ++j) {
+      if (scores_[j][one] > scores_[best_j][one]) best_j = j;
+    }
+  }
+  slope_ = static_cast<double>(best_j) * kSlopeStep;
+}
+
+void PowerEstimator::settle(std::size_t j, std::size_t best) {
+  const std::vector<double>& score = scores_[j];
   double log2_power = std::log2(kappas_[best]);
-  if (best > 0 && best + 1 < score_.size()) {
+  if (best > 0 && best + 1 < score.size()) {
     // The vertex of the parabola through the best point and its neighbours (within half a step).
-    const double a = score_[best - 1], b = score_[best], c = score_[best + 1];
+    const double a = score[best - 1], b = score[best], c = score[best + 1];
     const double curvature = a - 2 * b + c;
     if (curvature < 0) log2_power += 0.5 * kLog2Step * (a - c) / curvature;
   }
@@ -204,8 +249,8 @@ void PowerEstimator::add(const CalibrationEvidence& evidence) {
   // back and forth).
   if (held_) {
     double inside = 0, all = 0;
-    for (std::size_t k = 0; k < score_.size(); ++k) {
-      const double p = std::exp(score_[k] - score_[best]);
+    for (std::size_t k = 0; k < score.size(); ++k) {
+      const double p = std::exp(score[k] - score[best]);
       all += p;
       const double l = std::log2(kappas_[k]);
       if (l >= -hold_.below - 1e-9 && l <= hold_.above + 1e-9) inside += p;

@@ -47,24 +47,54 @@ TEST(StepDecisions, TheBankRaisesTheBeliefWhenItsPowerMovesHalfAnOctave) {
   EXPECT_DOUBLE_EQ(d.bank_ratio(1.0), 0.5);
 }
 
+// A frame of the given entropy over 1,000 cells joins the route.
+void join(StepDecisions& d, double entropy) {
+  PreparedFrame f;
+  f.entropy = entropy;
+  f.log_cells = std::log(1000.0);
+  d.join_route(f);
+}
+
 TEST(StepDecisions, EtuWeighsAgainstTheMedianOfTheRoutesLastFrames) {
   FilterConfig c = small();
   StepDecisions d(c);
   // Entropies 0.5, 0.6, 0.7: the third frame's reference is their median 0.6.
-  EXPECT_EQ(d.etu_weight_of(0.5, 0.9), 1.0) << "the only frame is its own reference";
-  EXPECT_EQ(d.etu_weight_of(0.6, 0.9), 1.0);
-  EXPECT_NEAR(d.etu_weight_of(0.7, 0.1), (1 - 0.7) / (1 - 0.6), 1e-12) << "the given entropy, not the powered one";
-  for (int i = 0; i < 1000; ++i) (void)d.etu_weight_of(0.2, 0.2);
+  join(d, 0.5);
+  EXPECT_EQ(d.etu_weight_of(0.9), 1.0) << "the only frame is its own reference";
+  join(d, 0.6);
+  EXPECT_EQ(d.etu_weight_of(0.9), 1.0);
+  join(d, 0.7);
+  EXPECT_NEAR(d.etu_weight_of(0.1), (1 - 0.7) / (1 - 0.6), 1e-12) << "the given entropy, not the powered one";
+  for (int i = 0; i < 1000; ++i) join(d, 0.2);
   EXPECT_LE(d.route_entropies().size(), 2 * kEtuRouteFrames);
-  EXPECT_EQ(d.etu_weight_of(0.7, 0.7), (1 - 0.7) / (1 - 0.2)) << "the old frames are forgotten";
+  join(d, 0.7);
+  EXPECT_EQ(d.etu_weight_of(0.7), (1 - 0.7) / (1 - 0.2)) << "the old frames are forgotten";
 
   c.etu_route_reference = false;
   StepDecisions configured(c);
-  EXPECT_NEAR(configured.etu_weight_of(0.1, 0.95), (1 - 0.95) / (1 - c.etu_reference_entropy), 1e-12)
+  join(configured, 0.1);
+  EXPECT_NEAR(configured.etu_weight_of(0.95), (1 - 0.95) / (1 - c.etu_reference_entropy), 1e-12)
       << "the configured reference reads the powered frame";
   EXPECT_TRUE(configured.etu_reads_powered_frame());
   c.etu = false;
-  EXPECT_EQ(StepDecisions(c).etu_weight_of(0.99, 0.99), 1.0);
+  StepDecisions without(c);
+  join(without, 0.99);
+  EXPECT_EQ(without.etu_weight_of(0.99), 1.0);
+}
+
+TEST(StepDecisions, AFramesSharpnessIsAgainstTheRoutesFramesBeforeIt) {
+  StepDecisions d(small());
+  join(d, 0.6);
+  EXPECT_EQ(d.sharper_nats(), 0.0) << "a route's first frame is as sharp as the route";
+  join(d, 0.5);
+  join(d, 0.7);
+  // The median of 0.6 and 0.5 (the upper of two) is 0.6: 0.1 of log(1,000) nats flatter.
+  EXPECT_NEAR(d.sharper_nats(), -0.1 * std::log(1000.0), 1e-12);
+  join(d, 0.4);
+  EXPECT_NEAR(d.sharper_nats(), (0.6 - 0.4) * std::log(1000.0), 1e-12);
+  // Before the estimator has found a slope, no frame is tempered for its sharpness.
+  EXPECT_EQ(d.sharpness_octaves(true), 0.0);
+  EXPECT_EQ(d.sharpness_octaves(false), 0.0);
 }
 
 TEST(StepDecisions, PasIsTheMassWeightedMeanAroundThePeakWithinTheWindow) {

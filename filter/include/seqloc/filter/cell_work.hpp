@@ -22,7 +22,7 @@ using intake::PreparedFrame;
 /// very likelihood the first pass did, without estimating anything again.
 struct FrameWeighting {
   double volume_power = 1;
-  double etu_weight = 1;
+  double etu_weight = 1;  ///< ETU's weight times self-calibration's for the frame's sharpness
   float peak_log_prob = 0;
 };
 
@@ -46,7 +46,9 @@ struct FrameResult {
   Pose argmax;  ///< (x*, th*)
   float peak_log_belief = 0;
   double frame_entropy = 0;  ///< H_hat of the frame's own volume, after self-calibration's power
-  double etu_weight = 1;     ///< the weight used (1 with ETU off)
+  /// The weight used: ETU's (1 with ETU off) times self-calibration's for the frame's sharpness
+  /// (StepDecisions::sharpness_weight).
+  double etu_weight = 1;
   /// The power self-calibration raised the frame to before ETU (1 with it off): the estimate from
   /// the frames before this one. For volumes sharpened as p^k it tends to 1 / k.
   double volume_power = 1;

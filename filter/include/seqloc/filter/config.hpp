@@ -89,6 +89,12 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// variogram of their peaks at lags 1 and this many frames (over a route's first twice this many
   /// frames, a shorter lag, from 3; 0: off).
   int self_calibration_shared_lag = 10;
+  /// Frames sharper than the route's typical frame (its median entropy) go in at up to two octaves
+  /// less power, by a slope self-calibration estimates with the power (selfcal/estimator.hpp): 0,
+  /// every frame at the power, unless the route's sharper frames predict worse than the rest (a
+  /// backbone confidently wrong at times). The weight is multiplied into ETU's. Off by default: on
+  /// the development draw's frames four times too sharp it cost 7 points (docs/filter.md).
+  bool self_calibration_sharpness = false;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the
   /// odometry is flagged "relocalized".

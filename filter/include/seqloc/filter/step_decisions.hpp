@@ -78,10 +78,24 @@ class StepDecisions {
   /// frame's shape later in the step may then wait for it.
   [[nodiscard]] bool etu_reads_powered_frame() const { return config_.etu && !config_.etu_route_reference; }
 
-  /// ETU's weight of a new frame (1 with ETU off): against the route's reference, which the frame's
-  /// `given_entropy` joins first, or the configured reference with the entropy of the frame raised
-  /// to its power (`powered_entropy`).
-  [[nodiscard]] double etu_weight_of(double given_entropy, double powered_entropy);
+  /// A new frame joins the route: its sharpness against the route's frames before it
+  /// (sharper_nats()), then its given entropy among theirs (route_entropies()).
+  void join_route(const PreparedFrame& frame);
+  /// ETU's weight of the frame that joined the route last (1 with ETU off): against the route's
+  /// reference, which the frame's given entropy has joined, or the configured reference with the
+  /// entropy of the frame raised to its power (`powered_entropy`).
+  [[nodiscard]] double etu_weight_of(double powered_entropy) const;
+  /// How much sharper the frame that joined last is than the route's frames before it: the
+  /// median of their given entropies less its own, in nats (0 for a route's first frame).
+  [[nodiscard]] double sharper_nats() const { return sharper_nats_; }
+  /// The octaves self-calibration takes off that frame's weight for its sharpness,
+  /// PowerEstimator::sharpness_octaves(slope, sharper_nats()) (<= 0; the weight, 2 to this, is
+  /// multiplied into ETU's): 0 unless calibrating with the one-step criterion (the bank estimates
+  /// no slope), and 0 for a route's first kSharpnessFrames frames (the route's typical frame is
+  /// read from that many first: on the sample region's development draw a slope read from the
+  /// first four frames tempered the matcher's sharp and right frames).
+  [[nodiscard]] double sharpness_octaves(bool calibrating) const;
+  static constexpr std::size_t kSharpnessFrames = 10;
 
   /// The one-step criterion's hold (FilterConfig::self_calibration_hold_share): the ratio the belief
   /// is raised by at this step, from the estimator's power now and whether it is held. While held,
@@ -166,6 +180,7 @@ class StepDecisions {
   bool started_ = false;  ///< a step has run since the last reset: the next one predicts
   std::optional<Pose> last_estimate_;
   std::vector<double> entropies_;
+  double sharper_nats_ = 0;  ///< sharper_nats()
   bool was_held_ = true;   ///< the estimator's hold at the last frame
   double last_power_ = 1;  ///< the power the belief's frames went in at
   selfcal::SharedErrors shared_;
