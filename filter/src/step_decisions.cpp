@@ -239,8 +239,11 @@ double StepDecisions::power(const std::optional<FrameWeighting>& weighting, bool
 }
 
 void StepDecisions::join_route(const PreparedFrame& frame) {
-  // The frame's sharpness against the route's frames before it, then the frame among them.
-  sharper_nats_ = entropies_.empty() ? 0.0 : (route_reference_entropy(entropies_) - frame.entropy) * frame.log_cells;
+  // The frame's sharpness against the route's frames before it (where the slope reads it), then
+  // the frame among them.
+  const bool slope = config_.self_calibrate && config_.self_calibration_sharpness;
+  sharper_nats_ =
+      slope && !entropies_.empty() ? (route_reference_entropy(entropies_) - frame.entropy) * frame.log_cells : 0.0;
   entropies_.push_back(frame.entropy);
   if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
 }

@@ -14,7 +14,8 @@ constexpr double kLog2MinPower = -6, kLog2MaxPower = 4, kLog2Step = 0.125;
 constexpr double kSlopeStep = 0.5;  // octaves per nat
 constexpr auto kSlopes = static_cast<std::size_t>(PowerEstimator::kMaxSlope / kSlopeStep) + 1;
 
-// f(x) for x in grid steps of `f` (linear between points, its ends beyond them).
+// f(x) for x in grid steps of `f` (linear between points, its ends beyond them); f[k] exactly at
+// a whole x = k.
 double interpolate(const std::vector<double>& f, double x) {
   const double last = static_cast<double>(f.size() - 1);
   const double at = std::clamp(x, 0.0, last);
@@ -205,11 +206,7 @@ void PowerEstimator::add(const CalibrationEvidence& evidence, double sharper_nat
   for (std::size_t j = 0; j < slopes_; ++j) {
     const double shift = sharpness_octaves(static_cast<double>(j) * kSlopeStep, sharper_nats) / kLog2Step;
     std::vector<double>& score = scores_[j];
-    if (shift == 0) {
-      for (std::size_t k = 0; k < score.size(); ++k) score[k] += log_p[k];
-    } else {
-      for (std::size_t k = 0; k < score.size(); ++k) score[k] += interpolate(log_p, static_cast<double>(k) + shift);
-    }
+    for (std::size_t k = 0; k < score.size(); ++k) score[k] += interpolate(log_p, static_cast<double>(k) + shift);
   }
   ++frames_;
   // The best (slope, kappa); the first slope of equal scores, so 0 until a steeper one is better.

@@ -59,7 +59,8 @@ inline RidgeKind timid() {
 }
 /// Calibrated frames (k = 1) of which 40 % are distinctive and wrong (peaks four times as sharp,
 /// 14 to 22 m along the road), errors shared moderately (rho = 0.5): a backbone often confidently
-/// wrong. Measured by bench/ridge_routes, not held by a test (docs/filter.md, "The ridge routes").
+/// wrong. Measured by bench/ridge_routes; SelfCalibration.FramesSharpestWhereWrongAreTempered holds
+/// what the sharpness slope does on it (docs/filter.md, "The ridge routes").
 inline RidgeKind distinctive_wrong() {
   return {
       .sharpen = 1, .rho = 0.5, .along_m = 6, .across_m = 1.5, .backwards = 0.2, .heading_deg = 15, .wrong_share = 0.4};

@@ -419,8 +419,7 @@ TEST_P(Ridge, TheFramesSharedErrorsWinBackWhatTheOneStepCriterionLoses) {
 // self-calibration), which knows the route's truth and the defaults do not.
 TEST_P(Ridge, EachRouteComesWithinTwoPointsOfItsBestFixedPower) {
   const test::RidgeKind kind = std::string(GetParam()) == "sharp_shared" ? test::sharp_shared() : test::timid();
-  FilterConfig fixed = test::RidgeRoute::config();
-  fixed.self_calibrate = false;
+  const FilterConfig fixed = ridge_without_self_calibration();
   for (unsigned seed = 1; seed <= 6; ++seed) {
     const test::BestFixed best = test::best_fixed_power(kind, seed, fixed, 60);
     EXPECT_GE(test::ridge_recall(kind, seed, test::RidgeRoute::config(), 60), best.recall - 2)

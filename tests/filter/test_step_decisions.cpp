@@ -83,7 +83,9 @@ TEST(StepDecisions, EtuWeighsAgainstTheMedianOfTheRoutesLastFrames) {
 }
 
 TEST(StepDecisions, AFramesSharpnessIsAgainstTheRoutesFramesBeforeIt) {
-  StepDecisions d(small());
+  FilterConfig c = small();
+  c.self_calibration_sharpness = true;
+  StepDecisions d(c);
   join(d, 0.6);
   EXPECT_EQ(d.sharper_nats(), 0.0) << "a route's first frame is as sharp as the route";
   join(d, 0.5);
@@ -95,6 +97,11 @@ TEST(StepDecisions, AFramesSharpnessIsAgainstTheRoutesFramesBeforeIt) {
   // Before the estimator has found a slope, no frame is tempered for its sharpness.
   EXPECT_EQ(d.sharpness_octaves(true), 0.0);
   EXPECT_EQ(d.sharpness_octaves(false), 0.0);
+  // Without the slope nothing reads a frame's sharpness, and none is measured.
+  StepDecisions without(small());
+  join(without, 0.6);
+  join(without, 0.4);
+  EXPECT_EQ(without.sharper_nats(), 0.0);
 }
 
 TEST(StepDecisions, PasIsTheMassWeightedMeanAroundThePeakWithinTheWindow) {

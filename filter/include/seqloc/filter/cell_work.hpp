@@ -47,7 +47,7 @@ struct FrameResult {
   float peak_log_belief = 0;
   double frame_entropy = 0;  ///< H_hat of the frame's own volume, after self-calibration's power
   /// The weight used: ETU's (1 with ETU off) times self-calibration's for the frame's sharpness
-  /// (StepDecisions::sharpness_weight).
+  /// (2^StepDecisions::sharpness_octaves).
   double etu_weight = 1;
   /// The power self-calibration raised the frame to before ETU (1 with it off): the estimate from
   /// the frames before this one. For volumes sharpened as p^k it tends to 1 / k.

@@ -86,7 +86,8 @@ class StepDecisions {
   /// entropy of the frame raised to its power (`powered_entropy`).
   [[nodiscard]] double etu_weight_of(double powered_entropy) const;
   /// How much sharper the frame that joined last is than the route's frames before it: the
-  /// median of their given entropies less its own, in nats (0 for a route's first frame).
+  /// median of their given entropies less its own, in nats (0 for a route's first frame, and
+  /// without self-calibration's sharpness slope, which alone reads it).
   [[nodiscard]] double sharper_nats() const { return sharper_nats_; }
   /// The octaves self-calibration takes off that frame's weight for its sharpness,
   /// PowerEstimator::sharpness_octaves(slope, sharper_nats()) (<= 0; the weight, 2 to this, is

@@ -22,7 +22,7 @@
 // sharpest where it is wrong. The estimator fits a second parameter, a slope b >= 0 (octaves per
 // nat): a frame s nats sharper than the route's typical frame (its entropy that much below the
 // median of the route's, in nats) goes in at kappa 2^-min(b s, 2), and flatter frames at kappa (ETU
-// tempers those). The score is kept on a grid of (kappa, b), b = 0 .. 4 in steps of 1/2 with a
+// tempers those). The score is kept on a grid of (kappa, b), b = 0 .. 2 in steps of 1/2 with a
 // flat prior; b = 0 wins ties, so a route whose sharper frames predict as well as the rest keeps
 // every frame at kappa. A calibrated backbone's sharper frames are its better ones (on the sample
 // region's development draw the sharpest fifth of the matcher's frames lands within 5 m 43 % of
