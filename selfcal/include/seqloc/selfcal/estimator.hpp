@@ -24,9 +24,8 @@
 // median of the route's, in nats) goes in at kappa 2^-min(b s, 2), and flatter frames at kappa (ETU
 // tempers those). The score is kept on a grid of (kappa, b), b = 0 .. 2 in steps of 1/2 with a
 // flat prior; b = 0 wins ties, so a route whose sharper frames predict as well as the rest keeps
-// every frame at kappa. A calibrated backbone's sharper frames are its better ones (on the sample
-// region's development draw the sharpest fifth of the matcher's frames lands within 5 m 43 % of
-// the time, the flattest fifth never), and b stays 0.
+// every frame at kappa. A calibrated backbone's sharper frames are its better ones, and b stays 0
+// (docs/filter.md, "Frames sharper than the route's", measures both).
 //
 // Cost: P_t is needed at every kappa of a grid, but depends on the frame only through its cells'
 // depths r = log p - log p_max. The filter bins the belief's mass by depth while it multiplies the
