@@ -239,11 +239,13 @@ double StepDecisions::power(const std::optional<FrameWeighting>& weighting, bool
 }
 
 void StepDecisions::join_route(const PreparedFrame& frame) {
-  // The frame's sharpness against the route's frames before it (where the slope reads it), then
-  // the frame among them.
+  // The frame's sharpness against the route's frames before it (where the slope reads it, and
+  // once there are kSharpnessFrames of them), then the frame among them. Before that the
+  // sharpness is 0 both where it weighs the frame and in the evidence the slope is estimated from.
   const bool slope = config_.self_calibrate && config_.self_calibration_sharpness;
-  sharper_nats_ =
-      slope && !entropies_.empty() ? (route_reference_entropy(entropies_) - frame.entropy) * frame.log_cells : 0.0;
+  sharper_nats_ = slope && entropies_.size() >= kSharpnessFrames
+                      ? (route_reference_entropy(entropies_) - frame.entropy) * frame.log_cells
+                      : 0.0;
   entropies_.push_back(frame.entropy);
   if (entropies_.size() > 2 * kEtuRouteFrames) entropies_.erase(entropies_.begin(), entropies_.end() - kEtuRouteFrames);
 }
@@ -256,8 +258,6 @@ double StepDecisions::etu_weight_of(double powered_entropy) const {
 
 double StepDecisions::sharpness_octaves(bool calibrating) const {
   if (!calibrating || config_.self_calibration_bank) return 0.0;
-  // The route's typical frame is read from ten frames before any frame is judged sharper than it.
-  if (entropies_.size() < kSharpnessFrames) return 0.0;
   return PowerEstimator::sharpness_octaves(estimator_.slope(), sharper_nats_);
 }
 

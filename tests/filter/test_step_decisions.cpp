@@ -86,20 +86,25 @@ TEST(StepDecisions, AFramesSharpnessIsAgainstTheRoutesFramesBeforeIt) {
   FilterConfig c = small();
   c.self_calibration_sharpness = true;
   StepDecisions d(c);
-  join(d, 0.6);
-  EXPECT_EQ(d.sharper_nats(), 0.0) << "a route's first frame is as sharp as the route";
-  join(d, 0.5);
-  join(d, 0.7);
-  // The median of 0.6 and 0.5 (the upper of two) is 0.6: 0.1 of log(1,000) nats flatter.
-  EXPECT_NEAR(d.sharper_nats(), -0.1 * std::log(1000.0), 1e-12);
+  // A route's first kSharpnessFrames frames are not read for their sharpness, however sharp.
+  ASSERT_EQ(StepDecisions::kSharpnessFrames, 9u) << "the figures below read nine frames";
+  for (std::size_t i = 0; i < StepDecisions::kSharpnessFrames; ++i) {
+    join(d, i % 2 == 0 ? 0.6 : 0.1);
+    EXPECT_EQ(d.sharper_nats(), 0.0) << "frame " << i;
+  }
+  // Nine frames before it, 0.6 five times and 0.1 four: the median is 0.6.
   join(d, 0.4);
   EXPECT_NEAR(d.sharper_nats(), (0.6 - 0.4) * std::log(1000.0), 1e-12);
+  join(d, 0.7);
+  // Ten frames before it (0.6 five times, 0.1 four times, 0.4): the median, the upper of the middle
+  // two, is 0.6, and the frame 0.1 of log(1,000) nats flatter.
+  EXPECT_NEAR(d.sharper_nats(), -0.1 * std::log(1000.0), 1e-12);
   // Before the estimator has found a slope, no frame is tempered for its sharpness.
   EXPECT_EQ(d.sharpness_octaves(true), 0.0);
   EXPECT_EQ(d.sharpness_octaves(false), 0.0);
   // Without the slope nothing reads a frame's sharpness, and none is measured.
   StepDecisions without(small());
-  join(without, 0.6);
+  for (std::size_t i = 0; i < StepDecisions::kSharpnessFrames; ++i) join(without, 0.6);
   join(without, 0.4);
   EXPECT_EQ(without.sharper_nats(), 0.0);
 }

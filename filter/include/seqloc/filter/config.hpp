@@ -92,8 +92,10 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// Frames sharper than the route's typical frame (its median entropy) go in at up to two octaves
   /// less power, by a slope self-calibration estimates with the power (selfcal/estimator.hpp): 0,
   /// every frame at the power, unless the route's sharper frames predict worse than the rest (a
-  /// backbone confidently wrong at times). The weight is multiplied into ETU's. Off by default: on
-  /// the development draw's frames four times too sharp it cost 7 points (docs/filter.md).
+  /// backbone confidently wrong at times). The weight is multiplied into ETU's. A route's first
+  /// StepDecisions::kSharpnessFrames frames have no sharpness, in their weight or in the slope's
+  /// estimate. Off by default: on the benchmark's feature-sparse volumes four and eight times too
+  /// sharp it cost 5.4 and 4.1 points R@5m (docs/filter.md, "Frames sharper than the route's").
   bool self_calibration_sharpness = false;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the

@@ -86,17 +86,19 @@ class StepDecisions {
   /// entropy of the frame raised to its power (`powered_entropy`).
   [[nodiscard]] double etu_weight_of(double powered_entropy) const;
   /// How much sharper the frame that joined last is than the route's frames before it: the
-  /// median of their given entropies less its own, in nats (0 for a route's first frame, and
-  /// without self-calibration's sharpness slope, which alone reads it).
+  /// median of their given entropies less its own, in nats. 0 without self-calibration's
+  /// sharpness slope, which alone reads it, and for a route's first kSharpnessFrames frames,
+  /// both in their weight and in the evidence the slope is estimated from: while the belief forms,
+  /// a backbone overconfident throughout predicts its sharper frames worse, and on the sample
+  /// region's development draw a slope read from those frames tempered the matcher's sharp and
+  /// right frames (docs/filter.md, "Frames sharper than the route's").
   [[nodiscard]] double sharper_nats() const { return sharper_nats_; }
   /// The octaves self-calibration takes off that frame's weight for its sharpness,
   /// PowerEstimator::sharpness_octaves(slope, sharper_nats()) (<= 0; the weight, 2 to this, is
   /// multiplied into ETU's): 0 unless calibrating with the one-step criterion (the bank estimates
-  /// no slope), and 0 for a route's first kSharpnessFrames frames (the route's typical frame is
-  /// read from that many first: on the sample region's development draw a slope read from the
-  /// first four frames tempered the matcher's sharp and right frames).
+  /// no slope).
   [[nodiscard]] double sharpness_octaves(bool calibrating) const;
-  static constexpr std::size_t kSharpnessFrames = 10;
+  static constexpr std::size_t kSharpnessFrames = 9;
 
   /// The one-step criterion's hold (FilterConfig::self_calibration_hold_share): the ratio the belief
   /// is raised by at this step, from the estimator's power now and whether it is held. While held,
