@@ -210,11 +210,18 @@ void PowerEstimator::add(const CalibrationEvidence& evidence, double sharper_nat
   }
   ++frames_;
   // The best (slope, kappa); the first slope of equal scores, so 0 until a steeper one is better.
+  // A slope is a second parameter beside kappa, and pays for it as the Bayesian information
+  // criterion has it, half the log of the frames read: on frames calibrated but for a power, a
+  // slope fitted to their spread of sharpness by chance would otherwise move kappa
+  // (SelfCalibration/Recovers). Held at 1 (below), kappa cannot move, nothing competes with the
+  // slope, and it is read without the penalty.
+  const double penalty = 0.5 * std::log(static_cast<double>(frames_));
+  const auto penalized = [&](std::size_t j, std::size_t k) { return scores_[j][k] - (j > 0 ? penalty : 0.0); };
   std::size_t best_j = 0, best = 0;
   for (std::size_t j = 0; j < slopes_; ++j) {
     const auto k =
         static_cast<std::size_t>(std::max_element(scores_[j].begin(), scores_[j].end()) - scores_[j].begin());
-    if (scores_[j][k] > scores_[best_j][best]) {
+    if (penalized(j, k) > penalized(best_j, best)) {
       best_j = j;
       best = k;
     }

@@ -23,8 +23,9 @@
 // nat): a frame s nats sharper than the route's typical frame (its entropy that much below the
 // median of the route's, in nats) goes in at kappa 2^-min(b s, 2), and flatter frames at kappa (ETU
 // tempers those). The score is kept on a grid of (kappa, b), b = 0 .. 2 in steps of 1/2 with a
-// flat prior; b = 0 wins ties, so a route whose sharper frames predict as well as the rest keeps
-// every frame at kappa. A calibrated backbone's sharper frames are its better ones, and b stays 0
+// flat prior; a slope b > 0 must beat b = 0 by half the log of the frames read (the Bayesian
+// information criterion's price of a parameter), so a route whose sharper frames predict as well
+// as the rest keeps every frame at kappa. A calibrated backbone's sharper frames are its better ones, and b stays 0
 // (docs/filter.md, "Frames sharper than the route's", measures both).
 //
 // Cost: P_t is needed at every kappa of a grid, but depends on the frame only through its cells'
