@@ -25,7 +25,7 @@ CalibrationEvidence frame_against_belief(bool right) {
   return e;
 }
 
-// 70 frames: every third-ish frame (30 of them) wrong, `sharper_wrong` nats sharper than the rest.
+// 100 frames, three of every ten (30 in all) wrong and `sharper_wrong` nats sharper than the rest.
 PowerEstimator route(double sharper_wrong) {
   PowerEstimator estimator(2.0, 0.0);
   const CalibrationEvidence right = frame_against_belief(true), wrong = frame_against_belief(false);

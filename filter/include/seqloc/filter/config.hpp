@@ -94,8 +94,8 @@ struct FilterConfig {  // NOLINT(clang-analyzer-optin.performance.Padding)
   /// every frame at the power, unless the route's sharper frames predict worse than the rest (a
   /// backbone confidently wrong at times). The weight is multiplied into ETU's. A route's first
   /// StepDecisions::kSharpnessFrames frames have no sharpness, in their weight or in the slope's
-  /// estimate. Off by default: on the benchmark's feature-sparse volumes four and eight times too
-  /// sharp it cost 5.4 and 4.1 points R@5m (docs/filter.md, "Frames sharper than the route's").
+  /// estimate. Off by default: it costs the benchmark's feature-sparse volumes when they are four
+  /// or eight times too sharp (docs/filter.md, "Frames sharper than the route's").
   bool self_calibration_sharpness = false;
 
   /// A frame whose argmax lands farther than this from the previous estimate moved by the

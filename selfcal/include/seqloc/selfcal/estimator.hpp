@@ -25,8 +25,8 @@
 // tempers those). The score is kept on a grid of (kappa, b), b = 0 .. 2 in steps of 1/2 with a
 // flat prior; a slope b > 0 must beat b = 0 by half the log of the frames read (the Bayesian
 // information criterion's price of a parameter), so a route whose sharper frames predict as well
-// as the rest keeps every frame at kappa. A calibrated backbone's sharper frames are its better ones, and b stays 0
-// (docs/filter.md, "Frames sharper than the route's", measures both).
+// as the rest keeps every frame at kappa. A calibrated backbone's sharper frames are its better
+// ones, and b stays 0 (docs/filter.md, "Frames sharper than the route's", measures both).
 //
 // Cost: P_t is needed at every kappa of a grid, but depends on the frame only through its cells'
 // depths r = log p - log p_max. The filter bins the belief's mass by depth while it multiplies the
@@ -151,7 +151,8 @@ class PowerEstimator {
   /// how much sharper the frame is than the route's typical frame (sharpness_octaves()).
   void add(const CalibrationEvidence& evidence, double sharper_nats = 0);
   /// The sharpness slope b (octaves per nat, 0 .. kMaxSlope): with the power held, the best with
-  /// kappa at 1; else the best jointly with kappa.
+  /// kappa at 1; else the best jointly with kappa, a slope > 0 paying half the log of the frames
+  /// read.
   [[nodiscard]] double slope() const { return slope_; }
   static constexpr double kMaxSlope = 2;
   /// The most a frame's sharpness takes off its power, in octaves.
