@@ -3,6 +3,11 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstring>
+
+#include <Eigen/Core>
+
+#include "seqloc/core/thread_pool.hpp"
 
 namespace seqloc::filter {
 
@@ -39,26 +44,41 @@ void BeliefVolume::set_gaussian(double u0, double v0, double sigma_cells) {
   }
 }
 
-void BeliefVolume::recentre(int du, int dv) {
+void BeliefVolume::recentre(int du, int dv, float fill, int threads) {
   if (du == 0 && dv == 0) return;
-  const float fill = min_value();
-  std::vector<float> copy(slice_cells());
-  for (int k = 0; k < headings_; ++k) {
-    float* s = slice(k);
-    std::copy(s, s + slice_cells(), copy.begin());
-    for (int v = 0; v < height_; ++v) {
-      const int sv = v + dv;
-      for (int u = 0; u < width_; ++u) {
-        const int su = u + du;
-        s[static_cast<std::size_t>(v) * width_ + u] =
-            (su >= 0 && su < width_ && sv >= 0 && sv < height_) ? copy[static_cast<std::size_t>(sv) * width_ + su]
-                                                                : fill;
+  const int W = width_, H = height_;
+  // Row v takes row v + dv, its cells u0 .. u1 from u0 + du .. u1 + du, the rest `fill`. Rows are
+  // moved in the order that reads each source row before it is written (up for dv > 0, down for
+  // dv < 0); memmove keeps a row's own overlap (dv = 0) right.
+  const int u0 = std::max(0, -du), u1 = std::min(W, W - du);
+  auto move_row = [&](float* s, int v) {
+    float* row = s + static_cast<std::size_t>(v) * W;
+    const int sv = v + dv;
+    if (sv < 0 || sv >= H || u0 >= u1) {
+      std::fill(row, row + W, fill);
+      return;
+    }
+    std::memmove(row + u0, s + static_cast<std::size_t>(sv) * W + u0 + du,
+                 static_cast<std::size_t>(u1 - u0) * sizeof(float));
+    std::fill(row, row + u0, fill);
+    std::fill(row + u1, row + W, fill);
+  };
+  core::parallel_chunks(headings_, threads, [&](int k0, int k1, int) {
+    for (int k = k0; k < k1; ++k) {
+      float* s = slice(k);
+      if (dv >= 0) {
+        for (int v = 0; v < H; ++v) move_row(s, v);
+      } else {
+        for (int v = H; v-- > 0;) move_row(s, v);
       }
     }
-  }
+  });
 }
 
-float BeliefVolume::min_value() const { return *std::min_element(data_.begin(), data_.end()); }
+float BeliefVolume::min_value() const {
+  // A value-only reduction vectorizes; std::min_element's search for the index does not.
+  return Eigen::Map<const Eigen::ArrayXf>(data_.data(), static_cast<Eigen::Index>(data_.size())).minCoeff();
+}
 
 double BeliefVolume::total_probability() const {
   double sum = 0;

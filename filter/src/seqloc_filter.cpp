@@ -268,8 +268,12 @@ void SeqLocFilter::rebase(BeliefVolume belief, const std::optional<Pose>& last_e
 }
 
 void SeqLocFilter::recentre(int du, int dv) {
-  belief_.recentre(du, dv);
-  cached_min_.reset();
+  if (du != 0 || dv != 0) {
+    // The entering cells take the window's minimum, so the minimum stays what it was.
+    const float fill = cached_min_ ? *cached_min_ : belief_.min_value();
+    belief_.recentre(du, dv, fill, config_.threads);
+    cached_min_ = fill;
+  }
   decisions_.recentre(du, dv);
   if (impl_->bank) impl_->bank->recentre(du, dv);
 }

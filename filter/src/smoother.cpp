@@ -64,15 +64,17 @@ void check_shapes(const BeliefVolume& forward, const BeliefVolume& backward, con
 SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& backward, const FilterConfig& config,
                              BeliefVolume* posterior) {
   const int R = forward.headings();
-  const std::size_t n = forward.slice_cells();
-  const auto N = static_cast<Eigen::Index>(n);
+  const auto N = static_cast<Eigen::Index>(forward.slice_cells());
   SlicedProduct p;
   p.best.resize(static_cast<std::size_t>(R));
   p.sum.resize(static_cast<std::size_t>(R));
+  // Each slice's product is written where it stays (the posterior, else a worker's scratch) and
+  // reduced there while it is in cache.
   auto reduce = [&](bool both) {
     core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
-      Eigen::ArrayXf product(N);
+      Eigen::ArrayXf scratch(posterior != nullptr ? 0 : N);
       for (int k = k0; k < k1; ++k) {
+        ArrayMap product(posterior != nullptr ? posterior->slice(k) : scratch.data(), N);
         if (both) {
           product = ConstArrayMap(forward.slice(k), N) * ConstArrayMap(backward.slice(k), N);
         } else {
@@ -80,7 +82,6 @@ SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& ba
         }
         p.best[static_cast<std::size_t>(k)] = product.maxCoeff();
         p.sum[static_cast<std::size_t>(k)] = static_cast<double>(product.sum());
-        if (posterior != nullptr) std::copy(product.data(), product.data() + n, posterior->slice(k));
       }
     });
     double total = 0;
@@ -95,9 +96,9 @@ SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& ba
   }
   if (posterior != nullptr) {
     const auto scale = static_cast<float>(1.0 / p.total);
-    for (int k = 0; k < R; ++k) {
-      ArrayMap(posterior->slice(k), N) *= scale;
-    }
+    core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
+      for (int k = k0; k < k1; ++k) ArrayMap(posterior->slice(k), N) *= scale;
+    });
   }
   return p;
 }

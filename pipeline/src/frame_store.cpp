@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <map>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <system_error>
@@ -98,12 +99,27 @@ void FrameStore::release(Slot& slot) {
   }
   memory_bytes_ -= slot.memory.size() * sizeof(std::uint16_t);
   std::vector<std::uint16_t>().swap(slot.memory);
+  slot.made.reset();
 }
 
-std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame) {
-  std::vector<std::uint16_t> halves(frame.log_prob.size());
-  filter::floats_to_halves(frame.log_prob, halves);
-  filter::halves_to_floats(halves, frame.log_prob);
+std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame, bool keep_halves) {
+  const std::size_t n = frame.log_prob.size();
+  std::vector<std::uint16_t> halves;
+  if (keep_halves) {
+    halves.resize(n);
+    filter::floats_to_halves(frame.log_prob, halves);
+    filter::halves_to_floats(halves, frame.log_prob);
+  } else {
+    // A block at a time, through a buffer that stays in cache.
+    constexpr std::size_t kBlock = 8192;
+    std::uint16_t block[kBlock];
+    for (std::size_t at = 0; at < n; at += kBlock) {
+      const std::size_t len = std::min(kBlock, n - at);
+      const std::span<float> values(frame.log_prob.data() + at, len);
+      filter::floats_to_halves(values, {block, len});
+      filter::halves_to_floats({block, len}, values);
+    }
+  }
   filter::summarize_frame(frame);
   return halves;
 }
@@ -116,10 +132,14 @@ void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
   std::vector<std::uint16_t> halves;
   try {
     // The header describes the rounded values (their entropy, peak and argmax), so that a frame
-    // written out as float16 and read back is the same frame.
-    auto rounded = std::make_shared<filter::PreparedFrame>(*source_(i));
-    halves = round_like_frame_store(*rounded);
-    if (halves.size() != values_of(*rounded)) {
+    // written out as float16 and read back is the same frame. A frame the source no longer holds
+    // is rounded where it lies; with one consumer no float16 copy is kept (it takes this frame).
+    std::shared_ptr<const filter::PreparedFrame> source_frame = source_(i);
+    auto rounded = source_frame.use_count() == 1 ? std::const_pointer_cast<filter::PreparedFrame>(source_frame)
+                                                 : std::make_shared<filter::PreparedFrame>(*source_frame);
+    source_frame.reset();
+    halves = round_like_frame_store(*rounded, readers_ > 1);
+    if (readers_ > 1 && halves.size() != values_of(*rounded)) {
       throw Error(ErrorCategory::internal, "frame store: frame " + std::to_string(i) + " holds " +
                                                std::to_string(halves.size()) + " values for its shape's " +
                                                std::to_string(values_of(*rounded)));
@@ -144,8 +164,11 @@ void FrameStore::make(std::size_t i, std::unique_lock<std::mutex>& lock) {
   h.argmax_u = frame->argmax_u;
   h.argmax_bin = frame->argmax_bin;
   const std::size_t bytes = halves.size() * sizeof(std::uint16_t);
+  slot.made = std::move(frame);
   try {
-    if (memory_bytes_ + bytes <= budget_) {
+    if (bytes == 0) {
+      // one consumer: it takes the frame as made
+    } else if (memory_bytes_ + bytes <= budget_) {
       slot.memory = std::move(halves);
       memory_bytes_ += bytes;
       stats_.peak_memory_bytes = std::max(stats_.peak_memory_bytes, memory_bytes_);
@@ -194,6 +217,16 @@ std::shared_ptr<const filter::PreparedFrame> FrameStore::take(std::size_t i) {
     } else {
       changed_.wait(lock);
     }
+  }
+  if (slot.made) {  // the first consumer
+    std::shared_ptr<const filter::PreparedFrame> frame = std::move(slot.made);
+    slot.made.reset();
+    if (++slot.taken >= readers_ && slot.copying == 0) {
+      release(slot);
+      slot.state = State::empty;
+      slot.released = true;
+    }
+    return frame;
   }
   auto frame = std::make_shared<filter::PreparedFrame>(slot.header);
   const std::uint16_t* halves = slot.mapped != nullptr ? slot.mapped : slot.memory.data();

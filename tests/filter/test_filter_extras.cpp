@@ -212,6 +212,33 @@ TEST(Window, RecentreMovesContentAndFillsWithTheMinimum) {
   EXPECT_EQ(b.prob(0, 0, 3), 0.1f);
 }
 
+TEST(Window, RecentreAgreesWithTheCellByCellDefinitionForEveryShift) {
+  // Every shift up to past the window's size each way, on 1 and 3 workers, against the
+  // definition: new (u, v) = old (u + du, v + dv) where that lies in the window, else the minimum.
+  BeliefVolume start(7, 5, 3);
+  for (std::size_t i = 0; i < start.size(); ++i) start.data()[i] = 0.25f + static_cast<float>((i * 37) % 101);
+  start.prob(6, 4, 2) = 0.125f;  // the minimum
+  for (int threads : {1, 3}) {
+    for (int dv = -6; dv <= 6; ++dv) {
+      for (int du = -8; du <= 8; ++du) {
+        BeliefVolume b = start;
+        b.recentre(du, dv, start.min_value(), threads);
+        int wrong = 0;
+        for (int k = 0; k < 3; ++k) {
+          for (int v = 0; v < 5; ++v) {
+            for (int u = 0; u < 7; ++u) {
+              const int su = u + du, sv = v + dv;
+              const bool inside = su >= 0 && su < 7 && sv >= 0 && sv < 5;
+              wrong += b.prob(u, v, k) != (inside ? start.prob(su, sv, k) : 0.125f);
+            }
+          }
+        }
+        EXPECT_EQ(wrong, 0) << "du " << du << " dv " << dv << ", " << threads << " workers";
+      }
+    }
+  }
+}
+
 TEST(Beyond, SubBinHeadingRefinesBetweenBins) {
   FilterConfig c = config(24, 24, 16);
   c.mgr = false;

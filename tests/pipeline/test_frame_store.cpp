@@ -115,7 +115,15 @@ TEST(FrameStore, BeyondTheBudgetFramesGoToAFileThatNoDirectoryShows) {
     expect_half_of(*held.take(0), 0);
   }
   EXPECT_TRUE(std::filesystem::is_empty(spill.path()));
-  FrameStore nowhere(counting.source(), 2, 1, 0, spill.path() / "missing");
+  {
+    // One reader takes each frame as made: nothing is kept for another, so nothing spills.
+    FrameStore alone(counting.source(), 2, 1, 0, spill.path() / "missing");
+    expect_half_of(*alone.take(0), 0);
+    expect_half_of(*alone.take(1), 1);
+    EXPECT_EQ(alone.stats().spilled, 0u);
+    EXPECT_EQ(alone.stats().peak_memory_bytes, 0u);
+  }
+  FrameStore nowhere(counting.source(), 2, 2, 0, spill.path() / "missing");
   try {
     (void)nowhere.take(0);
     FAIL() << "spilling into a missing directory must fail";

@@ -47,7 +47,10 @@ class BeliefVolume {
   /// The window moves by (du, dv) whole cells: the new cell (u, v) is the old (u + du, v + dv).
   /// Mass leaving the window is dropped; cells entering it get the window's current minimum
   /// (conventions.md section 6). The belief is not renormalized.
-  void recentre(int du, int dv);
+  void recentre(int du, int dv) { recentre(du, dv, min_value()); }
+  /// The same with the entering cells' value given (the window's minimum where the caller keeps
+  /// it), `threads` workers a slice each: rows moved whole, no pass over the belief to find it.
+  void recentre(int du, int dv, float fill, int threads = 1);
 
   [[nodiscard]] float min_value() const;
   /// Sum of the probabilities (1 for a normalized belief).

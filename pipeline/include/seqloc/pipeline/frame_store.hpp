@@ -57,6 +57,9 @@ class FrameStore {
     int taken = 0, copying = 0;  ///< consumers that took it, and that are copying it out
     bool released = false;
     filter::PreparedFrame header;  ///< everything but the log-probabilities
+    /// The frame as made (its values rounded), for the first consumer: the others convert the
+    /// float16 copy back.
+    std::shared_ptr<const filter::PreparedFrame> made;
     std::vector<std::uint16_t> memory;
     std::uint16_t* mapped = nullptr;
     std::size_t mapped_offset = 0, mapped_bytes = 0;
@@ -82,7 +85,7 @@ class FrameStore {
 /// What a frame becomes in a FrameStore: its log-probabilities rounded to float16 (NumPy's
 /// rounding) and its entropy, peak and argmax those of the rounded values. A loop that feeds
 /// frames itself applies this to get localize's poses exactly. Returns the float16 bits the
-/// values now hold (what the store keeps).
-std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame);
+/// values now hold (what the store keeps), or nothing where `keep_halves` is false.
+std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame, bool keep_halves = true);
 
 }  // namespace seqloc::pipeline
