@@ -58,7 +58,7 @@ void check_shapes(const BeliefVolume& forward, const BeliefVolume& backward, con
   }
 }
 
-// gamma's slices reduced (and written to `posterior`, normalized, when given). When the two
+// gamma's slices reduced (and written to `posterior` as they are, when given). When the two
 // passes share no mass that float can represent (they placed the vehicle apart with certainty),
 // the forward belief alone decides, as the filter lets a frame alone decide.
 SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& backward, const FilterConfig& config,
@@ -93,12 +93,6 @@ SlicedProduct reduce_product(const BeliefVolume& forward, const BeliefVolume& ba
     p.both = false;
     p.total = reduce(p.both);
     if (!(p.total > 0) || !std::isfinite(p.total)) throw FilterError("smoothed_result: the forward belief has no mass");
-  }
-  if (posterior != nullptr) {
-    const auto scale = static_cast<float>(1.0 / p.total);
-    core::parallel_chunks(R, config.threads, [&](int k0, int k1, int) {
-      for (int k = k0; k < k1; ++k) ArrayMap(posterior->slice(k), N) *= scale;
-    });
   }
   return p;
 }

@@ -51,7 +51,8 @@ class BackwardFilter {
 /// and beta_t (`backward`: the backward filter's before it absorbs frame t), over the same window:
 /// the argmax (x*, th*) of gamma = alpha * beta, PAS's position around x* when config.pas (as
 /// SeqLocFilter, on gamma), the sub-bin heading when configured, and the peak's log-posterior.
-/// `posterior`, when given (of the window's shape), receives gamma normalized. Where the two share
+/// `posterior`, when given (of the window's shape), receives gamma as it is, not normalized (a pass
+/// over the window its readers need not pay: pose_uncertainty normalizes). Where the two share
 /// no mass that float can represent (each certain of a different place), alpha alone decides.
 /// Throws FilterError when the shapes differ.
 [[nodiscard]] FrameResult smoothed_result(const BeliefVolume& forward, const BeliefVolume& backward,
