@@ -347,6 +347,15 @@ void SeqLocFilter::predict(const Odometry& odometry) {
   }
 }
 
+void SeqLocFilter::predict(const Odometry& odometry, BeliefVolume& previous) {
+  if (previous.width() != config_.width || previous.height() != config_.height ||
+      previous.headings() != config_.headings) {
+    throw FilterError("predict: the belief to hand over is not of the window's shape", ErrorCategory::internal);
+  }
+  predict(odometry);
+  std::swap(previous, impl_->scratch);  // the motion's source, until the next motion overwrites it
+}
+
 void SeqLocFilter::load(const PreparedFrame& /*frame*/, bool estimating) {
   // The frame stays where the caller holds it; scan_frame() bins its cells for the estimator.
   if (estimating) {

@@ -1,5 +1,7 @@
 #include "seqloc/pipeline/backward_pass.hpp"
 
+#include <utility>
+
 namespace seqloc::pipeline {
 namespace {
 
@@ -79,6 +81,22 @@ filter::FrameResult ForwardReplay::step(const StepRecord& record, const filter::
   // window and fills what enters).
   move_window(filter_, window_, record.origin);
   if (predict) filter_.predict(record.odometry);
+  return update(record, frame);
+}
+
+filter::FrameResult ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& frame,
+                                        filter::BeliefVolume& previous) {
+  if (record.origin[0] != window_.origin_u() || record.origin[1] != window_.origin_v()) {
+    previous = std::as_const(filter_).belief();
+    move_window(filter_, window_, record.origin);
+    filter_.predict(record.odometry);
+  } else {
+    filter_.predict(record.odometry, previous);
+  }
+  return update(record, frame);
+}
+
+filter::FrameResult ForwardReplay::update(const StepRecord& record, const filter::PreparedFrame& frame) {
   const std::span<const float> road = config_.mgr ? window_.road_distance_m() : std::span<const float>{};
   filter::FrameResult result = filter_.update(frame, record.crop, road, record.fix, record.weighting);
   move_window(filter_, window_, record.origin_after);

@@ -239,6 +239,24 @@ TEST(Window, RecentreAgreesWithTheCellByCellDefinitionForEveryShift) {
   }
 }
 
+TEST(Window, PredictHandsOverTheBeliefItMovedFrom) {
+  FilterConfig c = config(16, 12, 8);
+  SeqLocFilter handing(c), plain(c);
+  handing.belief().set_gaussian(7, 5, 1.5);
+  plain.belief() = handing.belief();
+  const BeliefVolume before = handing.belief();
+  BeliefVolume previous(16, 12, 8);
+  handing.predict({1.5, 0.5, 45}, previous);
+  plain.predict({1.5, 0.5, 45});
+  EXPECT_TRUE(std::equal(previous.data(), previous.data() + previous.size(), before.data()));
+  EXPECT_TRUE(
+      std::equal(handing.belief().data(), handing.belief().data() + handing.belief().size(), plain.belief().data()));
+  EXPECT_FALSE(std::equal(previous.data(), previous.data() + previous.size(), plain.belief().data()))
+      << "the motion moved the belief";
+  BeliefVolume wrong(16, 12, 4);
+  EXPECT_THROW(handing.predict({1, 0, 0}, wrong), FilterError);
+}
+
 TEST(Beyond, SubBinHeadingRefinesBetweenBins) {
   FilterConfig c = config(24, 24, 16);
   c.mgr = false;

@@ -89,6 +89,9 @@ class SeqLocFilter : private CellWork {
 
   /// The stages, exposed for tests and for callers that move the window between frames.
   void predict(const Odometry& odometry) override;
+  /// predict(), and the belief it moved from handed to `previous` (of the window's shape) by
+  /// exchanging their storage: a replay that keeps each step's belief keeps it without a copy.
+  void predict(const Odometry& odometry, BeliefVolume& previous);
   void recentre(int du, int dv);
   /// The window moved to another grid (a route crossing into the next region): `belief` is the
   /// belief resampled onto the new window (same size), `last_estimate` the last pose in its cells.

@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <optional>
+#include <utility>
 
 #include "seqloc/filter/smoother.hpp"
 #include "seqloc/pipeline/modes.hpp"
@@ -69,9 +70,18 @@ class ForwardReplay {
   /// (its pose from the replayed belief). `predict` false: the route's first frame, taken in
   /// without a prediction as the filter takes it.
   filter::FrameResult step(const StepRecord& record, const filter::PreparedFrame& frame, bool predict = true);
+  /// step(), and the belief before it (the last step's alpha) handed to `previous`: by exchanging
+  /// storage where the window did not move in between, else copied.
+  filter::FrameResult step(const StepRecord& record, const filter::PreparedFrame& frame,
+                           filter::BeliefVolume& previous);
   [[nodiscard]] const filter::BeliefVolume& belief() const { return filter_.belief(); }
+  /// Hands the belief to `out` by exchanging storage; the replay resumes before its next step.
+  void hand_belief_to(filter::BeliefVolume& out) { std::swap(filter_.belief(), out); }
 
  private:
+  /// The update of a step and the window's move after it.
+  filter::FrameResult update(const StepRecord& record, const filter::PreparedFrame& frame);
+
   filter::FilterConfig config_;
   RegionWindow window_;
   filter::SeqLocFilter filter_;
