@@ -87,12 +87,10 @@ filter::FrameResult ForwardReplay::step(const StepRecord& record, const filter::
 filter::FrameResult ForwardReplay::step(const StepRecord& record, const filter::PreparedFrame& frame,
                                         filter::BeliefVolume& previous) {
   if (record.origin[0] != window_.origin_u() || record.origin[1] != window_.origin_v()) {
-    previous = std::as_const(filter_).belief();
-    move_window(filter_, window_, record.origin);
-    filter_.predict(record.odometry);
-  } else {
-    filter_.predict(record.odometry, previous);
+    previous = std::as_const(filter_).belief();  // the window moves before the motion: a copy
+    return step(record, frame);
   }
+  filter_.predict(record.odometry, previous);
   return update(record, frame);
 }
 

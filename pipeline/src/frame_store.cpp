@@ -104,21 +104,17 @@ void FrameStore::release(Slot& slot) {
 
 std::vector<std::uint16_t> round_like_frame_store(filter::PreparedFrame& frame, bool keep_halves) {
   const std::size_t n = frame.log_prob.size();
-  std::vector<std::uint16_t> halves;
-  if (keep_halves) {
-    halves.resize(n);
-    filter::floats_to_halves(frame.log_prob, halves);
-    filter::halves_to_floats(halves, frame.log_prob);
-  } else {
-    // A block at a time, through a buffer that stays in cache.
-    constexpr std::size_t kBlock = 8192;
-    std::uint16_t block[kBlock];
-    for (std::size_t at = 0; at < n; at += kBlock) {
-      const std::size_t len = std::min(kBlock, n - at);
-      const std::span<float> values(frame.log_prob.data() + at, len);
-      filter::floats_to_halves(values, {block, len});
-      filter::halves_to_floats({block, len}, values);
-    }
+  std::vector<std::uint16_t> halves(keep_halves ? n : 0);
+  // A block at a time, so that the values are read back while in cache: into the halves kept, or
+  // through a buffer.
+  constexpr std::size_t kBlock = 8192;
+  std::uint16_t block[kBlock];
+  for (std::size_t at = 0; at < n; at += kBlock) {
+    const std::size_t len = std::min(kBlock, n - at);
+    const std::span<float> values(frame.log_prob.data() + at, len);
+    const std::span<std::uint16_t> bits(keep_halves ? halves.data() + at : block, len);
+    filter::floats_to_halves(values, bits);
+    filter::halves_to_floats(bits, values);
   }
   filter::summarize_frame(frame);
   return halves;
@@ -220,12 +216,8 @@ std::shared_ptr<const filter::PreparedFrame> FrameStore::take(std::size_t i) {
   }
   if (slot.made) {  // the first consumer
     std::shared_ptr<const filter::PreparedFrame> frame = std::move(slot.made);
-    slot.made.reset();
-    if (++slot.taken >= readers_ && slot.copying == 0) {
-      release(slot);
-      slot.state = State::empty;
-      slot.released = true;
-    }
+    ++slot.taken;
+    release_if_done(slot);
     return frame;
   }
   auto frame = std::make_shared<filter::PreparedFrame>(slot.header);
@@ -237,12 +229,15 @@ std::shared_ptr<const filter::PreparedFrame> FrameStore::take(std::size_t i) {
   filter::halves_to_floats({halves, frame->log_prob.size()}, frame->log_prob);
   lock.lock();
   --slot.copying;
-  if (slot.taken >= readers_ && slot.copying == 0) {
-    release(slot);
-    slot.state = State::empty;
-    slot.released = true;
-  }
+  release_if_done(slot);
   return frame;
+}
+
+void FrameStore::release_if_done(Slot& slot) {
+  if (slot.taken < readers_ || slot.copying != 0) return;
+  release(slot);
+  slot.state = State::empty;
+  slot.released = true;
 }
 
 FrameStore::Stats FrameStore::stats() const {

@@ -194,7 +194,7 @@ void SmoothMode::run(FramePrefetcher& frames) {
         checkpoints.read(s, alpha[0]);
         replay.resume(alpha[0], records[first]);
       } else {
-        (void)replay.step(records[t], *kept[t - first], alpha[t - 1 - first]);  // alpha of t - 1 handed over
+        replay.step(records[t], *kept[t - first], alpha[t - 1 - first]);  // alpha of t - 1 handed over
       }
       if (t == last && t > first) replay.hand_belief_to(alpha[t - first]);
       filter_seconds_ += seconds_since(t0);

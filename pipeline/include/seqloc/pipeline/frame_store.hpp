@@ -69,6 +69,8 @@ class FrameStore {
   /// exit, released while making).
   void make(std::size_t i, std::unique_lock<std::mutex>& lock);
   void release(Slot& slot);
+  /// Releases the slot once its last reader took it and no one is copying it out (lock held).
+  void release_if_done(Slot& slot);
 
   FrameSource source_;
   int readers_;
