@@ -1,9 +1,13 @@
-// Writes the synthetic rural region of samples/: a valley of farmland and forest crossed by a
-// winding road, with a T intersection, tracks, a farm and a hamlet. Everything is placed by
-// formulas and a fixed-seed generator of our own, so the file is the same on every machine.
+// Writes the synthetic regions of our own: the rural valley of samples/ (farmland and forest
+// crossed by a winding road, with a T intersection, tracks, a farm and a hamlet) and, for
+// development draws that no report uses, a mountain pass whose roads see few features (a
+// serpentine of long legs between forest patches, three tracks, a hamlet in the valley).
+// Everything is placed by formulas and fixed-seed generators of our own, so a file is the same on
+// every machine.
 //
-//   seqloc-make-sample OUTPUT.osm.pbf
+//   seqloc-make-sample [--region rural-valley|mountain-pass] OUTPUT.osm.pbf
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -48,7 +52,7 @@ std::vector<LocalPoint> rectangle(double x, double y, double w, double h, double
 // The main road: west to east, winding through the valley.
 LocalPoint main_road(double x) { return {x, 60.0 * std::sin(x / 180.0) + 25.0 * std::sin(x / 53.0)}; }
 
-void build(SyntheticMap& map) {
+void build_rural_valley(SyntheticMap& map) {
   Random rng(20261122);
   // Main road, shared node at the T intersection (x = 40).
   std::vector<std::int64_t> main_nodes;
@@ -126,17 +130,148 @@ void build(SyntheticMap& map) {
   }
 }
 
+// The mountain pass: a serpentine of six legs 190 m apart, each 1.11 km long, joined by hairpins,
+// climbing from a valley road along a river. Between the legs, forest patches of random extent
+// come within 8 to 12 m of the road (their ends are what a camera sees along a leg); a few
+// trees, benches, a parking place and a retaining wall; three tracks. Like the feature-sparse
+// regions the camera sees road and forest edges parallel to it for most of a leg.
+constexpr double kLegHalf = 555, kLegStep = 190, kLegFirst = -500, kHairpin = kLegStep / 2;
+constexpr int kLegs = 6;
+
+double leg_y(int leg, double x) {
+  const double m = 3 + leg % 2;  // whole half-waves: the wiggle vanishes at the hairpins
+  return kLegFirst + kLegStep * leg + 12.0 * std::sin(seqloc::core::kPi * m * (x + kLegHalf) / (2 * kLegHalf));
+}
+
+// The serpentine's nodes, leg by leg (each leg's node ids kept for the tracks), as one way.
+std::vector<std::vector<std::int64_t>> serpentine(SyntheticMap& map, std::vector<std::int64_t>& all) {
+  std::vector<std::vector<std::int64_t>> legs(kLegs);
+  for (int leg = 0; leg < kLegs; ++leg) {
+    const bool east = leg % 2 == 0;
+    for (int i = 0; i <= 2 * static_cast<int>(kLegHalf) / 15; ++i) {
+      const double x = east ? -kLegHalf + 15.0 * i : kLegHalf - 15.0 * i;
+      legs[leg].push_back(map.node({x, leg_y(leg, x)}));
+      all.push_back(legs[leg].back());
+    }
+    if (leg + 1 == kLegs) break;
+    const double cx = east ? kLegHalf : -kLegHalf, cy = kLegFirst + kLegStep * leg + kHairpin;
+    for (int k = 1; k < 12; ++k) {  // the hairpin: a half circle outwards, 15 degrees a node
+      const double a = -seqloc::core::kPi / 2 + seqloc::core::kPi * k / 12;
+      all.push_back(map.node({cx + (east ? 1 : -1) * kHairpin * std::cos(a), cy + kHairpin * std::sin(a)}));
+    }
+  }
+  map.way_through(all, {{"highway", "secondary"}, {"name", "Passstrasse"}});
+  return legs;
+}
+
+// A forest patch above a leg from x0 to x1, its edges `gap` metres off the leg and the next.
+void forest_between(SyntheticMap& map, int leg, double x0, double x1, double gap) {
+  std::vector<LocalPoint> ring;
+  for (double x = x0; x <= x1; x += 30) ring.push_back({x, leg_y(leg, x) + gap});
+  for (double x = x1; x >= x0; x -= 30) {
+    ring.push_back({x, leg < kLegs - 1 ? leg_y(leg + 1, x) - gap : leg_y(leg, x) + 120});
+  }
+  map.way(ring, {{"landuse", "forest"}}, true);
+}
+
+void valley(SyntheticMap& map, std::int64_t serpentine_start, Random& rng) {
+  std::vector<std::int64_t> road;
+  std::int64_t junction = 0;
+  auto valley_y = [](double x) { return -640.0 + 15.0 * std::sin(x / 120.0); };
+  for (int x = -720; x <= 720; x += 15) {
+    road.push_back(map.node({static_cast<double>(x), valley_y(x)}));
+    if (x == -615) junction = road.back();
+  }
+  map.way_through(road, {{"highway", "primary"}, {"name", "Talstrasse"}});
+  std::vector<std::int64_t> link{junction};
+  for (int k = 1; k < 8; ++k) {
+    const double t = k / 8.0;
+    const double y = valley_y(-615) * (1 - t) + kLegFirst * t - 20 * std::sin(seqloc::core::kPi * t);
+    link.push_back(map.node({-615 + (615 - kLegHalf) * t, y}));
+  }
+  link.push_back(serpentine_start);
+  map.way_through(link, {{"highway", "unclassified"}});
+  std::vector<LocalPoint> river;
+  for (double x = -740; x <= 740; x += 40) river.push_back({x, valley_y(x) - 30 - 4 * std::sin(x / 35)});
+  for (double x = 740; x >= -740; x -= 40) river.push_back({x, valley_y(x) - 48 + 3 * std::sin(x / 45)});
+  map.way(river, {{"natural", "water"}}, true);
+  for (int k = 0; k < 5; ++k) {  // the hamlet at the junction
+    const double x = -680 + 30 * k;
+    map.way(rectangle(x, valley_y(x) + 24 + rng.uniform(0, 8), rng.uniform(9, 13), rng.uniform(8, 11),
+                      rng.uniform(-10, 10)),
+            {{"building", "house"}}, true);
+  }
+  map.node({-600, valley_y(-600) - 6}, {{"highway", "bus_stop"}});
+}
+
+// Tracks up the slope from legs 0, 2 and 4 (eastbound), a gate on the second.
+void tracks(SyntheticMap& map, const std::vector<std::vector<std::int64_t>>& legs, Random& rng) {
+  for (int k = 0; k < 3; ++k) {
+    const auto& nodes = legs[2 * k];
+    const auto at = nodes.size() / 4 + static_cast<std::size_t>(rng.uniform(0, static_cast<double>(nodes.size()) / 2));
+    const double x = -kLegHalf + 15.0 * static_cast<double>(at), y = leg_y(2 * k, x);
+    const std::int64_t second = map.node({x + 20, y + 40}, k == 1 ? Tags{{"barrier", "gate"}} : Tags{});
+    map.way_through({nodes[at], second, map.node({x + 70, y + 120}), map.node({x + 60, y + 170})},
+                    {{"highway", "track"}});
+  }
+}
+
+void build_mountain_pass(SyntheticMap& map) {
+  Random rng(20261207);
+  std::vector<std::int64_t> road;
+  const auto legs = serpentine(map, road);
+  valley(map, road.front(), rng);
+  map.way({{-kLegHalf, leg_y(kLegs - 1, -kLegHalf)}, {-600, 600}, {-640, 720}}, {{"highway", "unclassified"}});
+  for (int leg = 0; leg < kLegs; ++leg) {  // two forest patches above each leg, apart
+    const double a0 = rng.uniform(-500, -200), a1 = a0 + rng.uniform(150, 350);
+    const double b0 = rng.uniform(a1 + 60, 250), b1 = b0 + rng.uniform(150, 300);
+    forest_between(map, leg, a0, a1, rng.uniform(8, 12));
+    forest_between(map, leg, b0, std::min(b1, 520.0), rng.uniform(8, 12));
+  }
+  tracks(map, legs, rng);
+  const double hairpin_y = kLegFirst + kHairpin;  // the first hairpin's centre; the k-th is kLegStep * k above
+  map.way(rectangle(kLegHalf + kHairpin + 18, hairpin_y, 22, 30, 0), {{"amenity", "parking"}}, true);
+  map.node({-kLegHalf - kHairpin - 6, hairpin_y + kLegStep}, {{"amenity", "bench"}});
+  map.node({kLegHalf + kHairpin + 6, hairpin_y + 4 * kLegStep}, {{"amenity", "bench"}});
+  const double wall_y = hairpin_y + 3 * kLegStep;
+  map.way({{-kLegHalf - 30, wall_y - 60}, {-kLegHalf - kHairpin + 6, wall_y}, {-kLegHalf - 30, wall_y + 60}},
+          {{"barrier", "retaining_wall"}});
+  for (int k = 0; k < 16; ++k) {  // lone trees by the legs
+    const int leg = k % kLegs;
+    const double x = rng.uniform(-500, 500);
+    map.node({x, leg_y(leg, x) + (k % 2 ? 1 : -1) * rng.uniform(6, 14)}, {{"natural", "tree"}});
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2 || std::string(argv[1]) == "--help") {
-    std::fprintf(stderr, "usage: seqloc-make-sample OUTPUT.osm.pbf\nWrites the synthetic rural sample region.\n");
-    return argc == 2 ? 0 : 2;
+  const std::string usage =
+      "usage: seqloc-make-sample [--region rural-valley|mountain-pass] OUTPUT.osm.pbf\n"
+      "Writes a synthetic region of our own: rural-valley (the default) is samples/'s; mountain-pass, a\n"
+      "serpentine between forest patches that sees few features, is for development draws.\n";
+  std::vector<std::string> args(argv + 1, argv + argc);
+  if (args.size() == 1 && args[0] == "--help") {
+    std::fputs(usage.c_str(), stdout);
+    return 0;
+  }
+  std::string region = "rural-valley";
+  if (args.size() == 3 && args[0] == "--region") {
+    region = args[1];
+    args.erase(args.begin(), args.begin() + 2);
+  }
+  if (args.size() != 1 || (region != "rural-valley" && region != "mountain-pass")) {
+    std::fputs(usage.c_str(), stderr);
+    return 2;
   }
   try {
-    SyntheticMap map(47.95, 11.25);
-    build(map);
-    map.write(argv[1], 30);
+    SyntheticMap map(region == "rural-valley" ? 47.95 : 46.62, region == "rural-valley" ? 11.25 : 10.45);
+    if (region == "rural-valley") {
+      build_rural_valley(map);
+    } else {
+      build_mountain_pass(map);
+    }
+    map.write(args[0], 30);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "seqloc-make-sample: error: %s\n", e.what());
     return 1;

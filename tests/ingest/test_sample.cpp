@@ -1,6 +1,7 @@
 // The sample region in samples/ is what our generator writes: regenerating it gives the same
 // features, and it holds what the demo needs (a road network with an intersection, forest,
-// meadows, buildings).
+// meadows, buildings). The generator's mountain pass (development draws) is the same file on
+// every run and holds few features for its length of road.
 
 #include <algorithm>
 #include <map>
@@ -52,6 +53,32 @@ TEST(Sample, IsARuralRegionWithWhatTheDemoNeeds) {
   EXPECT_GE(count.at("tree"), 50);
   EXPECT_GE(count.at("hedge"), 1);
   EXPECT_GE(count.at("fence"), 1);
+}
+
+TEST(Sample, TheMountainPassIsTheSameOnEveryRunAndSeesFewFeatures) {
+  test::ScratchDir dir;
+  const auto first = dir / "first.osm.pbf", second = dir / "second.osm.pbf";
+  for (const auto& path : {first, second}) {
+    const auto made = test::run_program(SEQLOC_MAKE_SAMPLE, {"--region", "mountain-pass", path.string()});
+    ASSERT_EQ(made.exit_code, 0) << made.err;
+  }
+  EXPECT_EQ(test::read_file(first), test::read_file(second));
+
+  const auto pass = census(read_osm(first));
+  const auto valley = census(read_osm(kSample));
+  EXPECT_EQ(pass.at("road"), 7);  // the serpentine, the valley road, its link, the top road, three tracks
+  EXPECT_EQ(pass.at("area:forest"), 12);
+  EXPECT_EQ(pass.at("area:building"), 5);
+  EXPECT_EQ(pass.at("tree"), 16);
+  EXPECT_LT(pass.at("tree") + pass.at("area:building"), (valley.at("tree") + valley.at("area:building")) / 3);
+}
+
+TEST(Sample, TheGeneratorRefusesAnUnknownRegion) {
+  test::ScratchDir dir;
+  const auto made = test::run_program(SEQLOC_MAKE_SAMPLE, {"--region", "atlantis", (dir / "x.osm.pbf").string()});
+  EXPECT_EQ(made.exit_code, 2);
+  EXPECT_NE(made.err.find("usage"), std::string::npos);
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.osm.pbf"));
 }
 
 }  // namespace
