@@ -8,6 +8,7 @@
 //   seqloc-make-sample [--region rural-valley|mountain-pass] OUTPUT.osm.pbf
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -143,9 +144,10 @@ double leg_y(int leg, double x) {
   return kLegFirst + kLegStep * leg + 12.0 * std::sin(seqloc::core::kPi * m * (x + kLegHalf) / (2 * kLegHalf));
 }
 
-// The serpentine's nodes, leg by leg (each leg's node ids kept for the tracks), as one way.
-std::vector<std::vector<std::int64_t>> serpentine(SyntheticMap& map, std::vector<std::int64_t>& all) {
+// The serpentine as one way; returns its legs' node ids (for the tracks and the valley's link).
+std::vector<std::vector<std::int64_t>> serpentine(SyntheticMap& map) {
   std::vector<std::vector<std::int64_t>> legs(kLegs);
+  std::vector<std::int64_t> all;
   for (int leg = 0; leg < kLegs; ++leg) {
     const bool east = leg % 2 == 0;
     for (int i = 0; i <= 2 * static_cast<int>(kLegHalf) / 15; ++i) {
@@ -218,9 +220,8 @@ void tracks(SyntheticMap& map, const std::vector<std::vector<std::int64_t>>& leg
 
 void build_mountain_pass(SyntheticMap& map) {
   Random rng(20261207);
-  std::vector<std::int64_t> road;
-  const auto legs = serpentine(map, road);
-  valley(map, road.front(), rng);
+  const auto legs = serpentine(map);
+  valley(map, legs.front().front(), rng);
   map.way({{-kLegHalf, leg_y(kLegs - 1, -kLegHalf)}, {-600, 600}, {-640, 720}}, {{"highway", "unclassified"}});
   for (int leg = 0; leg < kLegs; ++leg) {  // two forest patches above each leg, apart
     const double a0 = rng.uniform(-500, -200), a1 = a0 + rng.uniform(150, 350);
@@ -243,6 +244,15 @@ void build_mountain_pass(SyntheticMap& map) {
   }
 }
 
+// The regions the generator writes, each around its own origin.
+struct Region {
+  const char* name;
+  double lat0_deg, lon0_deg;
+  void (*build)(SyntheticMap&);
+};
+constexpr std::array kRegions{Region{"rural-valley", 47.95, 11.25, build_rural_valley},
+                              Region{"mountain-pass", 46.62, 10.45, build_mountain_pass}};
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -255,22 +265,19 @@ int main(int argc, char** argv) {
     std::fputs(usage.c_str(), stdout);
     return 0;
   }
-  std::string region = "rural-valley";
+  std::string name = kRegions.front().name;
   if (args.size() == 3 && args[0] == "--region") {
-    region = args[1];
+    name = args[1];
     args.erase(args.begin(), args.begin() + 2);
   }
-  if (args.size() != 1 || (region != "rural-valley" && region != "mountain-pass")) {
+  const auto* region = std::find_if(kRegions.begin(), kRegions.end(), [&](const Region& r) { return name == r.name; });
+  if (args.size() != 1 || region == kRegions.end()) {
     std::fputs(usage.c_str(), stderr);
     return 2;
   }
   try {
-    SyntheticMap map(region == "rural-valley" ? 47.95 : 46.62, region == "rural-valley" ? 11.25 : 10.45);
-    if (region == "rural-valley") {
-      build_rural_valley(map);
-    } else {
-      build_mountain_pass(map);
-    }
+    SyntheticMap map(region->lat0_deg, region->lon0_deg);
+    region->build(map);
     map.write(args[0], 30);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "seqloc-make-sample: error: %s\n", e.what());
