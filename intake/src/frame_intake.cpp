@@ -322,7 +322,9 @@ detail::IntakeSource source_of(const FrameVolume& volume) {
     if (is_prob && raw < 0) what = "probability " + std::to_string(raw) + " < 0";
     if (!what.empty()) throw IntakeError(where + ": " + what + " at cell " + std::to_string(i));
   }
-  throw IntakeError(where + ": a bad value", ErrorCategory::internal);
+  // The values are finite, but one raised to the volume's power left float's range (the SIMD sums
+  // see that; a log-probability of 1e38 is no backbone's).
+  throw IntakeError(where + ": a log-probability leaves float's range when raised to the volume's power");
 }
 
 /// The first pass: each worker's bins checked (throws IntakeError naming the first bad cell) and

@@ -69,39 +69,40 @@ SEQLOC_SIMD __m256 load8(const float* at, int lanes) {
   return _mm256_load_ps(padded);
 }
 
-/// A value as the filter takes it: raw * power where raw > kLogZero, kLogZero otherwise (NaN too).
-/// At power 1 that is max(raw, kLogZero): maxps returns its second operand where the first is NaN.
+/// A value as the filter takes it: raw * power where raw > kLogZero, kLogZero where raw <= kLogZero,
+/// and NaN where raw is NaN, so that a NaN reaches the sums, which are checked instead of every
+/// value (maxps returns its second operand where either is NaN).
 template <bool Raised>
 SEQLOC_SIMD __m256 powered(__m256 raw, __m256 power) {
   const __m256 zero = _mm256_set1_ps(kZero);
-  if constexpr (!Raised) return _mm256_max_ps(raw, zero);
-  return _mm256_blendv_ps(zero, _mm256_mul_ps(raw, power), _mm256_cmp_ps(raw, zero, _CMP_GT_OQ));
-}
-
-/// All ones in the lanes holding NaN or +inf (not less than or equal to the largest float).
-SEQLOC_SIMD __m256 bad_lanes(__m256 raw) {
-  return _mm256_cmp_ps(raw, _mm256_set1_ps(std::numeric_limits<float>::max()), _CMP_NLE_UQ);
+  if constexpr (!Raised) return _mm256_max_ps(zero, raw);
+  return _mm256_blendv_ps(zero, _mm256_mul_ps(raw, power), _mm256_cmp_ps(raw, zero, _CMP_NLE_UQ));
 }
 
 /// log of the smallest normal float: an exp below it counts zero.
 constexpr float kLogSmallestNormal = -87.3365448f;
 
-/// exp(a) for -87 <= a <= 88 (a below -87 is taken as -87, the result stays a normal float; above
-/// 88 the result is not an exp, and the caller takes that row again against a larger reference):
-/// 2^n p(r), r = a - n log 2 in [-log 2 / 2, log 2 / 2], p the degree-6 Taylor polynomial
-/// (relative error under 2e-7).
+/// exp's polynomial on [-log 2 / 2, log 2 / 2], 1 + c1 r + ... + c5 r^5: a minimax fit of the
+/// relative error (Lawson's iteration over 20,001 points) with the constant held at 1, so that
+/// exp(0) is 1 exactly (a frame with all its mass in one cell has log-probability 0 there).
+constexpr float kExp0 = 1.0f, kExp1 = 0.99999970198f, kExp2 = 0.49999150634f, kExp3 = 0.16667635739f,
+                kExp4 = 0.041897922754f, kExp5 = 0.0082903029397f;
+
+/// exp(a) for log of the smallest normal float <= a <= 88 (below, the result is not an exp and the
+/// caller masks the lane out; above, the caller takes that row again against a larger reference; a
+/// NaN or +inf gives NaN): 2^n p(r), r = a - n log 2 in [-log 2 / 2, log 2 / 2], p the degree-5
+/// polynomial below (relative error 1.5e-7 evaluated in float, the degree-6 Taylor polynomial's
+/// 2.2e-7).
 SEQLOC_SIMD __m256 exp_normal(__m256 a) {
-  a = _mm256_max_ps(a, _mm256_set1_ps(-87.0f));
   const __m256 n = _mm256_round_ps(_mm256_mul_ps(a, _mm256_set1_ps(1.44269504f)), _MM_FROUND_TO_NEAREST_INT);
   __m256 r = _mm256_fnmadd_ps(n, _mm256_set1_ps(0.693359375f), a);
   r = _mm256_fnmadd_ps(n, _mm256_set1_ps(-2.12194440e-4f), r);
-  __m256 p = _mm256_set1_ps(1.0f / 720);
-  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.0f / 120));
-  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.0f / 24));
-  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.0f / 6));
-  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(0.5f));
-  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.0f));
-  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(1.0f));
+  __m256 p = _mm256_set1_ps(kExp5);
+  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(kExp4));
+  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(kExp3));
+  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(kExp2));
+  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(kExp1));
+  p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(kExp0));
   const __m256i bits = _mm256_slli_epi32(_mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127)), 23);
   return _mm256_mul_ps(p, _mm256_castsi256_ps(bits));
 }
@@ -144,9 +145,13 @@ bool rose_too_far(RowSums& r, int j0, int j1) {
 }
 
 /// Adds a row's sums to the bins' (`nb` of them): each rescaled from its reference to the larger of
-/// the reference and the row's maximum, which becomes the reference.
-void fold_row(RowSums& r, int nb, double* sum, double* ex) {
+/// the reference and the row's maximum, which becomes the reference. Returns false where a row's sum
+/// is not finite: the row holds a NaN or +inf (block_pass; a value that rose too far for its exp
+/// was taken again against its row's maximum by then), or a value its power took out of float's
+/// range.
+bool fold_row(RowSums& r, int nb, double* sum, double* ex) {
   for (std::size_t j = 0; j < static_cast<std::size_t>(nb); ++j) {
+    if (!std::isfinite(r.sum[j])) return false;
     const float ref = r.ref[j], against = r.against[j], top = std::max(ref, r.row_max[j]);
     if (top > ref) {
       const double rescale = ref > kZero ? std::exp(double{ref} - top) : 0.0;
@@ -160,6 +165,7 @@ void fold_row(RowSums& r, int nb, double* sum, double* ex) {
     }
     r.ref[j] = top;
   }
+  return true;
 }
 
 /// Asks for the lines holding `bytes` bytes from `at` in the second-level cache.
@@ -171,15 +177,15 @@ SEQLOC_SIMD void prefetch(const void* at, std::size_t bytes) {
 
 /// One pass over groups g0 .. g0 + G of eight bins (G <= 2, the last one `lanes` wide) of a row,
 /// the sums in registers: e = exp(x - against) where x - against >= log of the smallest normal
-/// float, sum e, sum e x and the largest x. `next` (the next row, or null): its lines of these
-/// groups fetched on the way. Returns false where a value is NaN or +inf.
+/// float, sum e, sum e x and the largest x (a NaN or +inf value makes its bin's sum NaN). `next`
+/// (the next row, or null): its lines of these groups fetched on the way.
 template <int G, bool Raised, class T>
-SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, float raised_to,
+SEQLOC_SIMD void block_pass(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, float raised_to,
                             RowSums& r) {
   const __m256 power = _mm256_set1_ps(raised_to);
   const __m256 lowest = _mm256_set1_ps(kLogSmallestNormal);
   const std::size_t first = 8 * static_cast<std::size_t>(g0);
-  __m256 bad = _mm256_setzero_ps(), ref[G], top[G], sum[G], ex[G];
+  __m256 ref[G], top[G], sum[G], ex[G];
   for (int i = 0; i < G; ++i) {
     ref[i] = _mm256_load_ps(r.against.data() + first + 8 * i);
     top[i] = _mm256_set1_ps(kZero);
@@ -190,11 +196,10 @@ SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, 
     if (next != nullptr) prefetch(next + at, G * 8 * sizeof(T));
     for (int i = 0; i < G; ++i) {
       const __m256 raw = load8(row + at + 8 * i, i + 1 < G ? 8 : lanes);
-      bad = _mm256_or_ps(bad, bad_lanes(raw));
       const __m256 x = powered<Raised>(raw, power);
       top[i] = _mm256_max_ps(top[i], x);
       const __m256 a = _mm256_sub_ps(x, ref[i]);
-      const __m256 e = _mm256_and_ps(exp_normal(a), _mm256_cmp_ps(a, lowest, _CMP_GE_OQ));
+      const __m256 e = _mm256_and_ps(exp_normal(a), _mm256_cmp_ps(a, lowest, _CMP_NLT_UQ));  // NaN kept
       sum[i] = _mm256_add_ps(sum[i], e);
       ex[i] = _mm256_fmadd_ps(e, x, ex[i]);  // x is finite: a zero cell's is kLogZero, its e 0
     }
@@ -204,27 +209,28 @@ SEQLOC_SIMD bool block_pass(const T* row, const T* next, const IntakeSource& s, 
     _mm256_store_ps(r.sum.data() + first + 8 * i, sum[i]);
     _mm256_store_ps(r.ex.data() + first + 8 * i, ex[i]);
   }
-  return _mm256_movemask_ps(bad) == 0;
 }
 
 /// block_pass over a row's groups, two at a time (32 float16 values a cell, half a 64-byte line);
 /// a block whose values rose more than kHeadroom above their reference passes again against its
-/// maxima (the first row, a bin's first values). Returns false where a value is NaN or +inf.
+/// maxima (the first row, a bin's first values).
 template <bool Raised, class T>
-SEQLOC_SIMD bool row_pass(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
+SEQLOC_SIMD void row_pass(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
   const int groups = (nb + 7) / 8;
   start_row(r);
   for (int g0 = 0; g0 < groups; g0 += 2) {
     const int count = std::min(2, groups - g0), lanes = std::min(8, nb - 8 * (g0 + count - 1));
     auto pass = [&](const T* fetch) {
-      return count == 2 ? block_pass<2, Raised>(row, fetch, s, g0, lanes, power, r)
-                        : block_pass<1, Raised>(row, fetch, s, g0, lanes, power, r);
+      if (count == 2) {
+        block_pass<2, Raised>(row, fetch, s, g0, lanes, power, r);
+      } else {
+        block_pass<1, Raised>(row, fetch, s, g0, lanes, power, r);
+      }
     };
     // The next row's lines: each by the block that starts it (two blocks share a line of float16).
-    if (!pass((8 * g0 * sizeof(T)) % 64 == 0 ? next : nullptr)) return false;
-    if (rose_too_far(r, 8 * g0, std::min(nb, 8 * (g0 + count)))) (void)pass(nullptr);
+    pass((8 * g0 * sizeof(T)) % 64 == 0 ? next : nullptr);
+    if (rose_too_far(r, 8 * g0, std::min(nb, 8 * (g0 + count)))) pass(nullptr);
   }
-  return true;
 }
 
 #if SEQLOC_INTAKE_AVX512
@@ -254,29 +260,25 @@ SEQLOC_AVX512 __m512 load16(const float* at, int lanes) {
 /// exp_normal in sixteen lanes, the same operations (2^n by scalef, exact as the AVX2 version's
 /// exponent bits are): the same value in every lane.
 SEQLOC_AVX512 __m512 exp_normal16(__m512 a) {
-  a = _mm512_max_ps(a, _mm512_set1_ps(-87.0f));
   const __m512 n = _mm512_roundscale_ps(_mm512_mul_ps(a, _mm512_set1_ps(1.44269504f)), _MM_FROUND_TO_NEAREST_INT);
   __m512 r = _mm512_fnmadd_ps(n, _mm512_set1_ps(0.693359375f), a);
   r = _mm512_fnmadd_ps(n, _mm512_set1_ps(-2.12194440e-4f), r);
-  __m512 p = _mm512_set1_ps(1.0f / 720);
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.0f / 120));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.0f / 24));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.0f / 6));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(0.5f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.0f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.0f));
+  __m512 p = _mm512_set1_ps(kExp5);
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(kExp4));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(kExp3));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(kExp2));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(kExp1));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(kExp0));
   return _mm512_scalef_ps(p, n);
 }
 
 /// block_pass in sixteen lanes: groups g0 .. g0 + G of sixteen bins.
 template <int G, bool Raised, class T>
-SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, float raised_to,
+SEQLOC_AVX512 void block_pass16(const T* row, const T* next, const IntakeSource& s, int g0, int lanes, float raised_to,
                                 RowSums& r) {
   const __m512 power = _mm512_set1_ps(raised_to);
   const __m512 zero = _mm512_set1_ps(kZero), lowest = _mm512_set1_ps(kLogSmallestNormal);
-  const __m512 largest = _mm512_set1_ps(std::numeric_limits<float>::max());
   const std::size_t first = 16 * static_cast<std::size_t>(g0);
-  __mmask16 bad = 0;
   __m512 ref[G], top[G], sum[G], ex[G];
   for (int i = 0; i < G; ++i) {
     ref[i] = _mm512_load_ps(r.against.data() + first + 16 * i);
@@ -288,12 +290,11 @@ SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource&
     if (next != nullptr) prefetch(next + at, G * 16 * sizeof(T));
     for (int i = 0; i < G; ++i) {
       const __m512 raw = load16(row + at + 16 * i, i + 1 < G ? 16 : lanes);
-      bad |= _mm512_cmp_ps_mask(raw, largest, _CMP_NLE_UQ);
-      const __m512 x = Raised ? _mm512_mask_mul_ps(zero, _mm512_cmp_ps_mask(raw, zero, _CMP_GT_OQ), raw, power)
-                              : _mm512_max_ps(raw, zero);
+      const __m512 x = Raised ? _mm512_mask_mul_ps(zero, _mm512_cmp_ps_mask(raw, zero, _CMP_NLE_UQ), raw, power)
+                              : _mm512_max_ps(zero, raw);
       top[i] = _mm512_max_ps(top[i], x);
       const __m512 a = _mm512_sub_ps(x, ref[i]);
-      const __mmask16 keep = _mm512_cmp_ps_mask(a, lowest, _CMP_GE_OQ);
+      const __mmask16 keep = _mm512_cmp_ps_mask(a, lowest, _CMP_NLT_UQ);  // NaN kept
       const __m512 e = exp_normal16(a);
       sum[i] = _mm512_mask_add_ps(sum[i], keep, sum[i], e);
       ex[i] = _mm512_mask3_fmadd_ps(e, x, ex[i], keep);
@@ -304,12 +305,11 @@ SEQLOC_AVX512 bool block_pass16(const T* row, const T* next, const IntakeSource&
     _mm512_store_ps(r.sum.data() + first + 16 * i, sum[i]);
     _mm512_store_ps(r.ex.data() + first + 16 * i, ex[i]);
   }
-  return bad == 0;
 }
 
 /// row_pass in sixteen lanes.
 template <bool Raised, class T>
-SEQLOC_AVX512 bool row_pass16(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
+SEQLOC_AVX512 void row_pass16(const T* row, const T* next, const IntakeSource& s, int nb, float power, RowSums& r) {
   const int groups = (nb + 15) / 16;
   start_row(r);
   for (int g0 = 0; g0 < groups; g0 += 4) {
@@ -326,10 +326,9 @@ SEQLOC_AVX512 bool row_pass16(const T* row, const T* next, const IntakeSource& s
           return block_pass16<1, Raised>(row, fetch, s, g0, lanes, power, r);
       }
     };
-    if (!pass(next)) return false;
-    if (rose_too_far(r, 16 * g0, std::min(nb, 16 * (g0 + count)))) (void)pass(nullptr);
+    pass(next);
+    if (rose_too_far(r, 16 * g0, std::min(nb, 16 * (g0 + count)))) pass(nullptr);
   }
-  return true;
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
@@ -349,8 +348,8 @@ bool sums(const IntakeSource& s, const T* data, int j0, int j1, int lanes, float
   const std::size_t row_values = static_cast<std::size_t>(s.width) * s.cell_stride;
   for (int v = 0; v < s.height; ++v) {
     const T* row = data + static_cast<std::size_t>(v) * row_values + j0;
-    if (!pass(row, v + 1 < s.height ? row + row_values : nullptr, r)) return false;
-    fold_row(r, nb, sum, ex);
+    pass(row, v + 1 < s.height ? row + row_values : nullptr, r);
+    if (!fold_row(r, nb, sum, ex)) return false;
   }
   std::copy(r.ref.begin(), r.ref.begin() + nb, max);
   return true;

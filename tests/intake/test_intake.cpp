@@ -86,6 +86,70 @@ TEST(Intake, BadVolumesAreClearErrors) {
   expect_error(FrameVolume{}, "empty volume");
 }
 
+/// A log-probability volume of h x w x n cells, as float16 (`halves`) or float32 (`floats`).
+FrameVolume log_prob_view(const std::vector<float>& floats, const std::vector<std::uint16_t>& halves, bool half, int h,
+                          int w, int n) {
+  return {half ? static_cast<const void*>(halves.data()) : floats.data(),
+          half ? VolumeType::float16 : VolumeType::float32,
+          VolumeValues::log_prob,
+          h,
+          w,
+          n,
+          0.5};
+}
+
+/// The float16 of each value.
+std::vector<std::uint16_t> halves_of(const std::vector<float>& floats) {
+  std::vector<std::uint16_t> halves(floats.size());
+  for (std::size_t i = 0; i < floats.size(); ++i) halves[i] = float_to_half(floats[i]);
+  return halves;
+}
+
+// A NaN or +inf anywhere (a volume's first and last cell, a partial vector's last lane, a row whose
+// values rise far above the rows before it, the first row, which the sums take twice) is named by
+// its cell at every vector width, in float16 and float32, raised to a power or not; -inf is a zero.
+// The vectorized loops find it in their sums, not by testing each value.
+TEST(Intake, EveryBadValueIsNamedAtEveryVectorWidth) {
+  struct Restore {
+    ~Restore() { (void)limit_intake_vector_lanes(16); }
+  } restore;
+  constexpr int h = 6, w = 16, n = 40;  // 40 bins: two whole vectors of 16 and a partial one
+  constexpr std::size_t cells = static_cast<std::size_t>(h) * w * n;
+  std::vector<float> base(cells);
+  for (std::size_t i = 0; i < cells; ++i) {
+    base[i] = -5.0f - static_cast<float>(i % 7) + (i / (static_cast<std::size_t>(w) * n) == 4 ? 60.0f : 0.0f);
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  for (const std::size_t at : {std::size_t{0}, std::size_t{n - 1}, std::size_t{3 * w * n + 5 * n + 33},
+                               std::size_t{4 * w * n + 7}, cells - 1}) {
+    for (const float bad : {nan, inf}) {
+      std::vector<float> floats = base;
+      floats[at] = bad;
+      const std::vector<std::uint16_t> halves = halves_of(floats);
+      for (const bool half : {false, true}) {
+        const FrameVolume volume = log_prob_view(floats, halves, half, h, w, n);
+        for (const int lanes : {16, 8, 1}) {
+          (void)limit_intake_vector_lanes(lanes);
+          for (const double power : {1.0, 2.5}) {
+            try {
+              (void)prepare_frame(volume, n, 2, power);
+              ADD_FAILURE() << "no error for " << bad << " at cell " << at << ", lanes " << lanes;
+            } catch (const IntakeError& e) {
+              const std::string expected =
+                  (std::isnan(bad) ? "NaN" : "log-probability +inf") + std::string(" at cell ") + std::to_string(at);
+              EXPECT_NE(std::string(e.what()).find(expected), std::string::npos)
+                  << e.what() << " (lanes " << lanes << ", half " << half << ", power " << power << ")";
+            }
+          }
+        }
+      }
+      floats[at] = -inf;  // a zero, not an error
+      (void)limit_intake_vector_lanes(16);
+      EXPECT_NO_THROW((void)prepare_frame(log_prob_view(floats, {}, false, h, w, n), n, 1, 2.5));
+    }
+  }
+}
+
 // On a shape the vectorized intake writes from the volume directly (16 cells a row, bins in
 // eights) and on one it does not.
 class Float16Intake : public ::testing::TestWithParam<std::array<int, 3>> {};
@@ -220,16 +284,9 @@ TEST(Intake, EveryVectorWidthGivesTheSameFrame) {
       floats[i] = std::round((noise(rng) + (i / (static_cast<std::size_t>(w) * n) == 3 ? 50.0f : 0.0f)) * 64) / 64;
     }
     for (std::size_t i = 2; i < cells; i += 13) floats[i] = -std::numeric_limits<float>::infinity();
-    std::vector<std::uint16_t> halves(cells);
-    for (std::size_t i = 0; i < cells; ++i) halves[i] = float_to_half(floats[i]);
+    const std::vector<std::uint16_t> halves = halves_of(floats);
     for (const bool half : {false, true}) {
-      const FrameVolume volume{half ? static_cast<const void*>(halves.data()) : floats.data(),
-                               half ? VolumeType::float16 : VolumeType::float32,
-                               VolumeValues::log_prob,
-                               h,
-                               w,
-                               n,
-                               0.5};
+      const FrameVolume volume = log_prob_view(floats, halves, half, h, w, n);
       for (const double power : {1.0, 0.6}) {
         std::vector<PreparedFrame> frames;
         for (const int lanes : {16, 8, 1}) {
