@@ -306,6 +306,9 @@ detail::IntakeSource source_of(const FrameVolume& volume) {
   return {volume.data, volume.type, volume.height, volume.width, static_cast<std::size_t>(volume.bins)};
 }
 
+/// What a volume is told whose values leave float's range once raised to its power.
+constexpr const char* kOutOfRange = ": a log-probability leaves float's range when raised to the volume's power";
+
 /// Names the first bad cell of a volume (by its index in the file's (H, W, N) order).
 [[noreturn]] void throw_bad_cell(const FrameVolume& volume, const std::string& where) {
   constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -324,7 +327,7 @@ detail::IntakeSource source_of(const FrameVolume& volume) {
   }
   // The values are finite, but one raised to the volume's power left float's range (the SIMD sums
   // see that; a log-probability of 1e38 is no backbone's).
-  throw IntakeError(where + ": a log-probability leaves float's range when raised to the volume's power");
+  throw IntakeError(where + kOutOfRange);
 }
 
 /// The first pass: each worker's bins checked (throws IntakeError naming the first bad cell) and
@@ -439,6 +442,7 @@ PreparedFrame prepare_frame(const FrameVolume& volume, int window_headings, int 
   const int chunks = std::max(1, std::min(threads, volume.bins));
   const auto k = static_cast<float>(power);
   const Softmax softmax = sum_pass(volume, k, chunks, f.log_cells, where.str());
+  if (!std::isfinite(softmax.lse)) throw IntakeError(where.str() + kOutOfRange);  // the portable sums'
   if (softmax.max <= kLogZero) throw IntakeError(where.str() + ": no probability mass (every cell is zero)");
   f.entropy = softmax.entropy;
   const auto shift = static_cast<float>(softmax.lse);

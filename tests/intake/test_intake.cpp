@@ -143,6 +143,16 @@ TEST(Intake, EveryBadValueIsNamedAtEveryVectorWidth) {
           }
         }
       }
+      floats[at] = 1e37f;  // finite, but out of float's range raised to 40
+      for (const int lanes : {16, 8, 1}) {
+        (void)limit_intake_vector_lanes(lanes);
+        try {
+          (void)prepare_frame(log_prob_view(floats, {}, false, h, w, n), n, 1, 40.0);
+          ADD_FAILURE() << "no error for 1e37 raised to 40, lanes " << lanes;
+        } catch (const IntakeError& e) {
+          EXPECT_NE(std::string(e.what()).find("leaves float's range"), std::string::npos) << e.what();
+        }
+      }
       floats[at] = -inf;  // a zero, not an error
       (void)limit_intake_vector_lanes(16);
       EXPECT_NO_THROW((void)prepare_frame(log_prob_view(floats, {}, false, h, w, n), n, 1, 2.5));
