@@ -223,11 +223,10 @@ TEST_P(Recovers, ThePowerThatUndoesAKnownSharpening) {
 INSTANTIATE_TEST_SUITE_P(SelfCalibration, Recovers, ::testing::Values(0.25, 0.5, 1.0, 2.0, 4.0, 8.0),
                          [](const auto& p) { return "k" + std::to_string(static_cast<int>(p.param * 100)); });
 
-// Mean position error (cells) of a filter's estimates over frames 10 .. 59 of routes of the
-// generator with the given seeds, its volumes tempered by k.
-double mean_error(const std::vector<unsigned>& seeds, double k, double rho, const FilterConfig& c) {
-  double sum = 0;
-  int n = 0;
+// Position errors (cells) of a filter's estimates over frames 10 .. 59 of routes of the generator
+// with the given seeds, its volumes tempered by k.
+std::vector<double> position_errors(const std::vector<unsigned>& seeds, double k, double rho, const FilterConfig& c) {
+  std::vector<double> errors;
   for (const unsigned seed : seeds) {
     Generator g(seed, k, rho);
     const auto results = run(g, c, 60);
@@ -235,13 +234,22 @@ double mean_error(const std::vector<unsigned>& seeds, double k, double rho, cons
     for (int t = 0; t < 60; ++t) {
       const auto f = truth.frame(t);
       if (t >= 10) {
-        sum += std::hypot(results[static_cast<std::size_t>(t)].pose.u - f.truth_u,
-                          results[static_cast<std::size_t>(t)].pose.v - f.truth_v);
-        ++n;
+        errors.push_back(std::hypot(results[static_cast<std::size_t>(t)].pose.u - f.truth_u,
+                                    results[static_cast<std::size_t>(t)].pose.v - f.truth_v));
       }
     }
   }
-  return sum / n;
+  return errors;
+}
+
+double mean_of(const std::vector<double>& errors) {
+  return std::accumulate(errors.begin(), errors.end(), 0.0) / static_cast<double>(errors.size());
+}
+
+// The share of errors within `cells`, in %.
+double recall_within(const std::vector<double>& errors, double cells) {
+  const auto hits = std::count_if(errors.begin(), errors.end(), [cells](double e) { return e <= cells; });
+  return 100.0 * static_cast<double>(hits) / static_cast<double>(errors.size());
 }
 
 class Correlated : public ::testing::TestWithParam<double> {};
@@ -250,29 +258,33 @@ TEST_P(Correlated, SelfCalibrationCostsNothingAgainstTheFramesAsGiven) {
   // Calibrated frames whose errors consecutive frames share (AR(1) with the given rho): a
   // one-step predictive criterion reads the shared error as the frames being right, and so
   // favours sharpening them (at rho = 0.9 the estimate is about 2.4). The recursion with
-  // self-calibration must do within 5 % of the frames as given (its mean position error), and the
-  // brute-forced best fixed power is reported beside it (docs/filter.md, "Self-calibration": on
-  // this generator the best power is set by PAS over a broad belief, not by the correlation).
-  // Sixteen routes: over four (61 .. 64, as this test had) one route moves the mean by 5 %.
+  // self-calibration must do within 5 % of the frames as given (its mean position error), and its
+  // recall within 2 m (4 cells: the frames' own spread per axis; within 5 m every power finds
+  // 98 to 100 %) within 2 points of the best fixed power's, brute-forced over 2^-2 .. 2 (on this
+  // generator the best power is set by PAS over a broad belief, not by the correlation:
+  // docs/filter.md, "Self-calibration"). Sixteen routes: over four (61 .. 64, as this test had)
+  // one route moves the mean by 5 %.
+  constexpr double kWithin = 4;
   const double rho = GetParam();
   std::vector<unsigned> seeds;
   for (unsigned seed = 61; seed <= 76; ++seed) seeds.push_back(seed);
   Generator probe(1);
   FilterConfig fixed = probe.config();
   fixed.self_calibrate = false;
-  double best_power = 0, best_error = 1e30;
+  double best_recall = -1, best_power = 0, as_given = 0;
   for (int i = -4; i <= 2; ++i) {
     const double power = std::exp2(i / 2.0);
-    const double error = mean_error(seeds, power, rho, fixed);
-    if (error < best_error) {
-      best_error = error;
+    const std::vector<double> errors = position_errors(seeds, power, rho, fixed);
+    if (i == 0) as_given = mean_of(errors);
+    if (recall_within(errors, kWithin) > best_recall) {
+      best_recall = recall_within(errors, kWithin);
       best_power = power;
     }
   }
-  const double as_given = mean_error(seeds, 1, rho, fixed);
-  const double self_calibrated = mean_error(seeds, 1, rho, probe.config());
-  EXPECT_LE(self_calibrated, 1.05 * as_given) << "rho " << rho << ": as given " << as_given
-                                              << " cells; best fixed power " << best_power << " gives " << best_error;
+  const std::vector<double> self_calibrated = position_errors(seeds, 1, rho, probe.config());
+  EXPECT_LE(mean_of(self_calibrated), 1.05 * as_given) << "rho " << rho << ": as given " << as_given << " cells";
+  EXPECT_GE(recall_within(self_calibrated, kWithin), best_recall - 2.0)
+      << "rho " << rho << ": the best fixed power " << best_power << " finds " << best_recall << " %";
 }
 
 INSTANTIATE_TEST_SUITE_P(SelfCalibration, Correlated, ::testing::Values(0.5, 0.8, 0.9),
