@@ -35,7 +35,7 @@ struct IntakeSource {
 /// of e x with e = exp(x - max) (e under the smallest normal float counts zero), a row at a time in
 /// float and across rows in double, rescaled whenever max grows. The sums of a bin are the same
 /// whichever bins share the call. Returns false, with the sums unfinished, where a value is NaN or
-/// +inf.
+/// +inf, or leaves float's range when raised to `power` (found in the sums, not value by value).
 [[nodiscard]] bool intake_sums_simd(const IntakeSource& source, int j0, int j1, float power, float* max, double* sum,
                                     double* ex);
 

@@ -42,7 +42,8 @@ struct PreparedFrame {
 /// Checks and normalizes a volume (with `threads` workers), raised to `power` first (temper_frame's
 /// power, in the same passes: p^power / sum p^power). Throws IntakeError for a wrong shape, NaN,
 /// +inf, negative probabilities or a volume without mass (naming the first bad cell by its index in
-/// (H, W, N) order), or a power that is not finite and > 0; a -inf log-probability is a valid zero.
+/// (H, W, N) order), a log-probability that the power takes out of float's range, or a power that
+/// is not finite and > 0; a -inf log-probability is a valid zero.
 /// `window_headings`: the filter's heading bins, which the volume's must divide or be a multiple
 /// of. Two passes over the volume as given and one write of the frame, in SIMD where the CPU has
 /// it (intake_vector_lanes; docs/localize.md, "Speed").
