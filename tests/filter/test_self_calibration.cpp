@@ -276,8 +276,9 @@ TEST_P(Correlated, SelfCalibrationCostsNothingAgainstTheFramesAsGiven) {
     const double power = std::exp2(i / 2.0);
     const std::vector<double> errors = position_errors(seeds, power, rho, fixed);
     if (i == 0) as_given = mean_of(errors);
-    if (recall_within(errors, kWithin) > best_recall) {
-      best_recall = recall_within(errors, kWithin);
+    const double recall = recall_within(errors, kWithin);
+    if (recall > best_recall) {
+      best_recall = recall;
       best_power = power;
     }
   }

@@ -18,7 +18,6 @@
 namespace seqloc::intake {
 namespace {
 
-using core::float_to_half;
 using core::FrameVolume;
 using core::half_to_float;
 using core::VolumeType;
@@ -98,10 +97,10 @@ FrameVolume log_prob_view(const std::vector<float>& floats, const std::vector<st
           0.5};
 }
 
-/// The float16 of each value.
+/// The float16 of each value (core::floats_to_halves).
 std::vector<std::uint16_t> halves_of(const std::vector<float>& floats) {
   std::vector<std::uint16_t> halves(floats.size());
-  for (std::size_t i = 0; i < floats.size(); ++i) halves[i] = float_to_half(floats[i]);
+  core::floats_to_halves(floats, halves);
   return halves;
 }
 
